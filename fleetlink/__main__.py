@@ -1,0 +1,5 @@
+import sys
+
+from fleetlink.cli import main
+
+sys.exit(main())

@@ -1,0 +1,22 @@
+"""Test layout: tests/unit (no sockets), tests/integration (real services), tests/fault.
+
+Tests are marked by folder, so ``-m unit`` runs only the pure ones. Service fixtures
+(Kafka, schema registry, Zenoh routers) live in tests/fixtures and are loaded here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+pytest_plugins = ["tests.fixtures.services"]
+
+TESTS = Path(__file__).parent
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        rel = Path(str(item.fspath)).relative_to(TESTS).parts
+        if rel and rel[0] in ("unit", "integration", "fault"):
+            item.add_marker(getattr(pytest.mark, rel[0]))
