@@ -1,0 +1,50 @@
+"""Small helpers shared by the test suites: wait on a condition, pick a free port.
+
+Tests never ``time.sleep`` to synchronise; they wait for a condition with a deadline::
+
+    wait_until(lambda: len(received) == 10, timeout=5, message="10 samples received")
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Callable
+
+__all__ = ["free_port", "wait_until"]
+
+
+def wait_until(
+    pred: Callable[[], object],
+    timeout: float = 10.0,
+    interval: float = 0.02,
+    message: str = "",
+) -> None:
+    """Poll ``pred`` until it returns something truthy; fail the test after ``timeout`` seconds.
+
+    The predicate is evaluated once more at the deadline, so a condition that became true
+    while the last interval elapsed still passes. On timeout an AssertionError is raised
+    carrying ``message`` and the elapsed time.
+    """
+    start = time.monotonic()
+    deadline = start + timeout
+    while True:
+        if pred():
+            return
+        now = time.monotonic()
+        if now >= deadline:
+            break
+        time.sleep(min(interval, max(deadline - now, 0.0)))
+    if pred():
+        return
+    what = message or getattr(pred, "__name__", "condition")
+    raise AssertionError(f"timed out after {time.monotonic() - start:.2f}s waiting for: {what}")
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that was free on ``host`` a moment ago (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, 0))
+        port: int = sock.getsockname()[1]
+        return port
