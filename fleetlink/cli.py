@@ -17,6 +17,7 @@ from fleetlink.errors import FleetlinkError
 
 # Modules that add subcommands, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
+    "fleetlink.stack_cli",
 )
 
 Handler = Callable[[argparse.Namespace], int]
@@ -42,6 +43,8 @@ def configure_logging(verbosity: int) -> None:
     logging.basicConfig(
         level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr
     )
+    if verbosity < 2:
+        logging.getLogger("httpx").setLevel(logging.WARNING)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

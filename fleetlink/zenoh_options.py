@@ -39,7 +39,7 @@ class ZenohOptions:
                 raise ConfigError(f"zenoh config file not found: {self.config_file}")
             try:
                 conf = zenoh.Config.from_file(str(self.config_file))
-            except Exception as exc:  # zenoh raises its own error type with the parser message
+            except zenoh.ZError as exc:
                 raise ConfigError(f"{self.config_file}: invalid zenoh config: {exc}") from None
         else:
             conf = zenoh.Config()
@@ -56,7 +56,7 @@ class ZenohOptions:
         for key, value in settings:
             try:
                 conf.insert_json5(key, value)
-            except Exception as exc:
+            except zenoh.ZError as exc:
                 raise ConfigError(f"zenoh option {key}={value}: {exc}") from None
         return conf
 

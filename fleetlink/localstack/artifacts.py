@@ -1,0 +1,130 @@
+"""Fetch the Kafka broker jars and the Apicurio Registry distribution from Maven Central, once."""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import subprocess
+import tarfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from fleetlink.localstack.errors import StackError
+
+log = logging.getLogger(__name__)
+
+KAFKA_VERSION = "4.2.1"
+LOG4J_VERSION = "2.25.3"
+APICURIO_VERSION = "3.3.3"
+
+_KAFKA_POM = """<project xmlns="http://maven.apache.org/POM/4.0.0">
+  <modelVersion>4.0.0</modelVersion>
+  <groupId>fleetlink.localstack</groupId>
+  <artifactId>kafka-broker</artifactId>
+  <version>1</version>
+  <packaging>pom</packaging>
+  <dependencies>
+    <dependency><groupId>org.apache.kafka</groupId><artifactId>kafka_2.13</artifactId>
+      <version>{kafka}</version></dependency>
+    <dependency><groupId>org.apache.logging.log4j</groupId><artifactId>log4j-core</artifactId>
+      <version>{log4j}</version></dependency>
+    <dependency><groupId>org.apache.logging.log4j</groupId><artifactId>log4j-slf4j-impl</artifactId>
+      <version>{log4j}</version></dependency>
+  </dependencies>
+</project>
+"""
+
+
+def cache_root() -> Path:
+    """Where jars are kept between runs: $FLEETLINK_CACHE, else <project>/.cache."""
+    env = os.environ.get("FLEETLINK_CACHE")
+    if env:
+        return Path(env).expanduser().resolve()
+    return Path(__file__).resolve().parents[2] / ".cache"
+
+
+@dataclass(frozen=True)
+class Artifacts:
+    kafka_classpath: str
+    apicurio_dir: Path
+
+
+def _mvn() -> str:
+    mvn = shutil.which("mvn")
+    if mvn is None:
+        raise StackError(
+            "Maven (mvn) is needed once to fetch the Kafka and Apicurio jars from Maven Central; "
+            "install it (Debian: apt-get install maven) or set FLEETLINK_CACHE to a folder that "
+            "already holds them"
+        )
+    return mvn
+
+
+def _run_mvn(args: list[str], cwd: Path, what: str) -> None:
+    log.info("fetching %s from Maven Central (first run only)", what)
+    print(f"fleetlink stack: fetching {what} from Maven Central (first run only; cached in {cwd})",
+          flush=True)
+    proc = subprocess.run(
+        [_mvn(), "-B", "-q", *args], cwd=cwd, capture_output=True, text=True, check=False
+    )
+    if proc.returncode != 0:
+        tail = "\n".join((proc.stdout + proc.stderr).splitlines()[-20:])
+        raise StackError(f"could not fetch {what} with Maven (exit {proc.returncode}):\n{tail}")
+
+
+def fetch_kafka(root: Path) -> Path:
+    lib = root / f"kafka-{KAFKA_VERSION}" / "lib"
+    done = lib / ".complete"
+    if done.exists():
+        return lib
+    work = lib.parent
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "pom.xml").write_text(_KAFKA_POM.format(kafka=KAFKA_VERSION, log4j=LOG4J_VERSION))
+    tmp = work / "lib.partial"
+    shutil.rmtree(tmp, ignore_errors=True)
+    _run_mvn(
+        ["dependency:copy-dependencies", f"-DoutputDirectory={tmp}", "-DincludeScope=runtime"],
+        work,
+        f"Apache Kafka {KAFKA_VERSION} broker jars",
+    )
+    shutil.rmtree(lib, ignore_errors=True)
+    tmp.rename(lib)
+    done.touch()
+    return lib
+
+
+def fetch_apicurio(root: Path) -> Path:
+    home = root / f"apicurio-registry-{APICURIO_VERSION}"
+    done = home / ".complete"
+    if done.exists():
+        return _apicurio_app_dir(home)
+    home.mkdir(parents=True, exist_ok=True)
+    artifact = f"io.apicurio:apicurio-registry-app:{APICURIO_VERSION}:tar.gz:all"
+    _run_mvn(
+        ["dependency:copy", f"-Dartifact={artifact}", f"-DoutputDirectory={home}"],
+        home,
+        f"Apicurio Registry {APICURIO_VERSION}",
+    )
+    archives = sorted(home.glob("*.tar.gz"))
+    if not archives:
+        raise StackError(f"Maven reported success but no Apicurio archive is in {home}")
+    with tarfile.open(archives[0]) as tar:
+        tar.extractall(home / "dist", filter="data")
+    archives[0].unlink()
+    done.touch()
+    return _apicurio_app_dir(home)
+
+
+def _apicurio_app_dir(home: Path) -> Path:
+    runners = sorted((home / "dist").rglob("quarkus-run.jar"))
+    if not runners:
+        raise StackError(f"no quarkus-run.jar under {home / 'dist'}; delete {home} and fetch again")
+    return runners[0].parent
+
+
+def fetch_all(root: Path | None = None) -> Artifacts:
+    root = root or cache_root()
+    lib = fetch_kafka(root)
+    classpath = os.pathsep.join(str(p) for p in sorted(lib.glob("*.jar")))
+    return Artifacts(kafka_classpath=classpath, apicurio_dir=fetch_apicurio(root))

@@ -1,0 +1,7 @@
+"""Errors of the local stack: each says what went wrong and what to do."""
+
+from fleetlink.errors import FleetlinkError
+
+
+class StackError(FleetlinkError):
+    """The local Kafka / registry could not be fetched, started or reached."""

@@ -1,0 +1,158 @@
+"""Start a server process with its own log file, wait until it answers, stop it by PID."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fleetlink.localstack.errors import StackError
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def port_in_use(port: int, host: str = "127.0.0.1") -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.settimeout(0.2)
+        return s.connect_ex((host, port)) == 0
+
+
+def ensure_port_free(port: int, what: str, host: str = "127.0.0.1") -> None:
+    if port_in_use(port, host):
+        raise StackError(
+            f"port {host}:{port} for {what} is already in use; stop whatever listens there "
+            f"(`ss -ltnp 'sport = :{port}'`) or choose another port"
+        )
+
+
+def log_tail(path: Path, lines: int = 30) -> str:
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return "(no log)"
+    return "\n".join(text.splitlines()[-lines:])
+
+
+@dataclass
+class ServerProcess:
+    """One server process: argv, log file, PID file; ``start`` returns once ``ready()`` is true."""
+
+    name: str
+    argv: Sequence[str]
+    log_path: Path
+    pid_path: Path
+    ready: Callable[[], bool]
+    env: dict[str, str] = field(default_factory=dict)
+    cwd: Path | None = None
+    _proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def pid(self) -> int | None:
+        return self._proc.pid if self._proc else read_pid(self.pid_path)
+
+    def start(self, timeout: float) -> float:
+        """Start and wait until ready; returns the seconds it took. Raises with the log tail."""
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        began = time.monotonic()
+        with self.log_path.open("ab") as log:
+            self._proc = subprocess.Popen(
+                list(self.argv),
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                env={**os.environ, **self.env},
+                cwd=self.cwd,
+                start_new_session=True,
+            )
+        self.pid_path.write_text(str(self._proc.pid))
+        deadline = began + timeout
+        while time.monotonic() < deadline:
+            code = self._proc.poll()
+            if code is not None:
+                raise StackError(
+                    f"{self.name} exited with code {code} while starting; last lines of "
+                    f"{self.log_path}:\n{log_tail(self.log_path)}"
+                )
+            if self.ready():
+                return time.monotonic() - began
+            time.sleep(0.2)  # polling a starting JVM; bounded by the deadline above
+        self.stop()
+        raise StackError(
+            f"{self.name} did not come up within {timeout:.0f} s; last lines of "
+            f"{self.log_path}:\n{log_tail(self.log_path)}"
+        )
+
+    def stop(self, timeout: float = 20.0) -> None:
+        pid = self.pid
+        if pid is None:
+            return
+        stop_pid(pid, timeout)
+        if self._proc is not None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self._proc.wait(timeout=1)
+            self._proc = None
+        with contextlib.suppress(FileNotFoundError):
+            self.pid_path.unlink()
+
+    def kill(self) -> None:
+        """SIGKILL, for fault tests (no clean shutdown)."""
+        pid = self.pid
+        if pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(pid, signal.SIGKILL)
+            if self._proc is not None:
+                self._proc.wait(timeout=10)
+                self._proc = None
+
+    def signal(self, sig: signal.Signals) -> None:
+        pid = self.pid
+        if pid is not None:
+            os.killpg(pid, sig)
+
+
+def read_pid(path: Path) -> int | None:
+    try:
+        return int(path.read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # a zombie child still "exists"; treat it as gone
+    try:
+        waited, _ = os.waitpid(pid, os.WNOHANG)
+    except ChildProcessError:
+        return True
+    return waited == 0
+
+
+def stop_pid(pid: int, timeout: float = 20.0) -> None:
+    """SIGTERM the process group, then SIGKILL after ``timeout``."""
+    try:
+        os.killpg(pid, signal.SIGTERM)
+    except ProcessLookupError:
+        return
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not alive(pid):
+            return
+        time.sleep(0.1)  # waiting for a process to exit; bounded
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(pid, signal.SIGKILL)

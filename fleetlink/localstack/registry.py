@@ -1,0 +1,70 @@
+"""Apicurio Registry 3 (in-memory storage) with its Confluent-compatible API, on loopback."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+
+from fleetlink.localstack.process import ServerProcess, ensure_port_free, log_tail
+
+CCOMPAT_PATH = "/apis/ccompat/v7"
+
+
+@dataclass(frozen=True)
+class RegistrySettings:
+    port: int
+    data_dir: Path
+    host: str = "127.0.0.1"
+
+    @property
+    def url(self) -> str:
+        """The URL Confluent clients take (``schema.registry.url``)."""
+        return f"http://{self.host}:{self.port}{CCOMPAT_PATH}"
+
+
+class SchemaRegistry:
+    def __init__(self, settings: RegistrySettings, app_dir: Path, java: str) -> None:
+        self.settings = settings
+        data = settings.data_dir
+        self.process = ServerProcess(
+            name=f"Apicurio Registry on {settings.host}:{settings.port}",
+            argv=[
+                java, "-Xms128m", "-Xmx768m",
+                f"-Dquarkus.http.host={settings.host}",
+                f"-Dquarkus.http.port={settings.port}",
+                "-Dapicurio.storage.kind=sql",
+                "-Dapicurio.storage.sql.kind=h2",
+                "-Dquarkus.log.level=WARN",
+                "-Dquarkus.log.category.\"io.quarkus\".level=INFO",
+                "-Dquarkus.http.limits.max-body-size=16M",
+                "-jar", str(app_dir / "quarkus-run.jar"),
+            ],
+            log_path=data / "registry.log",
+            pid_path=data / "registry.pid",
+            ready=self._ready,
+            cwd=app_dir,
+        )
+
+    @property
+    def url(self) -> str:
+        return self.settings.url
+
+    def _ready(self) -> bool:
+        try:
+            resp = httpx.get(f"{self.url}/subjects", timeout=1.0)
+        except httpx.HTTPError:
+            return False
+        return resp.status_code == 200
+
+    def start(self, timeout: float = 120.0) -> float:
+        ensure_port_free(self.settings.port, "the schema registry", self.settings.host)
+        self.settings.data_dir.mkdir(parents=True, exist_ok=True)
+        return self.process.start(timeout)
+
+    def stop(self) -> None:
+        self.process.stop()
+
+    def log_tail(self) -> str:
+        return log_tail(self.process.log_path)
