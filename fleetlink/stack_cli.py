@@ -93,5 +93,5 @@ def _status(args: argparse.Namespace) -> int:
 
 def _fetch(_args: argparse.Namespace) -> int:
     artifacts = fetch_all()
-    print(f"cached in {cache_root()}: Kafka jars and Apicurio ({artifacts.apicurio_dir})")
+    print(f"cached in {cache_root()}: Kafka jars and Apicurio ({artifacts.apicurio_jar})")
     return 0

@@ -16,7 +16,8 @@ log = logging.getLogger(__name__)
 
 KAFKA_VERSION = "4.2.1"
 LOG4J_VERSION = "2.25.3"
-APICURIO_VERSION = "3.3.3"
+APICURIO_VERSION = "3.3.3"  # needs Java 21+
+APICURIO_JAVA17_VERSION = "3.0.9"  # the newest 3.x line that still runs on Java 17
 
 _KAFKA_POM = """<project xmlns="http://maven.apache.org/POM/4.0.0">
   <modelVersion>4.0.0</modelVersion>
@@ -47,7 +48,7 @@ def cache_root() -> Path:
 @dataclass(frozen=True)
 class Artifacts:
     kafka_classpath: str
-    apicurio_dir: Path
+    apicurio_jar: Path
 
 
 def _mvn() -> str:
@@ -94,17 +95,18 @@ def fetch_kafka(root: Path) -> Path:
     return lib
 
 
-def fetch_apicurio(root: Path) -> Path:
-    home = root / f"apicurio-registry-{APICURIO_VERSION}"
+def fetch_apicurio(root: Path, version: str = APICURIO_VERSION) -> Path:
+    """Fetch and unpack the registry distribution; returns the jar to run with ``java -jar``."""
+    home = root / f"apicurio-registry-{version}"
     done = home / ".complete"
     if done.exists():
-        return _apicurio_app_dir(home)
+        return _apicurio_jar(home)
     home.mkdir(parents=True, exist_ok=True)
-    artifact = f"io.apicurio:apicurio-registry-app:{APICURIO_VERSION}:tar.gz:all"
+    artifact = f"io.apicurio:apicurio-registry-app:{version}:tar.gz:all"
     _run_mvn(
         ["dependency:copy", f"-Dartifact={artifact}", f"-DoutputDirectory={home}"],
         home,
-        f"Apicurio Registry {APICURIO_VERSION}",
+        f"Apicurio Registry {version}",
     )
     archives = sorted(home.glob("*.tar.gz"))
     if not archives:
@@ -113,18 +115,20 @@ def fetch_apicurio(root: Path) -> Path:
         tar.extractall(home / "dist", filter="data")
     archives[0].unlink()
     done.touch()
-    return _apicurio_app_dir(home)
+    return _apicurio_jar(home)
 
 
-def _apicurio_app_dir(home: Path) -> Path:
-    runners = sorted((home / "dist").rglob("quarkus-run.jar"))
+def _apicurio_jar(home: Path) -> Path:
+    # 3.3+ ships a Quarkus fast-jar (quarkus-run.jar); 3.0 an uber "-runner.jar"
+    dist = home / "dist"
+    runners = sorted(dist.rglob("quarkus-run.jar")) or sorted(dist.rglob("*-runner.jar"))
     if not runners:
-        raise StackError(f"no quarkus-run.jar under {home / 'dist'}; delete {home} and fetch again")
-    return runners[0].parent
+        raise StackError(f"no runnable jar under {home / 'dist'}; delete {home} and fetch again")
+    return runners[0]
 
 
-def fetch_all(root: Path | None = None) -> Artifacts:
+def fetch_all(root: Path | None = None, apicurio_version: str = APICURIO_VERSION) -> Artifacts:
     root = root or cache_root()
     lib = fetch_kafka(root)
     classpath = os.pathsep.join(str(p) for p in sorted(lib.glob("*.jar")))
-    return Artifacts(kafka_classpath=classpath, apicurio_dir=fetch_apicurio(root))
+    return Artifacts(kafka_classpath=classpath, apicurio_jar=fetch_apicurio(root, apicurio_version))

@@ -25,7 +25,7 @@ class RegistrySettings:
 
 
 class SchemaRegistry:
-    def __init__(self, settings: RegistrySettings, app_dir: Path, java: str) -> None:
+    def __init__(self, settings: RegistrySettings, jar: Path, java: str) -> None:
         self.settings = settings
         data = settings.data_dir
         self.process = ServerProcess(
@@ -39,12 +39,12 @@ class SchemaRegistry:
                 "-Dquarkus.log.level=WARN",
                 "-Dquarkus.log.category.\"io.quarkus\".level=INFO",
                 "-Dquarkus.http.limits.max-body-size=16M",
-                "-jar", str(app_dir / "quarkus-run.jar"),
+                "-jar", str(jar),
             ],
             log_path=data / "registry.log",
             pid_path=data / "registry.pid",
             ready=self._ready,
-            cwd=app_dir,
+            cwd=jar.parent,
         )
 
     @property

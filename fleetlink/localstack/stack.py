@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import TracebackType
 
-from fleetlink.localstack.artifacts import fetch_all
+from fleetlink.localstack.artifacts import APICURIO_JAVA17_VERSION, APICURIO_VERSION, fetch_all
 from fleetlink.localstack.errors import StackError
 from fleetlink.localstack.java import KAFKA_MIN_JAVA, REGISTRY_MIN_JAVA, find_java
 from fleetlink.localstack.kafka import KafkaBroker, KafkaSettings
@@ -64,8 +64,15 @@ class LocalStack:
 
     def start(self, kafka_timeout: float = 90.0, registry_timeout: float = 120.0) -> StackInfo:
         kafka_java = find_java(KAFKA_MIN_JAVA, "Apache Kafka 4")
-        registry_java = find_java(REGISTRY_MIN_JAVA, "Apicurio Registry 3.3")
-        artifacts = fetch_all()
+        try:
+            registry_java = find_java(REGISTRY_MIN_JAVA, "Apicurio Registry")
+            registry_version = APICURIO_VERSION
+        except StackError:
+            # no Java 21 here: the 3.0 line of the same registry runs on Java 17
+            registry_java, registry_version = kafka_java, APICURIO_JAVA17_VERSION
+            log.info("no Java %d+; using Apicurio Registry %s on Java 17", REGISTRY_MIN_JAVA,
+                     registry_version)
+        artifacts = fetch_all(apicurio_version=registry_version)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.kafka = KafkaBroker(
             KafkaSettings(
@@ -79,7 +86,7 @@ class LocalStack:
         )
         self.registry = SchemaRegistry(
             RegistrySettings(port=self._registry_port or free_port(), data_dir=self.directory / "registry"),
-            artifacts.apicurio_dir,
+            artifacts.apicurio_jar,
             registry_java,
         )
         with ThreadPoolExecutor(max_workers=2) as pool:
