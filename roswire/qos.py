@@ -1,0 +1,178 @@
+"""ROS 2 QoS profiles and rmw_zenoh's compact QoS string (rmw_zenoh.md §3).
+
+``<rel>:<dur>:<hist>,<depth>:<dl_s>,<dl_ns>:<ls_s>,<ls_ns>:<liv>,<lease_s>,<lease_ns>``; every
+field equal to rmw_zenoh's default (RELIABLE, VOLATILE, KEEP_LAST, depth 42, infinite durations,
+AUTOMATIC) is written empty. Enum numbers are rmw's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import IntEnum
+from typing import TypeVar
+
+from roswire.errors import QosParseError
+
+E = TypeVar("E", bound=IntEnum)
+
+
+class Reliability(IntEnum):
+    SYSTEM_DEFAULT = 0
+    RELIABLE = 1
+    BEST_EFFORT = 2
+    UNKNOWN = 3
+    BEST_AVAILABLE = 4
+
+
+class Durability(IntEnum):
+    SYSTEM_DEFAULT = 0
+    TRANSIENT_LOCAL = 1
+    VOLATILE = 2
+    UNKNOWN = 3
+    BEST_AVAILABLE = 4
+
+
+class History(IntEnum):
+    SYSTEM_DEFAULT = 0
+    KEEP_LAST = 1
+    KEEP_ALL = 2
+    UNKNOWN = 3
+
+
+class Liveliness(IntEnum):
+    SYSTEM_DEFAULT = 0
+    AUTOMATIC = 1
+    MANUAL_BY_NODE = 2
+    MANUAL_BY_TOPIC = 3
+    UNKNOWN = 4
+    BEST_AVAILABLE = 5
+
+
+@dataclass(frozen=True)
+class Duration:
+    """An rmw_time_t: seconds and nanoseconds kept apart, as on the wire."""
+
+    sec: int
+    nsec: int
+
+    @property
+    def is_infinite(self) -> bool:
+        return self == INFINITE
+
+    def to_ns(self) -> int:
+        return self.sec * 1_000_000_000 + self.nsec
+
+
+INFINITE = Duration(9223372036, 854775807)
+"""RMW_DURATION_INFINITE, the default deadline, lifespan and lease."""
+
+ZENOH_DEFAULT_DEPTH = 42
+"""rmw_zenoh's default history depth: a depth of 42 is written as an empty field."""
+
+
+@dataclass(frozen=True)
+class QoS:
+    reliability: Reliability = Reliability.RELIABLE
+    durability: Durability = Durability.VOLATILE
+    history: History = History.KEEP_LAST
+    depth: int = 10
+    deadline: Duration = INFINITE
+    lifespan: Duration = INFINITE
+    liveliness: Liveliness = Liveliness.AUTOMATIC
+    lease: Duration = INFINITE
+
+    @property
+    def transient_local(self) -> bool:
+        return self.durability == Durability.TRANSIENT_LOCAL
+
+    @property
+    def best_effort(self) -> bool:
+        return self.reliability == Reliability.BEST_EFFORT
+
+    def with_depth(self, depth: int) -> QoS:
+        return replace(self, depth=depth)
+
+    def to_keyexpr(self) -> str:
+        """The compact string rmw_zenoh puts in endpoint tokens (defaults elided)."""
+
+        def field(value: int, default: int) -> str:
+            return "" if value == default else str(value)
+
+        def duration(value: Duration) -> str:
+            return f"{field(value.sec, INFINITE.sec)},{field(value.nsec, INFINITE.nsec)}"
+
+        return ":".join(
+            (
+                field(self.reliability, Reliability.RELIABLE),
+                field(self.durability, Durability.VOLATILE),
+                f"{field(self.history, History.KEEP_LAST)},{field(self.depth, ZENOH_DEFAULT_DEPTH)}",
+                duration(self.deadline),
+                duration(self.lifespan),
+                f"{field(self.liveliness, Liveliness.AUTOMATIC)},{duration(self.lease)}",
+            )
+        )
+
+    @classmethod
+    def parse(cls, text: str) -> QoS:
+        """Parse a compact QoS string; empty fields take rmw_zenoh's defaults.
+
+        Like rmw_zenoh, at least 6 ``:``-separated fields are required (extra ones are
+        ignored) with 1/1/2/2/2/3 ``,``-separated sub-fields.
+        """
+        fields = text.split(":")
+        if len(fields) < 6:
+            raise QosParseError(text, f"needs 6 ':'-separated fields, has {len(fields)}")
+        rel, dur, hist, deadline, lifespan, liv = fields[:6]
+        hist_parts = _parts(text, "history", hist, 2)
+        live_parts = _parts(text, "liveliness", liv, 3)
+        return cls(
+            reliability=_enum(text, "reliability", Reliability, rel, Reliability.RELIABLE),
+            durability=_enum(text, "durability", Durability, dur, Durability.VOLATILE),
+            history=_enum(text, "history", History, hist_parts[0], History.KEEP_LAST),
+            depth=_int(text, "depth", hist_parts[1], ZENOH_DEFAULT_DEPTH),
+            deadline=_duration(text, "deadline", deadline),
+            lifespan=_duration(text, "lifespan", lifespan),
+            liveliness=_enum(text, "liveliness", Liveliness, live_parts[0], Liveliness.AUTOMATIC),
+            lease=_duration(text, "lease", ",".join(live_parts[1:])),
+        )
+
+
+def _parts(text: str, what: str, field: str, count: int) -> list[str]:
+    parts = field.split(",")
+    if len(parts) != count:
+        raise QosParseError(text, f"{what} field {field!r} needs {count} ','-separated parts")
+    return parts
+
+
+def _int(text: str, what: str, raw: str, default: int) -> int:
+    if raw == "":
+        return default
+    if not raw.isascii() or not raw.isdigit():
+        raise QosParseError(text, f"{what} {raw!r} is not a non-negative integer")
+    return int(raw)
+
+
+def _enum(text: str, what: str, enum: type[E], raw: str, default: E) -> E:
+    value = _int(text, what, raw, int(default))
+    try:
+        return enum(value)
+    except ValueError:
+        raise QosParseError(text, f"{what} {value} is not a known value") from None
+
+
+def _duration(text: str, what: str, field: str) -> Duration:
+    sec, nsec = _parts(text, what, field, 2)
+    return Duration(_int(text, what, sec, INFINITE.sec), _int(text, what, nsec, INFINITE.nsec))
+
+
+DEFAULT = QoS()
+"""``rclcpp::QoS(10)``: reliable, volatile, keep last 10 -> ``::,10:,:,:,,``."""
+
+SENSOR_DATA = QoS(reliability=Reliability.BEST_EFFORT, depth=5)
+"""``rclcpp::SensorDataQoS()``: best effort, depth 5 -> ``2::,5:,:,:,,``."""
+
+TRANSIENT_LOCAL = QoS(durability=Durability.TRANSIENT_LOCAL, depth=1)
+"""Latched topics such as ``/tf_static``: reliable, transient local, depth 1 -> ``:1:,1:,:,:,,``."""
+
+SERVICES = QoS()
+"""Services and clients: ``::,10:,:,:,,``."""
