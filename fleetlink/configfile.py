@@ -45,7 +45,7 @@ def _line_index(node: yaml.Node, prefix: tuple[PathPart, ...], out: dict[tuple[P
 
 
 def _nearest_line(lines: Mapping[tuple[PathPart, ...], int], loc: tuple[PathPart, ...]) -> int | None:
-    for end in range(len(loc), -1, -1):
+    for end in range(len(loc), 0, -1):
         line = lines.get(loc[:end])
         if line is not None:
             return line
