@@ -1,0 +1,46 @@
+"""The mapping engine: ROS topic patterns -> Kafka topics and keys (pure, no I/O).
+
+    table = MappingTable(robot_types=[...], mappings=[...])
+    table.add_robot("tb4_01")                 # type from the robot types' ``match`` globs
+    for bound in table.match("/tb4_01/imu"):  # every mapping the topic feeds
+        topic = bound.kafka_topic or bound.render_topic(decoded_message)
+        key = bound.key or bound.render_key(decoded_message)
+
+See ``docs/`` and the module docstrings for the pattern and template syntax.
+"""
+
+from edge.mapping.patterns import Capture, TopicPattern, check_robot_name
+from edge.mapping.spec import (
+    DELIVERIES,
+    CompiledMapping,
+    Delivery,
+    MappingSpec,
+    RobotTypeSpec,
+    check_name,
+    check_ros_type,
+    check_unique_names,
+    compile_mapping,
+)
+from edge.mapping.table import BoundMapping, MappingInfo, MappingTable
+from edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
+
+__all__ = [
+    "DELIVERIES",
+    "KAFKA_TOPIC_MAX",
+    "BoundMapping",
+    "Capture",
+    "CompiledMapping",
+    "Delivery",
+    "MappingInfo",
+    "MappingSpec",
+    "MappingTable",
+    "RobotTypeSpec",
+    "Template",
+    "TopicPattern",
+    "check_name",
+    "check_robot_name",
+    "check_ros_type",
+    "check_unique_names",
+    "compile_mapping",
+    "kafka_topic_problem",
+]

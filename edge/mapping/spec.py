@@ -1,0 +1,152 @@
+"""Mapping declarations and their validation (config time, no I/O).
+
+``MappingSpec`` is what a config file or the admin API declares; ``compile_mapping`` checks it
+(pattern syntax, every template capture is captured by the pattern, static Kafka topic
+legality, the ROS type's form) and returns a ``CompiledMapping`` ready for the table.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal, get_args
+
+from edge.errors import MappingError
+from edge.mapping.patterns import TopicPattern
+from edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
+
+Delivery = Literal["at_least_once", "best_effort"]
+DELIVERIES: tuple[str, ...] = get_args(Delivery)
+
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
+ROS_TYPE_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*")
+_KAFKA_CHAR = re.compile(r"[A-Za-z0-9._-]")
+
+
+@dataclass(frozen=True, slots=True)
+class MappingSpec:
+    """One mapping as declared: ROS topic pattern -> Kafka topic template.
+
+    ``key`` defaults to ``{robot}`` (the pattern must then capture ``robot``); ``ros_type``
+    ``None`` means "discover it from the graph"; ``stages`` are the mapping's stage specs
+    (``edge.stages`` objects), carried through untouched.
+    """
+
+    name: str
+    source: str
+    topic: str
+    key: str | None = None
+    ros_type: str | None = None
+    delivery: Delivery = "at_least_once"
+    stages: tuple[Any, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class RobotTypeSpec:
+    """A robot type: robots whose namespace matches the glob ``match`` (``/tb4_*``) get
+    ``mappings`` instantiated when they register."""
+
+    name: str
+    match: str
+    mappings: tuple[MappingSpec, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class CompiledMapping:
+    """A validated mapping (a site-level mapping, or a robot type's template)."""
+
+    spec: MappingSpec
+    robot_type: str | None
+    pattern: TopicPattern
+    topic: Template
+    key: Template
+    field_paths: tuple[tuple[str, ...], ...] = field(default=())
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+
+def check_name(name: str, *, what: str = "mapping name") -> str:
+    if NAME_PATTERN.fullmatch(name) is None:
+        raise MappingError(f"{what} {name!r} must be non-empty and use only letters, digits, '_', '.', '-'")
+    return name
+
+
+def check_ros_type(ros_type: str, *, mapping: str | None = None) -> str:
+    if ROS_TYPE_PATTERN.fullmatch(ros_type) is None:
+        raise MappingError(f"ROS type {ros_type!r} must look like 'package/msg/Type'", mapping=mapping)
+    return ros_type
+
+
+def _check_captures(template: Template, pattern: TopicPattern, what: str, mapping: str) -> None:
+    captured = set(pattern.captures)
+    for name in sorted(template.captures - captured):
+        have = ", ".join(pattern.captures) or "nothing"
+        raise MappingError(
+            f"{what} {template.text!r} uses {{{name}}}, which the pattern {pattern.text!r} does not "
+            f"capture (it captures: {have}; message fields are written {{msg.field}})",
+            mapping=mapping, template=template.text,
+        )
+
+
+def _check_topic_literal(template: Template, mapping: str) -> None:
+    if template.is_literal:
+        problem = kafka_topic_problem(template.literal_text)
+        if problem:
+            raise MappingError(f"Kafka topic {template.text!r}: {problem}", mapping=mapping,
+                               template=template.text)
+        return
+    literal = template.literal_text
+    bad = sorted({c for c in literal if _KAFKA_CHAR.fullmatch(c) is None})
+    if bad:
+        raise MappingError(
+            f"Kafka topic template {template.text!r}: Kafka topic names use only [a-zA-Z0-9._-]; "
+            f"{''.join(bad)!r} is not allowed", mapping=mapping, template=template.text,
+        )
+    if len(literal) >= KAFKA_TOPIC_MAX:
+        raise MappingError(f"Kafka topic template {template.text!r} is too long (max {KAFKA_TOPIC_MAX})",
+                           mapping=mapping, template=template.text)
+
+
+def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> CompiledMapping:
+    """Validate ``spec``; raises ``MappingError`` naming the mapping and the faulty template."""
+    name = spec.name
+    check_name(name)
+    if spec.delivery not in DELIVERIES:
+        raise MappingError(f"delivery {spec.delivery!r} must be one of {', '.join(DELIVERIES)}", mapping=name)
+    if spec.ros_type is not None:
+        check_ros_type(spec.ros_type, mapping=name)
+    pattern = TopicPattern.parse(spec.source, mapping=name)
+    if robot_type is not None and not pattern.is_single("robot"):
+        raise MappingError(
+            f"topic pattern {spec.source!r}: mappings of robot type {robot_type!r} must capture the "
+            "robot as one segment, e.g. '/{robot}/imu'", mapping=name, template=spec.source,
+        )
+    topic = Template.parse(spec.topic, mapping=name, what="Kafka topic template")
+    _check_captures(topic, pattern, "Kafka topic template", name)
+    _check_topic_literal(topic, name)
+    if spec.key is None:
+        if "robot" not in pattern.captures:
+            raise MappingError(
+                f"the key defaults to '{{robot}}' but the pattern {spec.source!r} captures no robot; "
+                "set 'key' (a capture, a {msg.field} or fixed text)", mapping=name, template=spec.source,
+            )
+        key_text = "{robot}"
+    else:
+        key_text = spec.key
+    key = Template.parse(key_text, mapping=name, what="key template")
+    _check_captures(key, pattern, "key template", name)
+    paths = topic.field_paths + tuple(p for p in key.field_paths if p not in topic.field_paths)
+    return CompiledMapping(spec=spec, robot_type=robot_type, pattern=pattern, topic=topic, key=key,
+                           field_paths=paths)
+
+
+def check_unique_names(specs: Sequence[MappingSpec]) -> None:
+    """Mapping names are unique across the whole edge (site-level and every robot type)."""
+    seen: set[str] = set()
+    for spec in specs:
+        if spec.name in seen:
+            raise MappingError(f"mapping name {spec.name!r} is used twice; names must be unique per edge")
+        seen.add(spec.name)
