@@ -7,11 +7,14 @@ Tests never ``time.sleep`` to synchronise; they wait for a condition with a dead
 
 from __future__ import annotations
 
+import json
 import socket
 import time
 from collections.abc import Callable
 
-__all__ = ["free_port", "wait_until"]
+import zenoh
+
+__all__ = ["free_port", "wait_until", "zenoh_peer_config"]
 
 
 def wait_until(
@@ -48,3 +51,15 @@ def free_port(host: str = "127.0.0.1") -> int:
         sock.bind((host, 0))
         port: int = sock.getsockname()[1]
         return port
+
+
+def zenoh_peer_config(endpoint: str, mode: str = "peer") -> zenoh.Config:
+    """A session config that joins the router at ``endpoint`` like an rmw_zenoh node does:
+    peer (or client) mode, loopback listener, no multicast scouting, timestamping on."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"] if mode == "peer" else []))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")
+    return conf

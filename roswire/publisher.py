@@ -1,0 +1,160 @@
+"""``RosPublisher``: publish as an rmw_zenoh publisher does (rmw_zenoh.md §5).
+
+Exact data key (type name and hash of the node's distro), an ``MP`` token with the real QoS,
+CDR payload and an attachment on every sample (sequence from 1, send time, the GID derived from
+the token). TRANSIENT_LOCAL topics go through an advanced publisher whose cache answers late
+joiners, as rmw_zenoh's does.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Literal
+
+import zenoh
+import zenoh.ext
+
+from roswire.attachment import AttachmentVersion, encode
+from roswire.errors import RoswireError
+from roswire.gid import entity_gid
+from roswire.names import data_key
+from roswire.qos import DEFAULT, History, QoS, Reliability
+from roswire.tokens import EntityKind, endpoint_token
+
+if TYPE_CHECKING:
+    from roswire.node import RosNode
+
+log = logging.getLogger(__name__)
+
+Congestion = Literal["drop", "block"]
+SPORADIC_HEARTBEAT_S = 0.5
+
+
+class RosPublisher:
+    def __init__(
+        self,
+        node: RosNode,
+        topic: str,
+        typename: str,
+        qos: QoS = DEFAULT,
+        *,
+        type_hash: str | None = None,
+        attachment_version: AttachmentVersion | None = None,
+        congestion: Congestion | None = None,
+    ) -> None:
+        self.node = node
+        self.topic = node.resolve(topic)
+        self.typename = typename
+        self.qos = qos
+        self._type_hash = type_hash
+        self.attachment_version: AttachmentVersion = attachment_version or node.attachment_version
+        self.congestion = congestion
+        self._publisher: zenoh.Publisher | zenoh.ext.AdvancedPublisher | None = None
+        self._token: zenoh.LivelinessToken | None = None
+        self._lock = threading.Lock()
+        self.seq = 0
+        self.key = ""
+        self.token_key = ""
+        self.gid = b""
+        self.eid = -1
+
+    @property
+    def type_hash(self) -> str:
+        if self._type_hash is None:
+            self._type_hash = self.node.type_hash(self.typename)
+        return self._type_hash
+
+    def _congestion(self) -> zenoh.CongestionControl:
+        if self.congestion == "block" or (
+            self.congestion is None
+            and self.qos.reliability != Reliability.BEST_EFFORT
+            and self.qos.history == History.KEEP_ALL
+        ):
+            return zenoh.CongestionControl.BLOCK
+        return zenoh.CongestionControl.DROP
+
+    def start(self) -> RosPublisher:
+        if self._publisher is not None:
+            return self
+        from roswire.node import next_entity_id
+
+        session = self.node.session
+        self.key = data_key(self.node.domain_id, self.topic, self.typename, self.type_hash)
+        self.eid = next_entity_id()
+        self.token_key = endpoint_token(
+            domain=self.node.domain_id, zid=self.node.zid, nid=self.node.nid, eid=self.eid,
+            kind=EntityKind.PUBLISHER, namespace=self.node.namespace, node_name=self.node.name,
+            topic=self.topic, typename=self.typename, type_hash=self.type_hash, qos=self.qos,
+            enclave=self.node.enclave,
+        )
+        self.gid = entity_gid(self.token_key)
+        reliability = (
+            zenoh.Reliability.BEST_EFFORT if self.qos.best_effort else zenoh.Reliability.RELIABLE
+        )
+        if self.qos.transient_local:
+            miss = None
+            if not self.qos.best_effort:
+                miss = zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=SPORADIC_HEARTBEAT_S)
+            self._publisher = zenoh.ext.declare_advanced_publisher(
+                session, self.key, congestion_control=self._congestion(), reliability=reliability,
+                cache=zenoh.ext.CacheConfig(max_samples=max(self.qos.depth, 1)),
+                sample_miss_detection=miss, publisher_detection=True,
+            )
+        else:
+            self._publisher = session.declare_publisher(
+                self.key, congestion_control=self._congestion(), reliability=reliability
+            )
+        self._token = session.liveliness().declare_token(self.token_key)
+        self.node.adopt(self)
+        log.debug("publisher started key=%s token=%s", self.key, self.token_key)
+        return self
+
+    def stop(self) -> None:
+        if self._token is not None:
+            self._token.undeclare()
+            self._token = None
+        if self._publisher is not None:
+            publisher: Any = self._publisher  # AdvancedPublisher.undeclare is untyped in the stubs
+            publisher.undeclare()
+            self._publisher = None
+        self.node.forget(self)
+
+    def __enter__(self) -> RosPublisher:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    def publish_cdr(self, payload: bytes, *, source_ts_ns: int | None = None) -> int:
+        """Put one CDR-encoded message; returns its sequence number."""
+        publisher = self._publisher
+        if publisher is None:
+            raise RoswireError(f"publisher on {self.topic} is not started")
+        with self._lock:
+            self.seq += 1
+            seq = self.seq
+            stamp = time.time_ns() if source_ts_ns is None else source_ts_ns
+            publisher.put(payload, attachment=encode(seq, stamp, self.gid, self.attachment_version))
+        return seq
+
+    def publish(self, message: object) -> int:
+        """Serialize ``message`` (a rosbags object of this publisher's type) and put it."""
+        ts = self.node.typestore
+        if ts is None:
+            raise RoswireError(f"publisher on {self.topic}: the node has no type store to serialize with")
+        return self.publish_cdr(bytes(ts.serialize_cdr(message, self.typename)))
+
+    @property
+    def matching(self) -> bool | None:
+        """Whether any subscriber matches (None where zenoh cannot tell: advanced publishers)."""
+        publisher = self._publisher
+        if isinstance(publisher, zenoh.Publisher):
+            # the stubs say bool; zenoh 1.10 returns a MatchingStatus with a .matching flag
+            status: Any = publisher.matching_status
+            return bool(getattr(status, "matching", status))
+        return None

@@ -1,0 +1,63 @@
+"""Per-publisher sequence tracking: gaps, duplicates and reordering from attachment sequence numbers.
+
+Each rmw_zenoh publisher numbers its samples from 1 and its GID is unique per process run, so a
+sequence that does not continue the last one from the same GID means samples were lost (gap) or
+delivered twice / out of order.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from enum import Enum
+
+
+class SeqStatus(Enum):
+    FIRST = "first"
+    NEXT = "next"
+    GAP = "gap"
+    DUPLICATE = "duplicate"
+
+
+@dataclass(frozen=True)
+class SeqResult:
+    status: SeqStatus
+    missing: int = 0
+
+
+class SequenceTracker:
+    """Remembers the last sequence number of up to ``max_sources`` publishers (least recent evicted)."""
+
+    def __init__(self, max_sources: int = 4096) -> None:
+        self.max_sources = max_sources
+        self._last: OrderedDict[bytes, int] = OrderedDict()
+        self.gaps = 0
+        self.missing = 0
+        self.duplicates = 0
+
+    def observe(self, gid: bytes, seq: int) -> SeqResult:
+        last = self._last.get(gid)
+        if last is None:
+            result = SeqResult(SeqStatus.FIRST)
+        elif seq == last + 1:
+            result = SeqResult(SeqStatus.NEXT)
+        elif seq > last + 1:
+            result = SeqResult(SeqStatus.GAP, seq - last - 1)
+            self.gaps += 1
+            self.missing += result.missing
+        else:
+            self.duplicates += 1
+            self._last.move_to_end(gid)
+            return SeqResult(SeqStatus.DUPLICATE)
+        self._last[gid] = seq
+        self._last.move_to_end(gid)
+        while len(self._last) > self.max_sources:
+            self._last.popitem(last=False)
+        return result
+
+    def last(self, gid: bytes) -> int | None:
+        return self._last.get(gid)
+
+    @property
+    def sources(self) -> int:
+        return len(self._last)

@@ -1,0 +1,145 @@
+"""Graph discovery and the robot registry against a real zenoh router on loopback.
+
+Every test uses its own ROS domain id, so tests sharing the session router never see each
+other's tokens.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+
+from roswire.discovery import GraphWatcher
+from roswire.graph import EventKind, GraphEvent
+from roswire.node import RosNode
+from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
+from roswire.robot_watcher import RobotWatcher
+from roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType
+from roswire.tokens import EndpointInfo, EntityKind, NodeInfo
+from tests.helpers import wait_until, zenoh_peer_config
+
+IMU = "sensor_msgs/msg/Imu"
+IMU_HASH = "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
+TB4 = [RobotType("turtlebot4", "/tb4_*")]
+_domains = itertools.count(101)
+
+
+@pytest.fixture
+def domain() -> int:
+    return next(_domains)
+
+
+@pytest.fixture
+def observer(zenoh_router: str, domain: int) -> Iterator[RosNode]:
+    with RosNode("fleetlink", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as node:
+        yield node
+
+
+def robot(endpoint: str, domain: int, name: str) -> RosNode:
+    """A simulated robot process: its own session, a node in /<name> and one publisher."""
+    node = RosNode("sim", f"/{name}", domain_id=domain, config=zenoh_peer_config(endpoint)).start()
+    node.create_publisher("imu", IMU, SENSOR_DATA, type_hash=IMU_HASH)
+    return node
+
+
+def test_robots_joining_and_leaving_are_seen_within_a_second(
+    zenoh_router: str, domain: int, observer: RosNode
+) -> None:
+    events: list[tuple[RobotEvent, float]] = []
+    with RobotWatcher(observer, TB4, grace_s=0.2, tick_s=0.05,
+                      listeners=(lambda e: events.append((e, time.monotonic())),)):
+        joined = time.monotonic()
+        first = robot(zenoh_router, domain, "tb4_01")
+        second = robot(zenoh_router, domain, "tb4_02")
+        wait_until(lambda: len(events) == 2, timeout=5, message="two robots registered")
+        assert {(e.robot, e.kind, e.reason) for e, _ in events} == {
+            ("tb4_01", RobotEventKind.REGISTERED, Reason.DISCOVERED),
+            ("tb4_02", RobotEventKind.REGISTERED, Reason.DISCOVERED),
+        }
+        assert max(t for _, t in events) - joined < 1.0
+        left = time.monotonic()
+        first.stop()
+        wait_until(lambda: len(events) == 3, timeout=5, message="tb4_01 deregistered")
+        event, at = events[2]
+        assert (event.robot, event.kind, event.reason) == (
+            "tb4_01", RobotEventKind.DEREGISTERED, Reason.LIVELINESS_LOST)
+        assert at - left < 1.0
+        second.stop()
+        wait_until(lambda: len(events) == 4, timeout=5, message="tb4_02 deregistered")
+
+
+def test_robot_running_before_discovery_starts_is_found(
+    zenoh_router: str, domain: int, observer: RosNode
+) -> None:
+    early = robot(zenoh_router, domain, "tb4_07")
+    try:
+        with RobotWatcher(observer, TB4, grace_s=0.2) as watcher:
+            wait_until(lambda: [r.name for r in watcher.robots()] == ["tb4_07"], timeout=5,
+                       message="pre-existing robot tb4_07 found")
+            (found,) = watcher.robots()
+            assert found.robot_type == "turtlebot4"
+            assert len(found.entities) == 2  # the node token and the publisher token
+    finally:
+        early.stop()
+
+
+def test_graph_shows_nodes_topics_types_and_qos(zenoh_router: str, domain: int, observer: RosNode) -> None:
+    events: list[GraphEvent] = []
+    with GraphWatcher(observer.session, domain, listeners=(events.append,)) as watcher:
+        node = RosNode("tf_pub", "/tb4_03", domain_id=domain, config=zenoh_peer_config(zenoh_router)).start()
+        try:
+            node.create_publisher("/tf_static", "tf2_msgs/msg/TFMessage", TRANSIENT_LOCAL,
+                                  type_hash="TypeHashNotSupported")
+            node.create_subscriber("cmd_vel", "geometry_msgs/msg/Twist", lambda s: None,
+                                   type_hash="TypeHashNotSupported")
+            wait_until(lambda: len(watcher.topics()) == 2, timeout=5, message="two topics")
+            topics = watcher.topics()
+            tf = topics["/tf_static"]
+            assert tf.types == ("tf2_msgs/msg/TFMessage",)
+            assert [p.qos for p in tf.publishers] == [TRANSIENT_LOCAL]
+            assert tf.publishers[0].zid == node.zid
+            cmd = topics["/tb4_03/cmd_vel"]
+            assert [s.kind for s in cmd.subscribers] == [EntityKind.SUBSCRIPTION]
+            assert [n.fqn for n in watcher.nodes()] == ["/tb4_03/tf_pub"]
+            assert all(e.kind is EventKind.APPEARED for e in events)
+        finally:
+            node.stop()
+        wait_until(lambda: len(watcher) == 0, timeout=5, message="all tokens gone after stop")
+        gone = [e.entity for e in events if e.kind is EventKind.DISAPPEARED]
+        assert sum(isinstance(e, EndpointInfo) for e in gone) == 2
+        assert sum(isinstance(e, NodeInfo) for e in gone) == 1
+        # the observer's own node token is never part of the graph
+        assert all(e.entity.zid != observer.zid for e in events)
+
+
+def test_malformed_tokens_are_counted_and_never_stop_discovery(
+    zenoh_router: str, domain: int, observer: RosNode
+) -> None:
+    bad_keys = [
+        f"@ros2_lv/{domain}/zz/0/0/NN/%/%/x",                        # zid not hex
+        f"@ros2_lv/{domain}/ab/0/0/NN/%/%",                          # too few chunks
+        f"@ros2_lv/{domain}/ab/0/1/MP/%/%/n/%t/not_a_type/TypeHashNotSupported/::,10:,:,:,,",
+        f"@ros2_lv/{domain}/ab/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::String_/TypeHashNotSupported/garbage",
+        f"@ros2_lv/{domain}/ab/0/0/QQ/%/%/n",                         # unknown kind
+    ]
+    with zenoh.open(zenoh_peer_config(zenoh_router)) as vandal:
+        tokens = [vandal.liveliness().declare_token(k) for k in bad_keys]
+        with GraphWatcher(observer.session, domain) as watcher:
+            wait_until(lambda: watcher.stats.malformed == len(bad_keys), timeout=5,
+                       message="every malformed token counted")
+            good = robot(zenoh_router, domain, "tb4_05")
+            try:
+                wait_until(lambda: "/tb4_05/imu" in watcher.topics(), timeout=5,
+                           message="discovery continues after malformed tokens")
+                for token in tokens:
+                    token.undeclare()
+                wait_until(lambda: watcher.stats.deletes >= len(bad_keys), timeout=5,
+                           message="deletes of malformed tokens seen")
+                assert [n.fqn for n in watcher.nodes()] == ["/tb4_05/sim"]
+                assert watcher.stats.malformed == len(bad_keys)
+            finally:
+                good.stop()
