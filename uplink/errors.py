@@ -1,0 +1,22 @@
+"""Errors of the uplink."""
+
+from __future__ import annotations
+
+from fleetlink.errors import ConfigError, FleetlinkError
+
+
+class UplinkError(FleetlinkError):
+    """Base class of the uplink's errors."""
+
+
+class UnsafeKafkaSettingError(ConfigError, UplinkError):
+    """A Kafka override would weaken delivery guarantees (e.g. ``acks=1``)."""
+
+
+class ProduceError(UplinkError):
+    """Kafka refused or failed to acknowledge a record."""
+
+    def __init__(self, message: str, *, code: str, retriable: bool) -> None:
+        super().__init__(message)
+        self.code = code
+        self.retriable = retriable

@@ -1,0 +1,172 @@
+"""Kafka client settings: typed, secrets kept secret, safe defaults pinned in code.
+
+``acks=all`` and idempotence are not options: an override that would weaken them is refused
+at start-up with the YAML path. Credentials are ``SecretStr`` and may come from a file or an
+environment variable, so they never appear in config dumps or logs.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
+
+from uplink.errors import UnsafeKafkaSettingError
+
+# What the producer always runs with; none of it can be overridden to something weaker.
+PINNED_PRODUCER: dict[str, str | int | float | bool] = {
+    "acks": "all",
+    "enable.idempotence": True,
+    "max.in.flight.requests.per.connection": 5,
+}
+_SAFE_VALUES = {
+    "acks": {"all", "-1"},
+    "enable.idempotence": {"true"},
+}
+_NOT_OVERRIDABLE = {
+    "bootstrap.servers": "set kafka.bootstrap_servers instead",
+    "sasl.password": "use kafka.sasl.password, password_file or password_env (kept secret)",
+    "ssl.key.password": "use kafka.ssl.key_password (kept secret)",
+    "transactional.id": "transactions are not supported yet",
+}
+
+
+class SaslSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    mechanism: Literal["PLAIN", "SCRAM-SHA-256", "SCRAM-SHA-512"] = "SCRAM-SHA-512"
+    username: str
+    password: SecretStr | None = None
+    password_file: Path | None = None
+    password_env: str | None = None
+
+    @model_validator(mode="after")
+    def _one_password_source(self) -> SaslSettings:
+        given = [x for x in (self.password, self.password_file, self.password_env) if x is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of password, password_file, password_env")
+        return self
+
+    def resolve_password(self) -> SecretStr:
+        if self.password is not None:
+            return self.password
+        if self.password_file is not None:
+            try:
+                return SecretStr(self.password_file.read_text(encoding="utf-8").strip())
+            except OSError as exc:
+                raise UnsafeKafkaSettingError(
+                    f"kafka.sasl.password_file: cannot read {self.password_file}: {exc.strerror}"
+                ) from None
+        name = self.password_env or ""
+        value = os.environ.get(name)
+        if value is None:
+            raise UnsafeKafkaSettingError(f"kafka.sasl.password_env: environment variable {name} is not set")
+        return SecretStr(value)
+
+
+class SslSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    ca_location: Path | None = None
+    certificate_location: Path | None = None
+    key_location: Path | None = None
+    key_password: SecretStr | None = None
+    endpoint_identification: Literal["https", "none"] = "https"
+
+
+class KafkaSettings(BaseModel):
+    """The ``kafka:`` section of the uplink config."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    bootstrap_servers: str = Field(min_length=1, examples=["127.0.0.1:9092"])
+    security_protocol: Literal["PLAINTEXT", "SSL", "SASL_PLAINTEXT", "SASL_SSL"] = "PLAINTEXT"
+    sasl: SaslSettings | None = None
+    ssl: SslSettings | None = None
+    client_id: str = "fleetlink-uplink"
+    linger_ms: int = Field(default=5, ge=0, le=10_000)
+    compression: Literal["none", "lz4", "zstd", "snappy", "gzip"] = "lz4"
+    delivery_timeout_ms: int = Field(default=120_000, ge=1_000)
+    message_max_bytes: int = Field(default=1_000_000, ge=1_000)
+    producer_overrides: dict[str, str | int | float | bool] = {}
+    consumer_overrides: dict[str, str | int | float | bool] = {}
+
+    @field_validator("producer_overrides")
+    @classmethod
+    def _no_weakening(
+        cls, value: dict[str, str | int | float | bool]
+    ) -> dict[str, str | int | float | bool]:
+        for key, raw in value.items():
+            if key in _NOT_OVERRIDABLE:
+                raise ValueError(f"{key!r} cannot be overridden: {_NOT_OVERRIDABLE[key]}")
+            safe = _SAFE_VALUES.get(key)
+            if safe is not None and str(raw).lower() not in safe:
+                raise ValueError(
+                    f"{key}={raw!r} would weaken delivery guarantees; fleetlink pins "
+                    f"{key}={PINNED_PRODUCER[key]!r} (at-least-once from the edge spool needs it)"
+                )
+        return value
+
+    @model_validator(mode="after")
+    def _security_consistent(self) -> KafkaSettings:
+        if self.security_protocol.startswith("SASL") and self.sasl is None:
+            raise ValueError(f"security_protocol {self.security_protocol} needs a sasl section")
+        return self
+
+    def common_config(self) -> dict[str, str | int | float | bool]:
+        conf: dict[str, str | int | float | bool] = {
+            "bootstrap.servers": self.bootstrap_servers,
+            "security.protocol": self.security_protocol,
+            "client.id": self.client_id,
+        }
+        if self.sasl is not None:
+            conf["sasl.mechanism"] = self.sasl.mechanism
+            conf["sasl.username"] = self.sasl.username
+            conf["sasl.password"] = self.sasl.resolve_password().get_secret_value()
+        if self.ssl is not None:
+            for key, path in (
+                ("ssl.ca.location", self.ssl.ca_location),
+                ("ssl.certificate.location", self.ssl.certificate_location),
+                ("ssl.key.location", self.ssl.key_location),
+            ):
+                if path is not None:
+                    conf[key] = str(path)
+            if self.ssl.key_password is not None:
+                conf["ssl.key.password"] = self.ssl.key_password.get_secret_value()
+            conf["ssl.endpoint.identification.algorithm"] = self.ssl.endpoint_identification
+        return conf
+
+    def producer_config(self) -> dict[str, str | int | float | bool]:
+        conf = self.common_config()
+        conf.update(
+            {
+                "linger.ms": self.linger_ms,
+                "compression.type": self.compression,
+                "delivery.timeout.ms": self.delivery_timeout_ms,
+                "message.max.bytes": self.message_max_bytes,
+            }
+        )
+        conf.update(self.producer_overrides)
+        conf.update(PINNED_PRODUCER)
+        return conf
+
+    def consumer_config(self, group_id: str) -> dict[str, str | int | float | bool]:
+        conf = self.common_config()
+        conf.update(
+            {
+                "group.id": group_id,
+                "enable.auto.commit": False,
+                "auto.offset.reset": "earliest",
+                "isolation.level": "read_committed",
+            }
+        )
+        conf.update(self.consumer_overrides)
+        conf["enable.auto.commit"] = False  # offsets are committed only after the site acknowledged
+        return conf
+
+
+def redacted(conf: dict[str, str | int | float | bool]) -> dict[str, str | int | float | bool]:
+    """A copy safe to log: every password-like value replaced."""
+    return {k: ("***" if "password" in k or "secret" in k else v) for k, v in conf.items()}

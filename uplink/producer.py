@@ -1,0 +1,169 @@
+"""The Kafka producer adapter: every record gets a delivery report, nothing is fire-and-forget.
+
+``KafkaSink.produce`` hands a record to librdkafka with a callback; a poll thread serves
+delivery reports as they arrive. When librdkafka's queue is full the call waits (serving
+reports) instead of failing, so back-pressure reaches the caller, never a silent drop.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+from confluent_kafka import KafkaError, KafkaException, Message, Producer
+
+from fleetlink.ratelimit import LogLimiter
+from uplink.errors import ProduceError
+from uplink.kafka_settings import KafkaSettings, redacted
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Delivery:
+    """The outcome of one produce: ``error`` is None when Kafka acknowledged it."""
+
+    topic: str
+    partition: int
+    offset: int
+    error: ProduceError | None
+    latency_s: float
+
+
+DeliveryCallback = Callable[[Delivery], None]
+
+
+def _produce_error(err: KafkaError) -> ProduceError:
+    return ProduceError(
+        f"{err.name()}: {err.str()}", code=err.name(), retriable=bool(err.retriable())
+    )
+
+
+class KafkaSink:
+    """A started ``KafkaSink`` owns one idempotent producer and one thread polling it."""
+
+    def __init__(self, settings: KafkaSettings, *, queue_wait_s: float = 30.0) -> None:
+        self._settings = settings
+        self._queue_wait_s = queue_wait_s
+        self._producer: Producer | None = None
+        self._poller: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self._fatal: ProduceError | None = None
+        self._limiter = LogLimiter(log)
+
+    # -- lifecycle -------------------------------------------------------------------------
+
+    def start(self) -> KafkaSink:
+        conf: dict[str, Any] = dict(self._settings.producer_config())
+        conf["error_cb"] = self._on_client_error
+        log.info("starting Kafka producer %s", redacted(self._settings.producer_config()))
+        self._producer = Producer(conf)
+        self._stopping.clear()
+        self._poller = threading.Thread(target=self._poll_loop, name="kafka-poll", daemon=True)
+        self._poller.start()
+        return self
+
+    def stop(self, flush_timeout: float = 10.0) -> int:
+        """Flush what is in flight (bounded), stop polling; returns records still undelivered."""
+        producer = self._producer
+        if producer is None:
+            return 0
+        remaining: int = producer.flush(flush_timeout)
+        self._stopping.set()
+        if self._poller is not None:
+            self._poller.join(5)
+        self._producer = None
+        return remaining
+
+    def __enter__(self) -> KafkaSink:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    # -- producing -------------------------------------------------------------------------
+
+    def produce(
+        self,
+        topic: str,
+        key: bytes | None,
+        value: bytes,
+        *,
+        headers: Sequence[tuple[str, bytes]] = (),
+        timestamp_ms: int = 0,
+        on_delivery: DeliveryCallback,
+    ) -> None:
+        """Queue one record; ``on_delivery`` is called exactly once, from the poll thread.
+
+        A record Kafka can never take (too large, illegal topic) is reported through
+        ``on_delivery`` with a non-retriable error, not raised.
+        """
+        producer = self._producer
+        if producer is None:
+            raise ProduceError("producer not started", code="_NOT_STARTED", retriable=True)
+        if self._fatal is not None:
+            raise self._fatal
+        began = time.monotonic()
+
+        def report(err: KafkaError | None, msg: Message) -> None:
+            latency = time.monotonic() - began
+            error = _produce_error(err) if err is not None else None
+            partition, offset = msg.partition(), msg.offset()
+            on_delivery(Delivery(
+                topic,
+                -1 if partition is None else partition,
+                -1 if offset is None else offset,
+                error,
+                latency,
+            ))
+
+        deadline = began + self._queue_wait_s
+        while True:
+            try:
+                producer.produce(
+                    topic, value=value, key=key, headers=list(headers), timestamp=timestamp_ms,
+                    on_delivery=report,
+                )
+                return
+            except BufferError:
+                if time.monotonic() > deadline:
+                    raise ProduceError(
+                        f"librdkafka queue stayed full for {self._queue_wait_s:.0f} s",
+                        code="_QUEUE_FULL", retriable=True,
+                    ) from None
+                producer.poll(0.05)
+            except KafkaException as exc:
+                err = exc.args[0] if exc.args and isinstance(exc.args[0], KafkaError) else None
+                error = (
+                    _produce_error(err) if err is not None
+                    else ProduceError(str(exc), code="_UNKNOWN", retriable=False)
+                )
+                on_delivery(Delivery(topic, -1, -1, error, time.monotonic() - began))
+                return
+
+    def in_flight(self) -> int:
+        return len(self._producer) if self._producer is not None else 0
+
+    # -- internals -------------------------------------------------------------------------
+
+    def _poll_loop(self) -> None:
+        while not self._stopping.is_set():
+            producer = self._producer
+            if producer is None:
+                return
+            producer.poll(0.05)
+
+    def _on_client_error(self, err: KafkaError) -> None:
+        if err.fatal():
+            self._fatal = _produce_error(err)
+            log.error("Kafka producer fatal error: %s", err.str())
+        else:
+            # transient (broker down, connection refused): librdkafka retries by itself
+            self._limiter.log(logging.WARNING, err.name(), "Kafka client: %s", err.str())
