@@ -13,9 +13,10 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import zenoh
+from pydantic import BaseModel, ConfigDict
 
 from fleetlink.errors import ConfigError
 
@@ -127,3 +128,35 @@ def options_from_args(args: argparse.Namespace) -> ZenohOptions:
         config_file=args.zenoh_config,
         overrides=tuple(overrides),
     )
+
+
+class ZenohSection(BaseModel):
+    """The ``zenoh:`` section of a fleetlink config: a JSON5 file plus explicit overrides."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    config_file: Path | None = None
+    mode: Mode | None = None
+    connect: list[str] = []
+    listen: list[str] = []
+    overrides: dict[str, Any] = {}
+
+    def options(self) -> ZenohOptions:
+        return ZenohOptions(
+            mode=self.mode,
+            connect=tuple(self.connect),
+            listen=tuple(self.listen),
+            config_file=self.config_file,
+            overrides=tuple((k, json.dumps(v)) for k, v in self.overrides.items()),
+        )
+
+    def merged_with(self, cli: ZenohOptions) -> ZenohOptions:
+        """Command-line options win over the file's section, field by field."""
+        own = self.options()
+        return ZenohOptions(
+            mode=cli.mode or own.mode,
+            connect=cli.connect or own.connect,
+            listen=cli.listen or own.listen,
+            config_file=cli.config_file or own.config_file,
+            overrides=own.overrides + cli.overrides,
+        )
