@@ -1,0 +1,100 @@
+"""The edge <-> uplink wire contract: batches of records, acknowledgements, key expressions.
+
+Pure: bytes in, bytes out. Both sides import this one package, so the format has one definition.
+
+Batch (edge -> uplink, one Zenoh payload; little-endian throughout)::
+
+    "FLB" | version u8 (=1) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
+    body:  site str16 | edge_id str16 | stream str16 | first_seq u64
+           | n_schemas u16 | { fingerprint 8 bytes | schema JSON str32 } * n_schemas
+           | n_records u32 | { seq u64 | payload_len u32 | payload } * n_records
+
+Record payload (what the edge spool stores, so a batch is built without re-encoding)::
+
+    flags u8 (bit 0: raw value, bit 1: null key) | timestamp_ms i64 | value bytes32 | topic str16
+    | key bytes32 | n_headers u16 | { name str16 | value bytes32 } * n_headers
+
+A value is Avro single-object encoded (``C3 01`` + 8-byte CRC-64-AVRO fingerprint, little-endian,
++ Avro body) unless the raw flag is set (dead letters are produced exactly as given). Every batch
+carries the schema JSON of each fingerprint it uses, so any stateless uplink can register it: an
+Imu schema compresses to a few hundred bytes, small beside a batch.
+
+Ack (uplink -> edge, uncompressed)::
+
+    "FLA" | version u8 | edge_id str16 | stream str16 | first_seq u64 | last_seq u64 | status u8
+    (0 ok, 1 error) | detail str16 | n_failures u32 | { seq u64 | dead_lettered u8 | reason str16 } *
+
+``ok``: every record of the batch is in Kafka, or in the dead-letter topic (listed in failures,
+all with ``dead_lettered``); the edge may drop the whole range from its spool. ``error``: the
+batch was not (entirely) made safe; the edge sends it again later.
+
+Decoding anything malformed raises ``WireError`` with the reason and the offset.
+"""
+
+from fleetlink.wan.ack import ACK_MAGIC, Ack, RecordFailure, decode_ack, encode_ack
+from fleetlink.wan.batch import (
+    BATCH_MAGIC,
+    MAX_BATCH_BYTES,
+    Batch,
+    Codec,
+    decode_batch,
+    encode_batch,
+    encode_batch_payloads,
+    zstd_available,
+)
+from fleetlink.wan.errors import WireError
+from fleetlink.wan.framing import VERSION
+from fleetlink.wan.keys import (
+    ROOT,
+    ack_key,
+    admin_key,
+    check_key_name,
+    command_key,
+    events_key,
+    ingest_key,
+    site_prefix,
+)
+from fleetlink.wan.records import (
+    SINGLE_OBJECT_MAGIC,
+    VALUE_OFFSET,
+    Record,
+    decode_payload,
+    encode_payload,
+    payload_fingerprint,
+    single_object,
+    split_single_object,
+)
+
+__all__ = [
+    "ACK_MAGIC",
+    "BATCH_MAGIC",
+    "MAX_BATCH_BYTES",
+    "ROOT",
+    "SINGLE_OBJECT_MAGIC",
+    "VALUE_OFFSET",
+    "VERSION",
+    "Ack",
+    "Batch",
+    "Codec",
+    "Record",
+    "RecordFailure",
+    "WireError",
+    "ack_key",
+    "admin_key",
+    "check_key_name",
+    "command_key",
+    "decode_ack",
+    "decode_batch",
+    "decode_payload",
+    "encode_ack",
+    "encode_batch",
+    "encode_batch_payloads",
+    "encode_payload",
+    "events_key",
+    "ingest_key",
+    "payload_fingerprint",
+    "single_object",
+    "site_prefix",
+    "split_single_object",
+    "zstd_available",
+]

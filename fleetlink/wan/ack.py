@@ -1,0 +1,76 @@
+"""Acknowledgements: the uplink's answer to one batch."""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Literal
+
+from fleetlink.wan.errors import WireError
+from fleetlink.wan.framing import U32, VERSION, Reader, str16
+
+ACK_MAGIC = b"FLA"
+_ACK_RANGE = struct.Struct("<QQB")
+_FAILURE_HEAD = struct.Struct("<QB")
+
+
+@dataclass(frozen=True, slots=True)
+class RecordFailure:
+    seq: int
+    reason: str
+    dead_lettered: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    """The uplink's answer to one batch (see the module docstring for ok / error)."""
+
+    edge_id: str
+    stream: str
+    first_seq: int
+    last_seq: int
+    status: Literal["ok", "error"]
+    failures: tuple[RecordFailure, ...] = ()
+    detail: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status not in ("ok", "error"):
+            raise WireError(f"ack status must be 'ok' or 'error', got {self.status!r}")
+        if self.last_seq < self.first_seq:
+            raise WireError(f"ack range {self.first_seq}..{self.last_seq} is empty")
+        if self.status == "ok" and not all(f.dead_lettered for f in self.failures):
+            raise WireError("an 'ok' ack may list only dead-lettered failures")
+
+
+def encode_ack(ack: Ack) -> bytes:
+    parts = [ACK_MAGIC, bytes([VERSION]), str16(ack.edge_id), str16(ack.stream),
+             _ACK_RANGE.pack(ack.first_seq, ack.last_seq, 0 if ack.status == "ok" else 1),
+             str16(ack.detail), U32.pack(len(ack.failures))]
+    for failure in ack.failures:
+        parts += (_FAILURE_HEAD.pack(failure.seq, int(failure.dead_lettered)), str16(failure.reason))
+    return b"".join(parts)
+
+
+def decode_ack(data: bytes) -> Ack:
+    r = Reader(data)
+    if r.take(3, "ack magic") != ACK_MAGIC:
+        raise WireError("not a fleetlink ack", offset=0)
+    (version,) = r.take(1, "ack version")
+    if version != VERSION:
+        raise WireError(f"unsupported ack version {version}", offset=3)
+    edge_id, stream = r.text("edge_id"), r.text("stream")
+    first_seq, last_seq, status = r.unpack(_ACK_RANGE, "ack range")
+    if status > 1:
+        raise WireError(f"unknown ack status {status}", offset=r.pos - 1)
+    detail = r.text("ack detail")
+    (n_failures,) = r.unpack(U32, "failure count")
+    failures = []
+    for _ in range(n_failures):
+        seq, dead = r.unpack(_FAILURE_HEAD, "failure")
+        if dead > 1:
+            raise WireError(f"bad dead_lettered flag {dead}", offset=r.pos - 1)
+        failures.append(RecordFailure(seq=seq, dead_lettered=bool(dead), reason=r.text("failure reason")))
+    r.done("the ack")
+    return Ack(edge_id=edge_id, stream=stream, first_seq=first_seq, last_seq=last_seq,
+               status="ok" if status == 0 else "error", failures=tuple(failures), detail=detail)
+

@@ -1,0 +1,310 @@
+"""The edge <-> uplink wire contract: round trips, exact failures, fuzzing, key expressions."""
+
+from __future__ import annotations
+
+import contextlib
+import struct
+import zlib
+from typing import Literal
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fleetlink.wan import (
+    Ack,
+    Batch,
+    Codec,
+    Record,
+    RecordFailure,
+    WireError,
+    ack_key,
+    admin_key,
+    command_key,
+    decode_ack,
+    decode_batch,
+    decode_payload,
+    encode_ack,
+    encode_batch,
+    encode_batch_payloads,
+    encode_payload,
+    events_key,
+    ingest_key,
+    payload_fingerprint,
+    single_object,
+    site_prefix,
+    split_single_object,
+    zstd_available,
+)
+
+FP = bytes.fromhex("0102030405060708")
+FP2 = bytes.fromhex("a1a2a3a4a5a6a7a8")
+SCHEMA = '{"type":"record","name":"Imu","fields":[{"name":"x","type":"double"}]}'
+CODECS: list[Codec] = ["none", "zlib", "zstd"]
+
+
+def rec(seq: int, **kw: object) -> Record:
+    base: dict[str, object] = {
+        "kafka_topic": "fleet.imu", "key": b"tb4_01", "value": single_object(FP, b"\x00" * 8),
+        "headers": (("ros.topic", b"/tb4_01/imu"), ("site", b"warehouse-a")),
+        "timestamp_ms": 1_700_000_000_123, "seq": seq,
+    }
+    base.update(kw)
+    return Record(**base)  # type: ignore[arg-type]
+
+
+def batch(records: tuple[Record, ...], **kw: object) -> Batch:
+    return Batch(site="warehouse-a", edge_id="edge-1", stream="durable", first_seq=records[0].seq,
+                 records=records, schemas=kw.get("schemas", {FP: SCHEMA}))  # type: ignore[arg-type]
+
+
+def test_zstd_is_available_here() -> None:
+    # rosbags depends on backports.zstd, so the fast codec is always there in this project
+    assert zstd_available()
+
+
+RECORDS: list[Record] = [
+    rec(1),
+    rec(2, key=None),
+    rec(3, key=b""),
+    rec(4, headers=()),
+    rec(5, value=b"not avro at all", raw_value=True, kafka_topic="fleet.dead-letter"),
+    rec(6, timestamp_ms=-1),
+    rec(7, kafka_topic="ü" * 10, headers=(("ñ", b"\x00\xff"),)),
+    rec(2**64 - 1, value=single_object(FP2, b"")),
+]
+
+
+@pytest.mark.parametrize("record", RECORDS)
+def test_payload_round_trip(record: Record) -> None:
+    payload = encode_payload(record)
+    assert decode_payload(payload, record.seq) == record
+    assert payload_fingerprint(payload) == record.fingerprint
+
+
+@pytest.mark.parametrize("codec", CODECS)
+def test_batch_round_trip_every_codec(codec: Codec) -> None:
+    records = tuple(r for r in RECORDS if r.seq < 2**63)
+    original = Batch(site="s", edge_id="e", stream="durable", first_seq=1, records=records,
+                     schemas={FP: SCHEMA, FP2: "{}"})
+    data = encode_batch(original, codec=codec)
+    assert data[:3] == b"FLB"
+    assert data[4] == {"none": 0, "zlib": 1, "zstd": 2}[codec]
+    decoded = decode_batch(data)
+    assert decoded == original
+    assert decoded.last_seq == 7
+
+
+def test_payload_fast_path_matches_record_encoding() -> None:
+    records = (rec(10), rec(11), rec(15))
+    slow = encode_batch(batch(records))
+    fast = encode_batch_payloads(site="warehouse-a", edge_id="edge-1", stream="durable",
+                                 items=[(r.seq, encode_payload(r)) for r in records], schemas={FP: SCHEMA})
+    assert slow == fast
+
+
+def test_compression_pays_on_repetitive_records() -> None:
+    records = tuple(rec(i) for i in range(1, 501))
+    none = len(encode_batch(batch(records), codec="none"))
+    assert len(encode_batch(batch(records), codec="zlib")) < none / 5
+    assert len(encode_batch(batch(records), codec="zstd")) < none / 5
+
+
+def test_single_object_helpers() -> None:
+    value = single_object(FP, b"body")
+    fingerprint, body = split_single_object(value)
+    assert (fingerprint, bytes(body)) == (FP, b"body")
+    with pytest.raises(WireError, match="not an Avro single-object"):
+        split_single_object(b"\x00\x00" + FP)
+    with pytest.raises(WireError, match="8 bytes"):
+        single_object(b"short", b"")
+    assert rec(1, value=b"\xc3\x01short").fingerprint is None
+
+
+def _raw(
+    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 1
+) -> bytes:
+    header = struct.pack("<3sBBI", magic, version, codec, len(body) if size is None else size)
+    return header + (zlib.compress(body) if codec == 1 else body)
+
+
+def _body(records: list[tuple[int, bytes]], first_seq: int | None = None, trailing: bytes = b"") -> bytes:
+    first = records[0][0] if first_seq is None else first_seq
+    out = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QH", first, 0)
+    out += struct.pack("<I", len(records))
+    for seq, payload in records:
+        out += struct.pack("<QI", seq, len(payload)) + payload
+    return out + trailing
+
+
+GOOD = encode_payload(rec(1))
+
+BAD_BATCHES: list[tuple[bytes, str]] = [
+    (b"", "at least 9 bytes"),
+    (b"FLB\x01\x00", "at least 9 bytes"),
+    (_raw(_body([(1, GOOD)]), magic=b"XYZ"), "not a fleetlink batch"),
+    (_raw(_body([(1, GOOD)]), version=2), "unsupported batch version 2"),
+    (_raw(_body([(1, GOOD)]), codec=7), "unknown codec 7"),
+    (_raw(_body([(1, GOOD)]), size=10), "header says 10"),
+    (_raw(_body([(1, GOOD)]), size=2**31), "exceeds the"),
+    (_raw(b"garbage", codec=1, size=7)[:-3] + b"zzz", "corrupt zlib data"),
+    (_raw(_body([(1, GOOD)], trailing=b"x")), "1 unexpected trailing bytes after the batch"),
+    (_raw(_body([(2, GOOD), (2, GOOD)])), "seqs must increase: 2 after 2"),
+    (_raw(_body([(1, GOOD)], first_seq=0)), "first_seq 0 is not the first record's seq 1"),
+    (_raw(b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QHI", 1, 0, 0)), "at least one record"),
+    (_raw(_body([(1, GOOD[:-1])])), "truncated"),
+    (_raw(_body([(1, GOOD + b"!")])), "trailing bytes after the record"),
+    (_raw(_body([(1, b"\x80" + GOOD[1:])])), "unknown record flags 0x80"),
+    (_raw(b"\x02\x00\xff\xfe"), "site is not valid UTF-8"),
+]
+
+
+@pytest.mark.parametrize(("data", "reason"), BAD_BATCHES)
+def test_bad_batches_raise_wire_error_with_reason(data: bytes, reason: str) -> None:
+    with pytest.raises(WireError) as info:
+        decode_batch(data)
+    assert reason in str(info.value)
+
+
+def test_decompression_bomb_is_refused_before_inflating() -> None:
+    body = _body([(1, encode_payload(rec(1, value=b"\x00" * 2_000_000, raw_value=True)))])
+    data = _raw(body, codec=1)
+    assert len(data) < 10_000
+    with pytest.raises(WireError, match="exceeds the 1000000-byte limit"):
+        decode_batch(data, max_bytes=1_000_000)
+    assert decode_batch(data).records[0].value == b"\x00" * 2_000_000
+
+
+def test_encoder_refuses_what_the_decoder_would_refuse() -> None:
+    with pytest.raises(WireError, match="at least one record"):
+        encode_batch_payloads(site="s", edge_id="e", stream="d", items=[], schemas={})
+    with pytest.raises(WireError, match="must increase"):
+        encode_batch(batch((rec(3), rec(2))))
+    with pytest.raises(WireError, match="first_seq"):
+        encode_batch(Batch(site="s", edge_id="e", stream="d", first_seq=1, records=(rec(2),)))
+    with pytest.raises(WireError, match="8 bytes"):
+        encode_batch(batch((rec(1),), schemas={b"x": "{}"}))
+    with pytest.raises(WireError, match="16-bit"):
+        encode_payload(rec(1, kafka_topic="x" * 70_000))
+
+
+ACKS: list[Ack] = [
+    Ack(edge_id="edge-1", stream="durable", first_seq=1, last_seq=500, status="ok"),
+    Ack(edge_id="edge-1", stream="durable", first_seq=1, last_seq=1, status="ok",
+        failures=(RecordFailure(seq=1, reason="message too large: 2 MB", dead_lettered=True),)),
+    Ack(edge_id="e", stream="memory", first_seq=7, last_seq=9, status="error", detail="Kafka unavailable",
+        failures=(RecordFailure(seq=8, reason="timed out", dead_lettered=False),)),
+]
+
+
+@pytest.mark.parametrize("ack", ACKS)
+def test_ack_round_trip(ack: Ack) -> None:
+    assert decode_ack(encode_ack(ack)) == ack
+
+
+def test_ack_invariants() -> None:
+    with pytest.raises(WireError, match="only dead-lettered"):
+        Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="ok",
+            failures=(RecordFailure(seq=1, reason="x", dead_lettered=False),))
+    with pytest.raises(WireError, match="empty"):
+        Ack(edge_id="e", stream="d", first_seq=3, last_seq=2, status="ok")
+    good = encode_ack(ACKS[0])
+    with pytest.raises(WireError, match="not a fleetlink ack"):
+        decode_ack(b"XXX" + good[3:])
+    with pytest.raises(WireError, match="unsupported ack version 9"):
+        decode_ack(good[:3] + b"\x09" + good[4:])
+    with pytest.raises(WireError, match="trailing"):
+        decode_ack(good + b"\x00")
+    with pytest.raises(WireError, match="truncated"):
+        decode_ack(good[:-1])
+
+
+KEYS: list[tuple[str, str]] = [
+    (site_prefix("warehouse-a"), "fleetlink/warehouse-a"),
+    (ingest_key("warehouse-a", "edge-1"), "fleetlink/warehouse-a/ingest/edge-1"),
+    (ack_key("warehouse-a", "edge-1"), "fleetlink/warehouse-a/ack/edge-1"),
+    (command_key("warehouse-a", "tb4_01", "lightring"), "fleetlink/warehouse-a/command/tb4_01/lightring"),
+    (command_key("w", "fleet/tb4_01", "dock"), "fleetlink/w/command/fleet/tb4_01/dock"),
+    (events_key("warehouse-a"), "fleetlink/warehouse-a/events"),
+    (admin_key("warehouse-a"), "fleetlink/warehouse-a/admin/**"),
+]
+
+
+@pytest.mark.parametrize(("key", "expected"), KEYS)
+def test_keys_live_under_the_site_prefix(key: str, expected: str) -> None:
+    assert key == expected
+
+
+@pytest.mark.parametrize(
+    "call",
+    [lambda: site_prefix("a/b"), lambda: site_prefix("*"), lambda: site_prefix(""),
+     lambda: ingest_key("s", "e/1"), lambda: ingest_key("s", "$e"), lambda: command_key("s", "r//x", "c"),
+     lambda: command_key("s", "r", "a/b"), lambda: events_key("s p"), lambda: ack_key("s", "**")],
+)
+def test_names_that_would_escape_the_site_are_refused(call: object) -> None:
+    with pytest.raises(WireError):
+        call()  # type: ignore[operator]
+
+
+# --- property-based -----------------------------------------------------------------------------
+texts = st.text(max_size=20)
+records_st = st.builds(
+    Record,
+    kafka_topic=texts,
+    key=st.none() | st.binary(max_size=30),
+    value=st.binary(max_size=60) | st.binary(max_size=40).map(lambda b: single_object(FP, b)),
+    headers=st.lists(st.tuples(texts, st.binary(max_size=20)), max_size=4).map(tuple),
+    timestamp_ms=st.integers(-(2**63), 2**63 - 1),
+    raw_value=st.booleans(),
+)
+
+
+@st.composite
+def batches(draw: st.DrawFn) -> Batch:
+    rs = draw(st.lists(records_st, min_size=1, max_size=8))
+    seqs = sorted(draw(st.sets(st.integers(0, 2**64 - 1), min_size=len(rs), max_size=len(rs))))
+    records = tuple(Record(r.kafka_topic, r.key, r.value, r.headers, r.timestamp_ms, s, r.raw_value)
+                    for r, s in zip(rs, seqs, strict=True))
+    schemas = draw(st.dictionaries(st.binary(min_size=8, max_size=8), texts, max_size=3))
+    return Batch(site=draw(texts), edge_id=draw(texts), stream=draw(texts), first_seq=seqs[0],
+                 records=records, schemas=schemas)
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(batches(), st.sampled_from(CODECS))
+def test_any_batch_round_trips(original: Batch, codec: Codec) -> None:
+    assert decode_batch(encode_batch(original, codec=codec)) == original
+
+
+@settings(max_examples=500)
+@given(st.binary(max_size=300))
+def test_garbage_raises_only_wire_error(data: bytes) -> None:
+    for decode in (decode_batch, decode_ack, decode_payload):
+        with contextlib.suppress(WireError):
+            decode(data)
+
+
+@settings(max_examples=500, suppress_health_check=[HealthCheck.too_slow])
+@given(batches(), st.data())
+def test_mutated_batches_decode_or_raise_wire_error(original: Batch, data: st.DataObject) -> None:
+    encoded = bytearray(encode_batch(original, codec=data.draw(st.sampled_from(CODECS))))
+    for _ in range(data.draw(st.integers(1, 4))):
+        i = data.draw(st.integers(0, len(encoded) - 1))
+        encoded[i] = data.draw(st.integers(0, 255))
+    cut = data.draw(st.integers(0, len(encoded)))
+    try:
+        decoded = decode_batch(bytes(encoded[:cut]) if data.draw(st.booleans()) else bytes(encoded))
+    except WireError:
+        return
+    assert len(decoded.records) >= 1
+
+
+@settings(max_examples=300)
+@given(st.lists(st.builds(RecordFailure, seq=st.integers(0, 2**64 - 1), reason=texts,
+                          dead_lettered=st.booleans()), max_size=5),
+       st.integers(0, 2**63), st.integers(0, 2**63), texts)
+def test_any_ack_round_trips(failures: list[RecordFailure], a: int, n: int, detail: str) -> None:
+    status: Literal["ok", "error"] = "ok" if all(f.dead_lettered for f in failures) else "error"
+    ack = Ack(edge_id="e", stream="s", first_seq=a, last_seq=a + n, status=status,
+              failures=tuple(failures), detail=detail)
+    assert decode_ack(encode_ack(ack)) == ack
