@@ -20,7 +20,7 @@ import zenoh.ext
 from roswire.attachment import AttachmentVersion, encode
 from roswire.errors import RoswireError
 from roswire.gid import entity_gid
-from roswire.names import data_key
+from roswire.names import data_key, mangle
 from roswire.qos import DEFAULT, History, QoS, Reliability
 from roswire.tokens import EntityKind, endpoint_token
 
@@ -148,6 +148,17 @@ class RosPublisher:
         if ts is None:
             raise RoswireError(f"publisher on {self.topic}: the node has no type store to serialize with")
         return self.publish_cdr(bytes(ts.serialize_cdr(message, self.typename)))
+
+    def has_subscribers(self, timeout: float = 1.0) -> bool:
+        """Whether a subscriber is there: zenoh's matching status where available, otherwise
+        (advanced publishers) whether any ``MS`` token for this topic answers a liveliness query."""
+        matching = self.matching
+        if matching is not None:
+            return matching
+        pattern = (f"@ros2_lv/{self.node.domain_id}/*/*/*/{EntityKind.SUBSCRIPTION.value}/*/*/*/"
+                   f"{mangle(self.topic)}/**")
+        replies = self.node.session.liveliness().get(pattern, timeout=timeout)
+        return any(reply.ok is not None for reply in replies)
 
     @property
     def matching(self) -> bool | None:
