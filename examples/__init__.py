@@ -1,0 +1,1 @@
+"""Stream-processing applications that consume fleetlink's Kafka topics."""

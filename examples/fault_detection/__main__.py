@@ -1,0 +1,7 @@
+"""``python -m examples.fault_detection``: run the fault-detection app until SIGINT/SIGTERM."""
+
+import sys
+
+from examples.fault_detection.cli import main
+
+sys.exit(main())

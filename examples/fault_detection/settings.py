@@ -1,0 +1,77 @@
+"""The app's settings: one typed, frozen model; durations parsed from ``2s`` / ``500ms`` / ``1m``.
+
+Pure: nothing here reads the environment, the disk or the network.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, PositiveFloat, PositiveInt
+
+from examples.fault_detection.errors import SettingsError
+from examples.fault_detection.rules import HAZARD_CLIFF, HAZARD_WHEEL_DROP, RuleConfig
+
+__all__ = ["DEFAULT_STATE_DIR", "FaultDetectionSettings", "Topics", "parse_duration_ms"]
+
+DEFAULT_STATE_DIR = Path.home() / ".cache" / "fleetlink" / "fault-detection"
+
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m)?\s*$")
+_UNIT_MS = {"ms": 1, "s": 1000, "m": 60_000}
+
+
+def parse_duration_ms(text: str) -> int:
+    """``"2s"`` → 2000, ``"500ms"`` → 500, ``"1.5s"`` → 1500, ``"1m"`` → 60000; a bare number is seconds.
+
+    The result must be a positive whole number of milliseconds.
+    """
+    match = _DURATION.match(text)
+    if match is None:
+        raise SettingsError(f"invalid duration {text!r}: expected e.g. 2s, 500ms, 1.5s or 1m")
+    number, unit = match.group(1), match.group(2) or "s"
+    millis = float(number) * _UNIT_MS[unit]
+    if millis != int(millis) or millis < 1:
+        raise SettingsError(f"invalid duration {text!r}: must be a whole, positive number of milliseconds")
+    return int(millis)
+
+
+class Topics(BaseModel):
+    """Kafka topics the app reads (one per sensor) and writes (light-ring commands)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    ir_intensity: str = "fleet.ir_intensity"
+    hazard_detection: str = "fleet.hazard_detection"
+    kidnap_status: str = "fleet.kidnap_status"
+    commands: str = "fleet.commands.lightring"
+
+
+class FaultDetectionSettings(BaseModel):
+    """Everything the app needs; ``msg_paths`` must hold the irobot_create_msgs package."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    bootstrap: str = Field(min_length=1, description="Kafka bootstrap servers, HOST:PORT[,...]")
+    registry_url: str = Field(min_length=1, description="Confluent-compatible schema registry URL")
+    window_ms: PositiveInt = 2000
+    grace_ms: NonNegativeInt = 1000
+    group: str = Field(default="fleetlink-fault-detection", min_length=1)
+    state_dir: Path = DEFAULT_STATE_DIR
+    offset_reset: Literal["earliest", "latest"] = "latest"
+    ir_threshold: int = 3000
+    failure_hazards: frozenset[int] = frozenset({HAZARD_WHEEL_DROP, HAZARD_CLIFF})
+    min_events: PositiveInt = 2
+    distro: Literal["humble", "jazzy", "kilted"] = "jazzy"
+    msg_paths: tuple[Path, ...] = ()
+    topics: Topics = Topics()
+    poll_timeout_s: PositiveFloat = 0.2
+    commit_interval_s: PositiveFloat = 1.0
+
+    def rule_config(self) -> RuleConfig:
+        return RuleConfig(
+            ir_threshold=self.ir_threshold,
+            failure_hazards=self.failure_hazards,
+            min_events=self.min_events,
+        )
