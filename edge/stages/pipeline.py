@@ -94,6 +94,20 @@ class Pipeline:
     def stage_counters(self) -> dict[str, dict[str, int]]:
         return {stage.name: stage.counters.as_dict() for stage in self.stages}
 
+    def totals(self) -> StageCounters:
+        """One summary: ``received``/``emitted`` of the whole pipeline, ``passed`` of its last stage,
+        ``dropped``, ``late``, ``errors`` and ``nan`` summed over all stages."""
+        last = self.stages[-1].counters.passed if self.stages else self.counters.received
+        return StageCounters(
+            received=self.counters.received,
+            passed=last,
+            dropped=sum(stage.counters.dropped for stage in self.stages),
+            late=sum(stage.counters.late for stage in self.stages),
+            errors=sum(stage.counters.errors for stage in self.stages),
+            emitted=self.counters.emitted,
+            nan=sum(stage.counters.nan for stage in self.stages),
+        )
+
 
 def build_pipeline(specs: Sequence[StageSpec], *, name: str = "pipeline") -> Pipeline:
     """Stages for ``specs`` in order. Unnamed stages are named by type, numbered from the second of

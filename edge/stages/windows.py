@@ -47,6 +47,8 @@ class RunningStats:
 
     def result(self, op: str) -> Any:  # noqa: PLR0911 - one return per statistic
         """The statistic ``op``; ``None`` for every statistic but ``count`` when no value was added."""
+        if op not in OPS:
+            raise ValueError(f"unknown statistic {op!r}")
         if op == "count":
             return self.count
         if self.count == 0:
@@ -59,9 +61,8 @@ class RunningStats:
             return self.maximum
         if op == "last":
             return self.last
-        if op == "stddev":
-            return math.sqrt(self.m2 / self.count) if self.m2 >= 0 else math.nan
-        raise ValueError(f"unknown statistic {op!r}")
+        # stddev; m2 is NaN after an infinity and then stays NaN
+        return math.sqrt(self.m2 / self.count) if self.m2 >= 0 else math.nan
 
 
 class Window:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import fastavro
 import pytest
 
@@ -89,7 +91,7 @@ def test_copies_are_self_contained_and_define_each_type_once(
 ) -> None:
     index, root = root_node(schema(source))
     defined: set[str] = set()
-    fields = [
+    fields: list[dict[str, Any]] = [
         {
             "name": f"f{i}",
             "type": copy_self_contained(resolve_path(index, root, parse_path(p)), index, defined),
@@ -98,6 +100,7 @@ def test_copies_are_self_contained_and_define_each_type_once(
     ]
     out = {"type": "record", "name": "Out", "namespace": "x.y", "fields": fields}
     parsed = fastavro.parse_schema(out)  # raises if a type is missing or defined twice
+    assert isinstance(parsed, dict)
     assert parsed["name"] == "x.y.Out"
     assert len(defined) >= 1
     first = fields[0]["type"]
