@@ -18,6 +18,7 @@ from fleetlink.errors import FleetlinkError
 # Modules that add subcommands, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.stack_cli",
+    "roswire.cli",
 )
 
 Handler = Callable[[argparse.Namespace], int]
