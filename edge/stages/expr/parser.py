@@ -23,6 +23,9 @@ from edge.stages.expr.nodes import (
 )
 from edge.stages.paths import Step
 
+MAX_DEPTH = 64
+"""Deepest syntax tree accepted: keeps parsing, checking and evaluation far from Python's
+recursion limit whatever the text (``1+1+...+1`` is as deep as it is long)."""
 COMPARISONS = frozenset({"==", "!=", "<", "<=", ">", ">="})
 META_NAMES = frozenset({"robot", "topic", "stamp_ns"})
 # name -> (min args, max args or None for any number)
@@ -45,6 +48,7 @@ class _Parser:
         self.source = source
         self.tokens = tokenize(source)
         self.pos = 0
+        self.nesting = 0
 
     @property
     def tok(self) -> Token:
@@ -136,10 +140,17 @@ class _Parser:
             node = Arith(token.text, node, self.unary(), token.column)
         return node
 
+    def nest(self, token: Token) -> None:
+        self.nesting += 1
+        if self.nesting > MAX_DEPTH:
+            raise self.fail(f"expression is nested too deeply (more than {MAX_DEPTH} levels)", token)
+
     def unary(self) -> Node:
         if self.at("!", "-"):
             token = self.take()
+            self.nest(token)
             operand = self.unary()
+            self.nesting -= 1
             if token.text == "-" and isinstance(operand, Const):
                 value = operand.value
                 if isinstance(value, int | float) and not isinstance(value, bool):
@@ -175,9 +186,10 @@ class _Parser:
             self.take()
             return Meta(token.text, token.column)
         if self.at("("):
-            self.take()
+            self.nest(self.take())
             node = self.or_expr()
             self.expect(")")
+            self.nesting -= 1
             return node
         if token.kind == "ident":
             self.take()
@@ -215,13 +227,14 @@ class _Parser:
         if arity is None:
             known = ", ".join(sorted(FUNCTIONS))
             raise self.fail(f"unknown function {name.text!r} (known: {known})", name)
-        self.expect("(")
+        self.nest(self.expect("("))
         args = list(receiver)
         while not self.at(")"):
             args.append(self.or_expr())
             if not self.at(")"):
                 self.expect(",")
         self.take()
+        self.nesting -= 1
         low, high = arity
         if len(args) < low or (high is not None and len(args) > high):
             wanted = f"{low}" if low == high else f"at least {low}"
@@ -243,6 +256,35 @@ def _column(node: Node) -> int:
     return node.column
 
 
+def _children(node: Node) -> tuple[Node, ...]:
+    if isinstance(node, Unary):
+        return (node.operand,)
+    if isinstance(node, Arith | Compare | Logic):
+        return (node.left, node.right)
+    if isinstance(node, In):
+        return (node.operand,)
+    if isinstance(node, Call):
+        return node.args
+    if isinstance(node, Quantifier):
+        return (node.test,)
+    return ()
+
+
+def _check_depth(root: Node, source: str) -> None:
+    stack = [(root, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise ExpressionError(
+                f"expression is nested too deeply (more than {MAX_DEPTH} levels)",
+                expression=source,
+                column=node.column,
+            )
+        stack.extend((child, depth + 1) for child in _children(node))
+
+
 def parse_expression(source: str) -> Node:
     """Parse ``source``; raises ``ExpressionError`` with the column of the first problem."""
-    return _Parser(source).parse()
+    node = _Parser(source).parse()
+    _check_depth(node, source)
+    return node

@@ -133,3 +133,27 @@ def test_errors_give_the_column(source: str, column: int, reason: str) -> None:
 )
 def test_fields_of_unknown_kind_pass_without_a_schema(source: str) -> None:
     check_predicate(parse_expression(source), source)
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "(" * 70 + "x" + ")" * 70 + " > 1",
+        "!" * 70 + "x",
+        " + ".join(["1"] * 70) + " > 1",
+        " && ".join(["x"] * 70),
+        "-" * 70 + "x > 1",
+        "max(" * 70 + "1" + ")" * 70 + " > 0",
+        "(" * 1000 + "x",
+        "max(" * 900,
+        "!" * 4000,
+    ],
+)
+def test_deep_nesting_is_refused_not_a_recursion_error(source: str) -> None:
+    with pytest.raises(ExpressionError, match="nested too deeply"):
+        parse_expression(source)
+
+
+def test_moderate_nesting_is_fine() -> None:
+    source = " + ".join(["x"] * 40) + " > 1"
+    assert parse_expression(source) is not None
