@@ -4,7 +4,6 @@ stage agrees with a brute-force computation for any in-order stream."""
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -129,7 +128,7 @@ def test_aggregate_matches_brute_force(
                 expected.setdefault(start, []).append((t, x))
     assert sorted(got) == sorted(expected)
     for start, members in expected.items():
-        record: dict[str, Any] = got[start]
+        record = got[start]
         finite = [x for _, x in members if not math.isnan(x)]
         assert record["count"] == len(members)
         assert record["x_count"] == len(finite)
