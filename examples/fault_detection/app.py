@@ -28,7 +28,7 @@ from quixstreams.models import Row, SchemaRegistryClientConfig
 from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
 from quixstreams.models.serializers.exceptions import SerializationError
 
-from examples.fault_detection.errors import BadRecordError, SettingsError
+from examples.fault_detection.errors import BadRecordError, FaultDetectionError, SettingsError
 from examples.fault_detection.rules import (
     INITIAL_MEMORY,
     LightCommand,
@@ -39,7 +39,7 @@ from examples.fault_detection.rules import (
     step,
     window_verdict,
 )
-from examples.fault_detection.settings import FaultDetectionSettings
+from examples.fault_detection.settings import FaultDetectionSettings, check_copartitioned
 
 __all__ = ["COMMAND_ID_HEADER", "LIGHTRING_TYPE", "build_app", "lightring_schema", "run"]
 
@@ -245,6 +245,7 @@ def run(
     hand, commits and closes within about one poll timeout plus the final commit.
     """
     app = build_app(settings, on_command)
+    _check_sensor_topics(settings)
     if stop_event is None:
         app.run()
         return
@@ -258,6 +259,26 @@ def run(
     finally:
         finished.set()
         watcher.join()
+
+
+def _check_sensor_topics(settings: FaultDetectionSettings) -> None:
+    """Refuse to start on sensor topics with different partition counts (missing ones are created alike)."""
+    from confluent_kafka import KafkaException
+    from confluent_kafka.admin import AdminClient
+
+    topics = settings.topics
+    names = (topics.ir_intensity, topics.hazard_detection, topics.kidnap_status)
+    try:
+        metadata = AdminClient({"bootstrap.servers": settings.bootstrap}).list_topics(timeout=30)
+    except KafkaException as exc:
+        raise FaultDetectionError(f"cannot reach Kafka at {settings.bootstrap}: {exc}") from exc
+    check_copartitioned(
+        {
+            name: len(metadata.topics[name].partitions)
+            for name in names
+            if name in metadata.topics and metadata.topics[name].error is None
+        }
+    )
 
 
 def _stop_when_set(app: Application, stop_event: threading.Event, finished: threading.Event) -> None:

@@ -6,6 +6,7 @@ Pure: nothing here reads the environment, the disk or the network.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
@@ -14,7 +15,13 @@ from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, PositiveFloat
 from examples.fault_detection.errors import SettingsError
 from examples.fault_detection.rules import HAZARD_CLIFF, HAZARD_WHEEL_DROP, RuleConfig
 
-__all__ = ["DEFAULT_STATE_DIR", "FaultDetectionSettings", "Topics", "parse_duration_ms"]
+__all__ = [
+    "DEFAULT_STATE_DIR",
+    "FaultDetectionSettings",
+    "Topics",
+    "check_copartitioned",
+    "parse_duration_ms",
+]
 
 DEFAULT_STATE_DIR = Path.home() / ".cache" / "fleetlink" / "fault-detection"
 
@@ -74,4 +81,20 @@ class FaultDetectionSettings(BaseModel):
             ir_threshold=self.ir_threshold,
             failure_hazards=self.failure_hazards,
             min_events=self.min_events,
+        )
+
+
+def check_copartitioned(partitions: Mapping[str, int]) -> None:
+    """The sensor topics that exist must have one partition count between them.
+
+    A robot's windows and state live in the partition its key hashes to; with different
+    partition counts its IR, hazard and kidnap records would land in different partitions
+    and never meet in one window. ``partitions`` maps each existing topic to its count.
+    """
+    counts = set(partitions.values())
+    if len(counts) > 1:
+        listing = ", ".join(f"{name}={count}" for name, count in sorted(partitions.items()))
+        raise SettingsError(
+            f"the sensor topics must have the same number of partitions (a robot's records must meet "
+            f"in one partition), got {listing}"
         )

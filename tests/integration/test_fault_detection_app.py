@@ -21,6 +21,7 @@ import time
 import uuid
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -70,6 +71,10 @@ def robot_events(fault: Callable[[str, int], bool]) -> list[Event]:
             t = offset + stagger
             events.append(Event(sensor, T0 + t, fault(sensor, t)))
     return events
+
+
+def shifted(events: list[Event], by_ms: int) -> list[Event]:
+    return [Event(e.sensor, e.ts + by_ms, e.failure) for e in events]
 
 
 SCENARIO: dict[str, list[Event]] = {
@@ -261,22 +266,25 @@ class RunningApp:
     seen: list[LightCommand]
 
 
-@pytest.fixture
-def running_app(
-    kafka_bootstrap: str, schema_registry_url: str, topics: Topics, tmp_path: Path
-) -> Iterator[RunningApp]:
-    """The app in a thread (as ``fleetlink demo`` runs it), reading from the earliest offsets."""
-    settings = FaultDetectionSettings(
-        bootstrap=kafka_bootstrap,
-        registry_url=schema_registry_url,
+def app_settings(
+    bootstrap: str, registry_url: str, topics: Topics, state_dir: Path, group: str
+) -> FaultDetectionSettings:
+    return FaultDetectionSettings(
+        bootstrap=bootstrap,
+        registry_url=registry_url,
         window_ms=WINDOW_MS,
-        group=f"fd-test-{uuid.uuid4().hex[:8]}",
-        state_dir=tmp_path / "state",
+        group=group,
+        state_dir=state_dir,
         offset_reset="earliest",
         msg_paths=(IROBOT,),
         topics=topics,
         commit_interval_s=0.5,
     )
+
+
+@contextmanager
+def app_in_thread(settings: FaultDetectionSettings) -> Iterator[RunningApp]:
+    """The app in a thread (as ``fleetlink demo`` runs it); stopped and checked on exit."""
     stop = threading.Event()
     seen: list[LightCommand] = []
     with ThreadPoolExecutor(1, thread_name_prefix="fault-detection") as pool:
@@ -286,6 +294,17 @@ def running_app(
         finally:
             stop.set()
         app.done.result(timeout=30)  # re-raises whatever ended the app
+
+
+@pytest.fixture
+def running_app(
+    kafka_bootstrap: str, schema_registry_url: str, topics: Topics, tmp_path: Path
+) -> Iterator[RunningApp]:
+    group = f"fd-test-{uuid.uuid4().hex[:8]}"
+    with app_in_thread(
+        app_settings(kafka_bootstrap, schema_registry_url, topics, tmp_path / "state", group)
+    ) as app:
+        yield app
 
 
 def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_window(
@@ -330,6 +349,14 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
     latest = SchemaRegistryClient({"url": schema_registry_url}).get_latest_version(f"{topics.commands}-value")
     assert '"LightringLeds"' in latest.schema.schema_str
 
+    # a robot that joins while the app runs is judged like the others, nothing restarted
+    late_joiner = shifted(robot_events(lambda _s, t: t >= 1000), DURATION_MS)
+    produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_04": late_joiner})
+    [(state, joined_red_at)] = expected_changes(late_joiner, WINDOW_MS)
+    wait_all_committed(kafka_bootstrap, settings.group, list(sensor_topics(topics).values()), timeout=30)
+    new_commands = read_commands(kafka_bootstrap, schema_registry_url, topics.commands)[2:]
+    assert [(c.key, colours(c), c.timestamp) for c in new_commands] == [("tb4_04", {RED}, joined_red_at)]
+
     # every record counted: none skipped as late, undecodable or malformed
     skipped = [r.getMessage() for r in caplog.records if r.name.startswith("examples.fault_detection")]
     assert skipped == []
@@ -344,7 +371,11 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
 def test_cli_subprocess_detects_a_fault_and_stops_on_sigterm(
     kafka_bootstrap: str, schema_registry_url: str, topics: Topics, tmp_path: Path
 ) -> None:
-    # one robot, picked up from 1 s to the end: one red command, nothing else
+    # an undecodable record, then one robot picked up from 1 s to the end: the bad record is
+    # logged and skipped, the robot gets one red command and nothing else
+    producer = Producer({"bootstrap.servers": kafka_bootstrap})
+    producer.produce(topics.ir_intensity, key=b"tb4_07", value=b"not an avro record", timestamp=T0 - 1000)
+    assert producer.flush(10) == 0
     events = robot_events(lambda _s, t: t >= 1000)
     produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_07": events})
     [(state, red_at)] = expected_changes(events, 1500)
@@ -376,7 +407,44 @@ def test_cli_subprocess_detects_a_fault_and_stops_on_sigterm(
             proc.kill()
             proc.wait(10)
     reader.join(5)
+    assert any("skipping undecodable record" in line and topics.ir_intensity in line for line in lines)
     commands = read_commands(kafka_bootstrap, schema_registry_url, topics.commands)
     assert [(c.key, colours(c)) for c in commands] == [("tb4_07", {RED})]
     assert commands[0].timestamp == red_at
     assert commands[0].command_id == f"tb4_07-failed-{red_at}"
+
+
+def test_state_survives_a_restart_on_a_fresh_disk(
+    kafka_bootstrap: str, schema_registry_url: str, topics: Topics, tmp_path: Path
+) -> None:
+    """Failed before the restart stays failed after it (no second red); recovery is one green.
+
+    The second run gets an empty state folder, so the robot's state and its open windows come
+    back from the changelog topic in Kafka, not from the local disk.
+    """
+    group = f"fd-restart-{uuid.uuid4().hex[:8]}"
+    names = list(sensor_topics(topics).values())
+    events = robot_events(lambda _s, t: 1000 <= t < 6000)
+    first, second = [e for e in events if e.ts < T0 + 5000], [e for e in events if e.ts >= T0 + 5000]
+    (_, red_at), (_, green_at) = expected_changes(events, WINDOW_MS)
+    assert red_at < T0 + 5000 < green_at
+
+    with app_in_thread(
+        app_settings(kafka_bootstrap, schema_registry_url, topics, tmp_path / "one", group)
+    ) as app:
+        produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_05": first})
+        wait_all_committed(kafka_bootstrap, group, names, timeout=45)
+    assert [(c.state.value, c.stamp_ms) for c in app.seen] == [("failed", red_at)]
+
+    with app_in_thread(
+        app_settings(kafka_bootstrap, schema_registry_url, topics, tmp_path / "two", group)
+    ) as app:
+        produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_05": second})
+        wait_all_committed(kafka_bootstrap, group, names, timeout=45)
+    assert [(c.state.value, c.stamp_ms) for c in app.seen] == [("running", green_at)]
+
+    commands = read_commands(kafka_bootstrap, schema_registry_url, topics.commands)
+    assert [(c.key, colours(c), c.timestamp) for c in commands] == [
+        ("tb4_05", {RED}, red_at),
+        ("tb4_05", {GREEN}, green_at),
+    ]
