@@ -1,0 +1,126 @@
+"""Test CA and certificates for the Zenoh WAN link (fleetlink.certs)."""
+
+from __future__ import annotations
+
+import stat
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import pytest
+from cryptography import x509
+from cryptography.exceptions import InvalidSignature
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from fleetlink.certs import (
+    CLOUD_NAME,
+    UPLINK_NAME,
+    CertError,
+    edge_name,
+    generate_bundle,
+    issue,
+    load_ca,
+    new_ca,
+    write_identity,
+)
+
+NOW = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+SERVER = ExtendedKeyUsageOID.SERVER_AUTH
+CLIENT = ExtendedKeyUsageOID.CLIENT_AUTH
+
+
+def usages(cert: x509.Certificate) -> list[x509.ObjectIdentifier]:
+    return list(cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value)
+
+
+def test_ca_is_a_ca_for_end_entities_only() -> None:
+    ca = new_ca("test CA", now=NOW, valid_days=10)
+    constraints = ca.certificate.extensions.get_extension_for_class(x509.BasicConstraints).value
+    assert (constraints.ca, constraints.path_length) == (True, 0)
+    assert ca.common_name == "test CA"
+    assert ca.certificate.not_valid_after_utc == NOW + timedelta(days=10)
+    ca.certificate.verify_directly_issued_by(ca.certificate)
+
+
+@pytest.mark.parametrize(
+    ("server", "client", "hosts", "expected_usages", "expected_alt"),
+    [
+        (True, False, ["localhost", "127.0.0.1"], [SERVER], ["localhost", "127.0.0.1"]),
+        (False, True, [], [CLIENT], None),
+        (True, True, ["cloud.example.com"], [SERVER, CLIENT], ["cloud.example.com"]),
+        (False, True, ["::1"], [CLIENT], ["::1"]),
+    ],
+)
+def test_issue_sets_usages_and_names(
+    server: bool, client: bool, hosts: list[str], expected_usages: list[x509.ObjectIdentifier],
+    expected_alt: list[str] | None,
+) -> None:
+    ca = new_ca(now=NOW)
+    ident = issue(ca, "edge-site-a", now=NOW, server=server, client=client, hosts=hosts)
+    ident.certificate.verify_directly_issued_by(ca.certificate)
+    assert ident.common_name == "edge-site-a"
+    assert usages(ident.certificate) == expected_usages
+    constraints = ident.certificate.extensions.get_extension_for_class(x509.BasicConstraints).value
+    assert constraints.ca is False
+    if expected_alt is None:
+        with pytest.raises(x509.ExtensionNotFound):
+            ident.certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    else:
+        alt = ident.certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        assert [str(name.value) for name in alt] == expected_alt
+
+
+def test_certificate_from_another_ca_does_not_verify() -> None:
+    ca, other = new_ca(now=NOW), new_ca(now=NOW)
+    ident = issue(other, "edge-site-a", now=NOW, client=True)
+    with pytest.raises(InvalidSignature):
+        ident.certificate.verify_directly_issued_by(ca.certificate)
+
+
+@pytest.mark.parametrize(
+    ("name", "kwargs", "message"),
+    [
+        ("edge-a", {}, "choose server, client or both"),
+        ("cloud", {"server": True}, "at least one host"),
+        ("edge-a", {"client": True, "valid_days": 0}, "valid_days must be positive"),
+        ("", {"client": True}, "certificate name ''"),
+        ("a/b", {"client": True}, "certificate name 'a/b'"),
+        ("-x", {"client": True}, "certificate name '-x'"),
+    ],
+)
+def test_issue_errors(name: str, kwargs: dict[str, object], message: str) -> None:
+    ca = new_ca(now=NOW)
+    with pytest.raises(CertError, match=message):
+        issue(ca, name, now=NOW, **kwargs)  # type: ignore[arg-type]
+
+
+def test_private_keys_stay_out_of_repr() -> None:
+    ca = new_ca(now=NOW)
+    ident = issue(ca, "x", now=NOW, client=True)
+    assert "key" not in repr(ident)
+    assert "key" not in repr(ca)
+
+
+def test_written_keys_are_owner_only_and_load_back(tmp_path: Path) -> None:
+    bundle = generate_bundle(tmp_path / "certs", now=NOW, sites=["site-a", "site-b"])
+    assert set(bundle.identities) == {CLOUD_NAME, UPLINK_NAME, edge_name("site-a"), edge_name("site-b")}
+    for files in bundle.identities.values():
+        assert stat.S_IMODE(files.key.stat().st_mode) == 0o600
+        assert files.key.read_bytes().startswith(b"-----BEGIN PRIVATE KEY-----")
+        cert = x509.load_pem_x509_certificate(files.certificate.read_bytes())
+        assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == files.name
+    assert stat.S_IMODE((tmp_path / "certs" / "ca-key.pem").stat().st_mode) == 0o600
+    ca = load_ca(tmp_path / "certs")
+    extra = write_identity(issue(ca, "edge-site-c", now=NOW, client=True), tmp_path / "certs")
+    x509.load_pem_x509_certificate(extra.certificate.read_bytes()).verify_directly_issued_by(
+        x509.load_pem_x509_certificate(bundle.ca_certificate.read_bytes())
+    )
+
+
+def test_bundle_lookup_and_load_errors(tmp_path: Path) -> None:
+    bundle = generate_bundle(tmp_path, now=NOW)
+    with pytest.raises(CertError, match="no certificate named 'edge-x'"):
+        bundle["edge-x"]
+    with pytest.raises(CertError, match="cannot read CA"):
+        load_ca(tmp_path / "missing")
+    with pytest.raises(CertError, match="requested twice"):
+        generate_bundle(tmp_path / "dup", now=NOW, clients=["edge-a"], sites=["a"])
