@@ -26,7 +26,7 @@ from rosbags.serde import SerdeError
 from roswire import cdr
 from roswire.attachment import decode as decode_attachment
 from roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
-from roswire.names import data_key_expr, parse_data_key
+from roswire.names import DataKey, data_key_expr, parse_data_key
 from roswire.qos import DEFAULT, QoS
 from roswire.sequence import SeqStatus, SequenceTracker
 from roswire.tokens import EntityKind, endpoint_token
@@ -35,6 +35,8 @@ if TYPE_CHECKING:
     from roswire.node import RosNode
 
 log = logging.getLogger(__name__)
+
+_KEY_CACHE_SIZE = 1024  # parsed data keys remembered per subscriber (one per publisher type/hash)
 
 # What rosbags raises for bytes that are not a message of the type (or an unknown type).
 _DECODE_ERRORS = (SerdeError, KeyError, ValueError, IndexError, struct.error, UnicodeDecodeError)
@@ -109,6 +111,7 @@ class RosSubscriber:
         self._token: zenoh.LivelinessToken | None = None
         self._lock = threading.Lock()
         self._warned: set[str] = set()
+        self._keys: dict[str, DataKey] = {}
         self.key_expr = ""
         self.token_key = ""
 
@@ -187,11 +190,16 @@ class RosSubscriber:
     def _accept(self, sample: zenoh.Sample, key: str, received_ns: int) -> RosSample | None:
         stats = self.stats
         stats.received += 1
-        try:
-            parsed = parse_data_key(key)
-        except KeyParseError:
-            stats.bad_key += 1
-            raise
+        parsed = self._keys.get(key)
+        if parsed is None:
+            try:
+                parsed = parse_data_key(key)
+            except KeyParseError:
+                stats.bad_key += 1
+                raise
+            if len(self._keys) >= _KEY_CACHE_SIZE:
+                self._keys.clear()
+            self._keys[key] = parsed
         payload = sample.payload.to_bytes()
         raw_att = sample.attachment
         seq = ts = gid = version = None
