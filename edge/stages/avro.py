@@ -148,10 +148,20 @@ def describe(node: Node, index: SchemaIndex) -> str:
 
 
 def root_node(schema: Any) -> tuple[SchemaIndex, Node]:
-    index = SchemaIndex(schema)
-    node = index.resolve(schema, None)
+    """Index ``schema`` and resolve its top; refuses anything but a well-formed record schema."""
+    try:
+        index = SchemaIndex(schema)
+        node = index.resolve(schema, None)
+        fields = node.schema.get("fields") if isinstance(node.schema, dict) else None
+        malformed = not isinstance(fields, list) or any(
+            not isinstance(f, dict) or "name" not in f or "type" not in f for f in fields
+        )
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise StageConfigError(f"input is not a valid Avro schema ({type(exc).__name__}: {exc})") from None
     if kind_of(node) != "record":
         raise StageConfigError("stages need a record schema as input")
+    if malformed:
+        raise StageConfigError("input is not a valid Avro schema: a record field lacks 'name' or 'type'")
     return index, node
 
 

@@ -107,9 +107,15 @@ class OnChangeStage:
         state = self._state.get(key)
         if state is not None:
             due = self.heartbeat_ns is not None and now_ns - state.forwarded_ns >= self.heartbeat_ns
-            if not due and not any(
-                changed(old, new, self.deadband) for old, new in zip(state.values, values, strict=True)
-            ):
+            try:
+                moved = due or any(
+                    changed(old, new, self.deadband) for old, new in zip(state.values, values, strict=True)
+                )
+            except _SAMPLE_ERRORS as exc:  # values that cannot be compared (e.g. ragged arrays)
+                counters.errors += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                return []
+            if not moved:
                 if self.heartbeat_ns is None:
                     counters.dropped += 1
                     return []

@@ -70,6 +70,21 @@ def test_non_record_input_is_refused() -> None:
         root_node({"type": "array", "items": "double"})
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"type": "record", "fields": []},  # no name
+        {"type": "record", "name": "R", "fields": [{"name": "x"}]},
+        {"type": "record", "name": "R", "fields": [{"name": "x", "type": {"type": "record", "fields": []}}]},
+        {"type": "record", "name": "R", "fields": 3},
+        {"type": "record", "name": "R"},
+    ],
+)
+def test_malformed_input_schema_is_a_config_error(bad: dict[str, Any]) -> None:
+    with pytest.raises(StageConfigError, match="not a valid Avro schema"):
+        root_node(bad)
+
+
 def test_unknown_reference_is_an_error() -> None:
     bad = {"type": "record", "name": "R", "fields": [{"name": "x", "type": "ros.Missing"}]}
     index, root = root_node(bad)

@@ -167,3 +167,11 @@ def test_output_schema_checks_paths() -> None:
 def test_rejects_bad_options(fields: list[str], deadband: float) -> None:
     with pytest.raises(ValueError, match="on_change"):
         OnChangeStage(fields, deadband)
+
+
+def test_values_that_cannot_be_compared_are_errors() -> None:
+    stage = OnChangeStage(["x"])
+    assert stage.process(sample({"x": np.array([1.0, 2.0])}), 0)
+    assert stage.process(sample({"x": [[1.0], [1.0, 2.0]]}), 1) == []  # ragged: numpy refuses it
+    assert stage.counters.errors == 1
+    assert_balanced(stage)
