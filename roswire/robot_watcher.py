@@ -2,12 +2,16 @@
 
 Wires a :class:`~roswire.discovery.GraphWatcher` into a pure
 :class:`~roswire.robots.RobotRegistry`, runs its grace-period clock on a small timer thread,
-and (optionally) listens for explicit registrations on ``/fleetlink/register``
-(``std_msgs/msg/String`` ``"<robot_type>/<robot_name>"``).
+(optionally) listens for explicit registrations on ``/fleetlink/register``
+(``std_msgs/msg/String`` ``"<robot_type>/<robot_name>"``) and (optionally) publishes every
+registration and deregistration as JSON in a ``std_msgs/msg/String`` on ``/fleetlink/robot_events``::
+
+    {"event": "registered", "robot": "tb4_07", "robot_type": "turtlebot4", "reason": "discovered"}
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -20,12 +24,14 @@ from roswire.errors import RobotError
 from roswire.graph import GraphEvent
 from roswire.names import HASH_NOT_SUPPORTED
 from roswire.node import RosNode
+from roswire.publisher import RosPublisher
 from roswire.robots import Robot, RobotEvent, RobotRegistry, RobotType, parse_registration
 from roswire.subscriber import RosSample, RosSubscriber
 
 log = logging.getLogger(__name__)
 
 REGISTER_TOPIC = "/fleetlink/register"
+EVENTS_TOPIC = "/fleetlink/robot_events"
 STRING_TYPE = "std_msgs/msg/String"
 STRING_HASHES = {
     "humble": HASH_NOT_SUPPORTED,
@@ -34,6 +40,12 @@ STRING_HASHES = {
 }
 
 RobotListener = Callable[[RobotEvent], object]
+
+
+def event_json(event: RobotEvent) -> str:
+    """The JSON text published on the events topic for one registry event."""
+    return json.dumps({"event": event.kind.value, "robot": event.robot, "robot_type": event.robot_type,
+                       "reason": event.reason.value})
 
 
 class RobotWatcher:
@@ -46,6 +58,7 @@ class RobotWatcher:
         tick_s: float = 0.1,
         listeners: tuple[RobotListener, ...] = (),
         registrations: bool = False,
+        events_topic: str | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.node = node
@@ -53,6 +66,8 @@ class RobotWatcher:
         self.tick_s = tick_s
         self.clock = clock
         self.registrations = registrations
+        self.events_topic = events_topic
+        self._events_pub: RosPublisher | None = None
         self.bad_registrations = 0
         self._listeners = list(listeners)
         self._lock = threading.Lock()
@@ -69,6 +84,9 @@ class RobotWatcher:
             return self
         self.node.start()
         self._stop.clear()
+        if self.events_topic is not None:
+            self._events_pub = self.node.create_publisher(
+                self.events_topic, STRING_TYPE, type_hash=STRING_HASHES.get(self.node.distro))
         self.watcher = GraphWatcher(self.node.session, self.node.domain_id, listeners=(self._on_graph,))
         self.watcher.start()
         if self.registrations:
@@ -88,6 +106,9 @@ class RobotWatcher:
         if self._register_sub is not None:
             self._register_sub.stop()
             self._register_sub = None
+        if self._events_pub is not None:
+            self._events_pub.stop()
+            self._events_pub = None
         if self.watcher is not None:
             self.watcher.stop()
             self.watcher = None
@@ -132,6 +153,8 @@ class RobotWatcher:
         for event in events:
             log.info("robot %s %s type=%s reason=%s", event.robot, event.kind.value, event.robot_type,
                      event.reason.value)
+            if self._events_pub is not None:
+                self._events_pub.publish_cdr(cdr.encode_string(event_json(event)))
             for listener in self._listeners:
                 try:
                     listener(event)

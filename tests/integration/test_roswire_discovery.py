@@ -7,23 +7,27 @@ other's tokens.
 from __future__ import annotations
 
 import itertools
+import json
 import time
 from collections.abc import Iterator
 
 import pytest
 import zenoh
 
+from roswire import cdr
 from roswire.discovery import GraphWatcher
 from roswire.graph import EventKind, GraphEvent
 from roswire.node import RosNode
 from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
-from roswire.robot_watcher import RobotWatcher
+from roswire.robot_watcher import EVENTS_TOPIC, REGISTER_TOPIC, RobotWatcher
 from roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType
 from roswire.tokens import EndpointInfo, EntityKind, NodeInfo
 from tests.helpers import wait_until, zenoh_peer_config
 
 IMU = "sensor_msgs/msg/Imu"
 IMU_HASH = "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
+STRING = "std_msgs/msg/String"
+STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
 TB4 = [RobotType("turtlebot4", "/tb4_*")]
 _domains = itertools.count(101)
 
@@ -143,3 +147,32 @@ def test_malformed_tokens_are_counted_and_never_stop_discovery(
                 assert watcher.stats.malformed == len(bad_keys)
             finally:
                 good.stop()
+
+
+def test_explicit_registration_topic_and_robot_events_topic(
+    zenoh_router: str, domain: int, observer: RosNode
+) -> None:
+    published: list[dict[str, str]] = []
+    with RosNode("ops", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as ops:
+        ops.create_subscriber(EVENTS_TOPIC, STRING, lambda s: published.append(
+            json.loads(cdr.decode_string(s.payload))), type_hash=STRING_HASH)
+        register = ops.create_publisher(REGISTER_TOPIC, STRING, type_hash=STRING_HASH)
+        with RobotWatcher(observer, TB4, grace_s=0.2, tick_s=0.05, registrations=True,
+                          events_topic=EVENTS_TOPIC) as watcher:
+            wait_until(lambda: register.matching, timeout=5, message="watcher listens on /fleetlink/register")
+            register.publish_cdr(cdr.encode_string("turtlebot4/tb4_42"))     # not running yet
+            register.publish_cdr(cdr.encode_string("forklift/fl_1"))         # unknown type: ignored
+            register.publish_cdr(b"\x00\x01\x00\x00garbage")                  # not a String: ignored
+            wait_until(lambda: [r.name for r in watcher.robots()] == ["tb4_42"], timeout=5,
+                       message="explicitly registered robot")
+            assert watcher.robots()[0].explicit
+            wait_until(lambda: watcher.bad_registrations == 2, timeout=5, message="bad registrations counted")
+            late = robot(zenoh_router, domain, "tb4_42")
+            wait_until(lambda: len(watcher.robots()[0].entities) == 2, timeout=5, message="robot shows up")
+            late.stop()
+            wait_until(lambda: not watcher.robots(), timeout=5, message="deregistered when it leaves")
+            wait_until(lambda: len(published) == 2, timeout=5, message="two events on the events topic")
+    assert published == [
+        {"event": "registered", "robot": "tb4_42", "robot_type": "turtlebot4", "reason": "explicit"},
+        {"event": "deregistered", "robot": "tb4_42", "robot_type": "turtlebot4", "reason": "liveliness_lost"},
+    ]
