@@ -448,3 +448,27 @@ def test_state_survives_a_restart_on_a_fresh_disk(
         ("tb4_05", {RED}, red_at),
         ("tb4_05", {GREEN}, green_at),
     ]
+
+
+def test_latency_tool_measures_window_and_app_parts(kafka_bootstrap: str, schema_registry_url: str) -> None:
+    """The measurement tool runs (examples are tested artefacts) and its figures add up."""
+    argv = [
+        sys.executable, "-m", "examples.fault_detection.latency",
+        "--bootstrap", kafka_bootstrap, "--registry", schema_registry_url, "--msg-path", str(IROBOT),
+        "--window", "500ms", "--rate", "20", "--runs", "1",
+    ]  # fmt: skip
+    done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=90, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = [line.split() for line in done.stdout.splitlines() if line.startswith(("failed ", "running "))]
+    assert [row[0] for row in rows] == ["failed", "running"]
+    for row in rows:
+        window, app = int(row[5]), int(row[8])
+        assert 500 - 200 < window <= 500 + 100
+        assert 0 <= app < 2000
+    assert (
+        sum(
+            line.split()[0] in {"total", "window", "app"} and "p50" in line
+            for line in done.stdout.splitlines()
+        )
+        == 3
+    )
