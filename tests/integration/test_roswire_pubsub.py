@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from collections.abc import Iterator
 
@@ -18,6 +19,7 @@ from roswire.node import RosNode
 from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
 from roswire.subscriber import RosSample
 from roswire.tokens import EndpointInfo, parse_token
+from roswire.wire_detect import probe_wire
 from schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 
@@ -222,3 +224,27 @@ def test_stopped_node_rejects_publishing(zenoh_router: str, domain: int) -> None
         pub.publish_cdr(b"\x00\x01\x00\x00")
     with pytest.raises(RoswireError, match="no type store"):
         RosNode("n", config=zenoh.Config()).type_hash(STRING)  # never started: no network needed
+
+
+def test_probe_detects_an_older_network(zenoh_router: str, domain: int) -> None:
+    with RosNode("old_talker", domain_id=domain, config=zenoh_peer_config(zenoh_router),
+                 attachment_version=1) as old, \
+         RosNode("prober", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as prober:
+        pub = old.create_publisher("/chatter", STRING, type_hash="TypeHashNotSupported")
+        stop = threading.Event()
+
+        def talk() -> None:
+            while not stop.wait(0.02):
+                pub.publish_cdr(b"\x00\x01\x00\x00\x01\x00\x00\x00\x00")
+
+        talker = threading.Thread(target=talk)
+        talker.start()
+        try:
+            verdict = probe_wire(prober.session, domain, seconds=1.0)
+        finally:
+            stop.set()
+            talker.join()
+    assert verdict.attachment_version == 1
+    assert verdict.hash_style == "humble"
+    assert verdict.attachments.get("v1", 0) >= 10
+    assert not verdict.mixed

@@ -1,0 +1,94 @@
+"""Find out which rmw_zenoh wire variant a network speaks, before publishing into it.
+
+A sender must not pick the attachment layout blindly (rmw_zenoh.md §4, §11): a 77-byte (v1)
+attachment means an rmw_zenoh from before mid-2025, a 33-byte one (v2) a current one; endpoint
+tokens whose hash chunk is ``TypeHashNotSupported`` come from Humble. :class:`WireTally` counts
+what it is shown (pure); :func:`probe_wire` listens to a live network for a while.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Literal
+
+import zenoh
+
+from roswire.attachment import AttachmentVersion, detect_version
+from roswire.errors import TokenError
+from roswire.names import HASH_NOT_SUPPORTED
+from roswire.tokens import EndpointInfo, liveliness_prefix, parse_token
+
+HashStyle = Literal["humble", "rihs01"]
+
+
+@dataclass(frozen=True)
+class WireVerdict:
+    attachment_version: AttachmentVersion | None
+    """The layout seen on most samples, None when no sample carried a known one."""
+    hash_style: HashStyle | None
+    """``humble`` when endpoint tokens say TypeHashNotSupported, ``rihs01`` when they carry hashes."""
+    attachments: dict[str, int]
+    endpoints: int
+
+    @property
+    def mixed(self) -> bool:
+        return self.attachments.get("v1", 0) > 0 and self.attachments.get("v2", 0) > 0
+
+
+class WireTally:
+    def __init__(self) -> None:
+        self.attachments: Counter[str] = Counter()
+        self.hashes: Counter[str] = Counter()
+
+    def observe_attachment(self, raw: bytes | None) -> None:
+        if raw is None:
+            self.attachments["none"] += 1
+            return
+        version = detect_version(raw)
+        self.attachments[f"v{version}" if version else "unknown"] += 1
+
+    def observe_endpoint(self, endpoint: EndpointInfo) -> None:
+        self.hashes["humble" if endpoint.type_hash == HASH_NOT_SUPPORTED else "rihs01"] += 1
+
+    def verdict(self) -> WireVerdict:
+        v1, v2 = self.attachments.get("v1", 0), self.attachments.get("v2", 0)
+        version: AttachmentVersion | None = None
+        if v1 or v2:
+            version = 2 if v2 >= v1 else 1
+        style: HashStyle | None = None
+        if self.hashes:
+            style = "humble" if self.hashes["humble"] > self.hashes["rihs01"] else "rihs01"
+        return WireVerdict(version, style, dict(self.attachments), sum(self.hashes.values()))
+
+
+def probe_wire(session: zenoh.Session, domain: int, seconds: float = 2.0) -> WireVerdict:
+    """Listen to ``<domain>/**`` for ``seconds`` and read the current tokens; return what was seen."""
+    tally = WireTally()
+    lock = threading.Lock()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        att = sample.attachment
+        with lock:
+            tally.observe_attachment(att.to_bytes() if att is not None else None)
+
+    deadline = time.monotonic() + seconds
+    sub = session.declare_subscriber(f"{domain}/**", on_sample)
+    try:
+        for reply in session.liveliness().get(liveliness_prefix(domain), timeout=seconds):
+            if reply.ok is None:
+                continue
+            try:
+                entity = parse_token(str(reply.ok.key_expr))
+            except TokenError:
+                continue
+            if isinstance(entity, EndpointInfo):
+                with lock:
+                    tally.observe_endpoint(entity)
+        time.sleep(max(0.0, deadline - time.monotonic()))
+    finally:
+        sub.undeclare()
+    with lock:
+        return tally.verdict()
