@@ -19,6 +19,7 @@ from fleetlink.errors import FleetlinkError
 COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.stack_cli",
     "roswire.cli",
+    "schemas.cli",
 )
 
 Handler = Callable[[argparse.Namespace], int]

@@ -131,7 +131,8 @@ def check_uint64(values: Sequence[int], field: str, offset: int) -> None:
     """Raise ``WireRange`` for a uint64 that an Avro long cannot hold."""
     for i, value in enumerate(values):
         if value > 0x7FFF_FFFF_FFFF_FFFF:
-            raise WireRange(field, value, "uint64 above 2**63-1 does not fit an Avro long", offset + 8 * i)
+            reason = "uint64 above 2**63-1 does not fit an Avro long"
+            raise WireRange(f"{field}[{i}]", value, reason, offset + 8 * i)
 
 
 def swap(buf: bytes, start: int, nbytes: int, size: int) -> bytes:
