@@ -14,6 +14,7 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
+from fleetlink.localstack.zenoh_router import ZenohRouter
 from roswire import cdr
 from roswire.discovery import GraphWatcher
 from roswire.graph import EventKind, GraphEvent
@@ -21,8 +22,9 @@ from roswire.node import RosNode
 from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
 from roswire.robot_watcher import EVENTS_TOPIC, REGISTER_TOPIC, RobotWatcher
 from roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType
+from roswire.subscriber import RosSample
 from roswire.tokens import EndpointInfo, EntityKind, NodeInfo
-from tests.helpers import wait_until, zenoh_peer_config
+from tests.helpers import free_port, wait_until, zenoh_peer_config
 
 IMU = "sensor_msgs/msg/Imu"
 IMU_HASH = "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
@@ -176,3 +178,38 @@ def test_explicit_registration_topic_and_robot_events_topic(
         {"event": "registered", "robot": "tb4_42", "robot_type": "turtlebot4", "reason": "explicit"},
         {"event": "deregistered", "robot": "tb4_42", "robot_type": "turtlebot4", "reason": "liveliness_lost"},
     ]
+
+
+def test_router_restart_discovery_and_subscription_come_back(domain: int) -> None:
+    """Reliability matrix #13: sessions reconnect by themselves; a restart shorter than the grace
+    period does not deregister robots."""
+    port = free_port()
+    router = ZenohRouter(port).start()
+    events: list[RobotEvent] = []
+    samples: list[RosSample] = []
+    try:
+        with RosNode("fleetlink", domain_id=domain,
+                     config=zenoh_peer_config(router.endpoint, "client")) as obs, \
+             RosNode("sim", "/tb4_09", domain_id=domain,
+                     config=zenoh_peer_config(router.endpoint, "client")) as bot:
+            obs.create_subscriber("/tb4_09/imu", IMU, samples.append, type_hash=IMU_HASH)
+            pub = bot.create_publisher("imu", IMU, SENSOR_DATA, type_hash=IMU_HASH)
+            with RobotWatcher(obs, TB4, grace_s=10.0, listeners=(events.append,)) as watcher:
+                graph = watcher.watcher
+                assert graph is not None
+                wait_until(lambda: len(graph) == 2, timeout=5, message="robot node and publisher seen")
+                wait_until(lambda: pub.matching, timeout=5, message="subscriber matched")
+                pub.publish_cdr(b"\x00\x01\x00\x00")
+                wait_until(lambda: len(samples) == 1, timeout=5, message="first sample")
+                router.stop()
+                wait_until(lambda: len(graph) == 0, timeout=5, message="tokens gone with the router")
+                router = ZenohRouter(port).start()
+                wait_until(lambda: len(graph) == 2, timeout=15, message="tokens back after reconnect")
+                wait_until(lambda: pub.matching, timeout=15, message="subscription back after reconnect")
+                pub.publish_cdr(b"\x00\x01\x00\x00")
+                wait_until(lambda: len(samples) == 2, timeout=5, message="sample after the restart")
+                assert [r.name for r in watcher.robots()] == ["tb4_09"]
+    finally:
+        router.stop()
+    assert [(e.robot, e.kind) for e in events] == [("tb4_09", RobotEventKind.REGISTERED)]
+    assert samples[1].seq == 2
