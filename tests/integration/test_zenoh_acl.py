@@ -101,7 +101,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fleet]:
 
 def _put_seen(session: zenoh.Session, key: str, collector: Collector) -> bool:
     session.put(key, b"probe")
-    return key in set(collector.keys())
+    return key in set(collector.key_exprs())
 
 
 def _unique(prefix: str) -> str:
@@ -217,10 +217,10 @@ def test_edge_keeps_raw_ros_traffic_and_other_sites_keys_on_the_site(tmp_path: P
 
         wait_until(own_put_arrived, 10, message="site A's fleetlink put reaches the cloud")
         # The site network itself works under the edge's default-deny ACL.
-        wait_until(lambda: raw_key in set(on_site.keys()), 5, message="raw data on the site network")
-        wait_until(lambda: token_key in set(tokens_on_site.keys()), 5, message="liveliness on the site")
-        assert set(at_cloud.keys()) == {"fleetlink/site-a/events/x"}
-        assert tokens_at_cloud.keys() == []
+        wait_until(lambda: raw_key in set(on_site.key_exprs()), 5, message="raw data on the site network")
+        wait_until(lambda: token_key in set(tokens_on_site.key_exprs()), 5, message="liveliness on the site")
+        assert set(at_cloud.key_exprs()) == {"fleetlink/site-a/events/x"}
+        assert tokens_at_cloud.key_exprs() == []
         token.undeclare()
 
         # Control: with this permissive cloud, site B's certificate CAN write into site A's keys,
@@ -250,4 +250,4 @@ def test_dev_variants_carry_fleetlink_keys_and_keep_raw_traffic_on_site() -> Non
         wait_until(lambda: (robot.put("0/robot1/imu/T/H", b"raw"),
                             robot.put("fleetlink/site-a/events/x", sentinel),
                             sentinel in _payloads(at_cloud))[2], 10, message="dev: fleetlink put at cloud")
-        assert set(at_cloud.keys()) == {"fleetlink/site-a/events/x"}
+        assert set(at_cloud.key_exprs()) == {"fleetlink/site-a/events/x"}

@@ -81,11 +81,11 @@ class Collector:
         with self._lock:
             return list(self._items)
 
-    def keys(self) -> list[str]:
+    def key_exprs(self) -> list[str]:
         return [key for key, _ in self.items]
 
     def count(self, prefix: str) -> int:
-        return sum(1 for key in self.keys() if key.startswith(prefix))
+        return sum(1 for key in self.key_exprs() if key.startswith(prefix))
 
 
 @dataclass(frozen=True)
