@@ -55,7 +55,12 @@ class SpoolError(EdgeError):
 
 class SpoolFullError(SpoolError):
     """The spool is at ``max_bytes`` (or the disk is full) and, under the ``block`` policy, no
-    room was freed within the timeout. The record was NOT taken: the caller still owns it."""
+    room was freed within the timeout. The record was NOT taken: the caller still owns it.
+    ``taken`` says how many leading records of an ``append_many`` call were taken."""
+
+    def __init__(self, message: str, *, path: Path | None = None, taken: int = 0) -> None:
+        super().__init__(message, path=path)
+        self.taken = taken
 
 
 class SpoolLockedError(SpoolError):

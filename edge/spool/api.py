@@ -1,0 +1,151 @@
+"""What the sender sees of a record buffer: records, batches, counters, options, the protocol.
+
+Two buffers implement ``RecordBuffer``: the durable ``Spool`` (``at_least_once`` mappings) and
+the bounded ``MemoryBuffer`` (``best_effort``). Each is one *stream*: one ordered log with its
+own sequence numbers, so ``(edge_id, stream, seq)`` names a record uniquely.
+
+The sender's loop, identical for both::
+
+    batch = buffer.read_unacked(max_records=500, max_bytes=1 << 20)   # marks it in flight
+    ... send it; on an ok ack:  buffer.ack(batch.first_seq)
+    ... on an error ack or a timeout:  buffer.release(batch.first_seq)  # re-read first, same range
+    ... on reconnect: buffer.release_all()
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol, get_args
+
+from edge.errors import SpoolError
+
+FullPolicy = Literal["block", "drop_oldest", "drop_newest"]
+FsyncPolicy = Literal["always", "batch", "interval"]
+FULL_POLICIES: tuple[str, ...] = get_args(FullPolicy)
+FSYNC_POLICIES: tuple[str, ...] = get_args(FsyncPolicy)
+
+
+@dataclass(frozen=True, slots=True)
+class SpoolRecord:
+    seq: int
+    timestamp_ms: int
+    """When the record was appended (wall clock, ms): what ``oldest_age`` is measured from."""
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class SpoolBatch:
+    """Consecutive unacked records handed to the sender; acked or released as a whole by
+    ``first_seq``. Seqs increase but may have gaps (records lost to corruption, seq jumps)."""
+
+    stream: str
+    first_seq: int
+    last_seq: int
+    records: tuple[SpoolRecord, ...]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(len(r.payload) for r in self.records)
+
+
+@dataclass(frozen=True, slots=True)
+class SpoolStats:
+    """Counters since open (``appended`` ... ``stale_acks``) and the current state."""
+
+    stream: str
+    appended: int
+    acked: int
+    dropped_oldest: int
+    dropped_newest: int
+    corrupt_skipped: int
+    block_timeouts: int
+    disk_full: int
+    stale_acks: int
+    fsyncs: int
+    bytes: int
+    depth: int
+    """Unacked records held (including those in flight)."""
+    in_flight: int
+    oldest_append_ms: int | None
+    """Append time of the oldest unacked record, ``None`` when empty."""
+    segments: int
+    next_seq: int
+    blocked_appenders: int = 0
+    """Appenders waiting for room right now (``block`` policy)."""
+
+    def oldest_age_ms(self, now_ms: int) -> int:
+        return 0 if self.oldest_append_ms is None else max(0, now_ms - self.oldest_append_ms)
+
+
+@dataclass(frozen=True, slots=True)
+class SpoolOptions:
+    """How a spool is bounded and made durable. See docs/spool.md for the guarantees."""
+
+    max_bytes: int = 1 << 30
+    segment_bytes: int = 16 << 20
+    policy: FullPolicy = "block"
+    block_timeout_s: float = 1.0
+    fsync: FsyncPolicy = "interval"
+    fsync_interval_ms: int = 100
+    fsync_batch: int = 1000
+    """``batch`` policy: fsync after this many records (and at least every interval)."""
+
+    def __post_init__(self) -> None:
+        if self.policy not in FULL_POLICIES:
+            raise SpoolError(f"spool policy {self.policy!r} must be one of {', '.join(FULL_POLICIES)}")
+        if self.fsync not in FSYNC_POLICIES:
+            raise SpoolError(f"fsync {self.fsync!r} must be one of {', '.join(FSYNC_POLICIES)}")
+        if self.segment_bytes < 4096:
+            raise SpoolError(f"segment_bytes must be at least 4096, got {self.segment_bytes}")
+        if self.max_bytes < 2 * self.segment_bytes:
+            raise SpoolError(f"max_bytes ({self.max_bytes}) must be at least twice segment_bytes "
+                             f"({self.segment_bytes}) so that acked segments can free room")
+        if self.fsync_interval_ms <= 0 or self.fsync_batch <= 0 or self.block_timeout_s < 0:
+            raise SpoolError("fsync_interval_ms and fsync_batch must be positive, block_timeout_s >= 0")
+
+
+class RecordBuffer(Protocol):
+    """The interface the WAN sender uses (``Spool`` and ``MemoryBuffer``). Thread-safe."""
+
+    @property
+    def stream(self) -> str: ...
+
+    def append(self, payload: bytes) -> int | None:
+        """Take one record; returns its seq, or ``None`` when the ``drop_newest`` policy rejected
+        it (counted). Under ``block`` raises ``SpoolFullError`` after the timeout."""
+        ...
+
+    def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
+        """``append`` for several records at once (one write, one fsync)."""
+        ...
+
+    def read_unacked(
+        self, max_records: int, max_bytes: int, *, skip_in_flight: bool = True
+    ) -> SpoolBatch | None:
+        """The next batch to send (released batches first, then unread records), marked in
+        flight; ``None`` when there is nothing to send. ``skip_in_flight=False`` first releases
+        everything in flight, so sending restarts from the first unacked record."""
+        ...
+
+    def ack(self, first_seq: int) -> bool:
+        """The batch starting at ``first_seq`` reached Kafka; False if unknown (stale)."""
+        ...
+
+    def release(self, first_seq: int) -> bool:
+        """The batch starting at ``first_seq`` must be sent again."""
+        ...
+
+    def release_all(self) -> int:
+        """Everything in flight must be sent again (e.g. after a reconnect); returns batches."""
+        ...
+
+    def stats(self) -> SpoolStats: ...
+
+    def close(self) -> None: ...
+
+
+def check_payloads(payloads: Sequence[bytes], limit: int) -> None:
+    for payload in payloads:
+        if len(payload) > limit:
+            raise SpoolError(f"record of {len(payload)} bytes exceeds the {limit}-byte record limit")

@@ -1,0 +1,155 @@
+"""The spool's on-disk framing (pure: bytes in, frames out).
+
+A segment file is a 16-byte header (``FLSPOOL1`` + first seq, u64 LE) then frames::
+
+    magic u16 (0x5BF1) | flags u16 (0) | length u32 | seq u64 | append time ms i64 | crc u32 | payload
+
+all little-endian. ``crc`` is CRC-32 (zlib's, the IEEE polynomial: C-fast everywhere; CRC-32C
+would need an extra package) over the payload followed by the 24 header bytes before it, so
+any flipped bit in the length, seq, time or payload is caught. A frame that fails is damage:
+the scanner looks for the next magic whose frame checks out and resumes there.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+FRAME_MAGIC = 0x5BF1
+MAGIC_BYTES = struct.pack("<H", FRAME_MAGIC)
+_PREFIX = struct.Struct("<HHIQq")
+_FRAME = struct.Struct("<HHIQqI")
+HEADER_SIZE = _FRAME.size  # 28
+SEGMENT_MAGIC = b"FLSPOOL1"
+_SEGMENT_HEAD = struct.Struct("<8sQ")
+SEGMENT_HEADER_SIZE = _SEGMENT_HEAD.size  # 16
+
+
+def encode_frame(seq: int, timestamp_ms: int, payload: bytes, payload_crc: int | None = None) -> bytes:
+    """One frame; pass ``payload_crc = zlib.crc32(payload)`` if already computed."""
+    prefix = _PREFIX.pack(FRAME_MAGIC, 0, len(payload), seq, timestamp_ms)
+    crc = zlib.crc32(prefix, zlib.crc32(payload) if payload_crc is None else payload_crc)
+    return prefix + crc.to_bytes(4, "little") + payload
+
+
+def encode_segment_header(first_seq: int) -> bytes:
+    return _SEGMENT_HEAD.pack(SEGMENT_MAGIC, first_seq)
+
+
+def decode_segment_header(data: bytes) -> int | None:
+    """The first seq in a segment header, or ``None`` when the header is not one."""
+    if len(data) < SEGMENT_HEADER_SIZE:
+        return None
+    magic, first_seq = _SEGMENT_HEAD.unpack_from(data, 0)
+    return int(first_seq) if magic == SEGMENT_MAGIC else None
+
+
+def peek_timestamp(header: bytes) -> int | None:
+    """The append time in a frame header (unchecked: for statistics only)."""
+    if len(header) < HEADER_SIZE:
+        return None
+    magic, _, _, _, ts, _ = _FRAME.unpack_from(header, 0)
+    return int(ts) if magic == FRAME_MAGIC else None
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    offset: int
+    end: int
+    seq: int
+    timestamp_ms: int
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Damage:
+    """Bytes ``[offset, end)`` hold no valid frame."""
+
+    offset: int
+    end: int
+    reason: str
+
+
+class _NeedMore:
+    """The header is plausible but the frame runs past the bytes available."""
+
+    __slots__ = ("end",)
+
+    def __init__(self, end: int) -> None:
+        self.end = end
+
+
+def _header_problem(magic: int, flags: int, length: int, max_len: int) -> str | None:
+    if magic != FRAME_MAGIC:
+        return "bad frame magic"
+    if flags != 0:
+        return f"unknown frame flags 0x{flags:04x}"
+    if length > max_len:
+        return f"frame length {length} exceeds the {max_len}-byte limit"
+    return None
+
+
+def frame_at(
+    buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True
+) -> Frame | _NeedMore | str:
+    """The frame at ``off``; ``_NeedMore`` if it runs past ``end``; else the reason it is bad."""
+    if end - off < HEADER_SIZE:
+        return _NeedMore(off + HEADER_SIZE)
+    magic, flags, length, seq, ts, crc = _FRAME.unpack_from(buf, off)
+    problem = _header_problem(magic, flags, length, max_len)
+    if problem is not None:
+        return problem
+    stop = off + HEADER_SIZE + length
+    if stop > end:
+        return _NeedMore(stop)
+    view = memoryview(buf)
+    payload = view[off + HEADER_SIZE : stop]
+    if zlib.crc32(view[off : off + 24], zlib.crc32(payload)) != crc:
+        return "checksum mismatch"
+    return Frame(offset=off, end=stop, seq=seq, timestamp_ms=ts, payload=bytes(payload) if copy else b"")
+
+
+def _resync(buf: bytes, start: int, end: int, max_len: int, after_seq: int) -> int:
+    """Offset of the next valid frame after ``start`` (``end`` if none)."""
+    pos = start
+    while True:
+        pos = buf.find(MAGIC_BYTES, pos + 1, end)
+        if pos < 0:
+            return end
+        found = frame_at(buf, pos, end, max_len)
+        if isinstance(found, Frame) and found.seq > after_seq:
+            return pos
+
+
+def scan(
+    buf: bytes, start: int, end: int, *, max_len: int, final: bool, after_seq: int = -1, copy: bool = True
+) -> Iterator[Frame | Damage]:
+    """Frames and damaged ranges in ``buf[start:end]``, in order.
+
+    ``final`` means ``end`` is the true end of the data: a frame running past it is a torn tail
+    (damage). Otherwise scanning stops quietly before such a frame (read more and call again).
+    Seqs must increase (beyond ``after_seq``); a valid frame that goes backwards is damage.
+    ``copy=False`` leaves payloads empty (recovery only needs seqs and offsets).
+    """
+    off = start
+    last_seq = after_seq
+    while off < end:
+        found = frame_at(buf, off, end, max_len, copy=copy)
+        if isinstance(found, Frame) and found.seq <= last_seq:
+            found = f"seq {found.seq} does not follow {last_seq}"
+        if isinstance(found, Frame):
+            yield found
+            last_seq = found.seq
+            off = found.end
+            continue
+        if isinstance(found, _NeedMore):
+            if not final:
+                return
+            reason = f"truncated frame ({end - off} of {max(found.end - off, HEADER_SIZE)} bytes present)"
+        else:
+            reason = found
+        resume = _resync(buf, off, end, max_len, last_seq)
+        yield Damage(offset=off, end=resume, reason=reason)
+        off = resume

@@ -1,0 +1,456 @@
+"""The durable spool: an append-only, checksummed, bounded log on local disk.
+
+A record is taken once ``append`` returns its seq: it has been written to the OS (it survives
+``kill -9``) and is fsynced per ``SpoolOptions.fsync``. It leaves when the sender acks the
+batch that carried it. See docs/spool.md for the format, guarantees, policies and figures.
+
+Thread-safety: one lock guards the state (appenders are serialised by a second lock); one
+writer thread and one sender thread are the intended users. A background thread fsyncs for
+the ``interval`` and ``batch`` policies without holding the lock while the disk works.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import logging
+import os
+import threading
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from edge.errors import SpoolClosedError, SpoolError, SpoolFullError, SpoolLockedError
+from edge.spool.api import SpoolBatch, SpoolOptions, SpoolRecord, SpoolStats, check_payloads
+from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, Frame, encode_frame, peek_timestamp
+from edge.spool.ledger import Ledger
+from edge.spool.reading import read_frames
+from edge.spool.segments import Cursor, Segment, recover
+from edge.spool.tracking import SendTracker, Slice
+from edge.spool.writer import DiskFull, SegmentWriter
+
+log = logging.getLogger(__name__)
+
+RESERVE_BLOCK = 1 << 20
+"""Seqs reserved (one fsynced ledger entry) at a time; an unclean restart skips to the bound."""
+COUNTERS = ("appended", "acked", "dropped_oldest", "dropped_newest", "corrupt_skipped",
+            "block_timeouts", "disk_full", "stale_acks", "fsyncs")
+
+Item = tuple[int, int, bytes]  # seq, append time ms, frame
+
+
+def wall_ms() -> int:
+    return time.time_ns() // 1_000_000
+
+
+class Spool:
+    """The durable spool of one stream in one directory (a ``RecordBuffer``). Use it as a
+    context manager, or ``open()`` / ``close()``; the constructor touches nothing on disk."""
+
+    def __init__(self, directory: Path | str, options: SpoolOptions | None = None, *,
+                 stream: str = "durable", clock: Callable[[], int] = wall_ms) -> None:
+        self.directory = Path(directory)
+        self.options = options or SpoolOptions()
+        self._stream = stream
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._appending = threading.Lock()
+        self._space = threading.Condition(self._lock)
+        self._state = "new"
+        self._max_len = self.options.segment_bytes - SEGMENT_HEADER_SIZE - HEADER_SIZE
+        self._ledger = Ledger(self.directory / "ledger")
+        self._writer = SegmentWriter(self.directory)
+        self._lock_fd = -1
+        self._segments: list[Segment] = []
+        self._tracker = SendTracker(Cursor())
+        self._next_seq = 1
+        self._reserved = 1
+        self._persisted_mark = 0
+        self._bytes = 0
+        self._depth = 0
+        self._blocked = 0
+        self._warned: set[str] = set()
+        self._c = dict.fromkeys(COUNTERS, 0)
+        self._stop = threading.Event()
+        self._flusher: threading.Thread | None = None
+
+    @property
+    def stream(self) -> str:
+        return self._stream
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def open(self) -> Spool:
+        """Lock the directory, recover what is there, start the fsync thread."""
+        if self._state != "new":
+            raise SpoolError("a Spool object can be opened once", path=self.directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._lock_fd = os.open(self.directory / "LOCK", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self._lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(self._lock_fd)
+            raise SpoolLockedError("the spool is open elsewhere", path=self.directory) from None
+        state = self._ledger.open()
+        found = recover(self.directory, state.ack_mark, self._max_len)
+        self._segments, self._tracker = found.segments, SendTracker(found.cursor)
+        self._depth, self._c["corrupt_skipped"] = found.depth, found.corrupt_records
+        self._bytes = sum(s.size for s in self._segments)
+        self._persisted_mark = state.ack_mark
+        resume = max(found.last_seq, state.ack_mark) + 1
+        if state.clean_next_seq is not None:
+            self._next_seq = max(resume, state.clean_next_seq)
+        else:  # unclean stop: seqs up to the reservation may have left before a power loss
+            self._next_seq = max(resume, state.reserved)
+        self._reserved = max(state.reserved, self._next_seq)
+        log.info("spool %s opened: %d records unacked in %d segments, next seq %d%s", self.directory,
+                 self._depth, len(self._segments), self._next_seq,
+                 " (after an unclean stop)" if state.clean_next_seq is None and not state.fresh else "")
+        self._state = "open"
+        if self.options.fsync != "always":
+            self._flusher = threading.Thread(target=self._flush_loop, name="spool-fsync", daemon=True)
+            self._flusher.start()
+        return self
+
+    def close(self) -> None:
+        """fsync, record a clean stop, release the directory. Idempotent."""
+        with self._lock:
+            if self._state != "open":
+                self._state = "closed"
+                return
+            self._state = "closing"
+            self._space.notify_all()
+        self._stop.set()
+        if self._flusher is not None:
+            self._flusher.join()
+        with self._appending, self._lock:
+            self._writer.seal()
+            self._ledger.record_ack(self._tracker.mark(), sync=False)
+            self._ledger.record_clean(self._next_seq)
+            self._ledger.close()
+            os.close(self._lock_fd)
+            self._state = "closed"
+
+    def __enter__(self) -> Spool:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _check_open(self) -> None:
+        if self._state != "open":
+            raise SpoolClosedError(f"the spool is {self._state}", path=self.directory)
+
+    # -- appending -------------------------------------------------------------------------------
+    def append(self, payload: bytes) -> int | None:
+        """Take one record: its seq, or ``None`` if ``drop_newest`` rejected it (counted)."""
+        return self.append_many((payload,))[0]
+
+    def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
+        """Take records in order (one write, one fsync when due). Under ``block`` a timeout
+        raises ``SpoolFullError`` whose ``taken`` counts the leading records that were taken."""
+        check_payloads(payloads, self._max_len)
+        crcs = [zlib.crc32(p) for p in payloads]
+        results: list[int | None] = []
+        with self._appending, self._lock:
+            self._check_open()
+            chunk: list[Item] = []
+            size_in_chunk = 0
+            try:
+                for payload, crc in zip(payloads, crcs, strict=True):
+                    size = HEADER_SIZE + len(payload)
+                    if not self._fits(size_in_chunk + size):
+                        self._write_chunk(chunk, results)
+                        chunk, size_in_chunk = [], 0
+                        if not self._prepare(size):
+                            results.append(None)
+                            continue
+                    seq = self._take_seq()
+                    ts = self._clock()
+                    chunk.append((seq, ts, encode_frame(seq, ts, payload, crc)))
+                    size_in_chunk += size
+                    results.append(seq)
+                self._write_chunk(chunk, results)
+            except SpoolFullError as exc:
+                exc.taken = sum(1 for r in results if r is not None)
+                raise
+            finally:
+                if self.options.fsync == "always" or (
+                    self.options.fsync == "batch" and self._writer.unsynced >= self.options.fsync_batch
+                ):
+                    self._sync_locked()
+        return results
+
+    def _fits(self, size: int) -> bool:
+        active = self._writer.segment
+        header = 0 if active is not None else SEGMENT_HEADER_SIZE
+        used = active.size if active is not None else SEGMENT_HEADER_SIZE
+        within_segment = used + size <= self.options.segment_bytes
+        return within_segment and self._bytes + header + size <= self.options.max_bytes
+
+    def _take_seq(self) -> int:
+        seq = self._next_seq
+        self._next_seq += 1
+        if self._next_seq > self._reserved:
+            self._reserved = self._next_seq + RESERVE_BLOCK
+            if not self._ledger.record_reserve(self._reserved):
+                self._warn("reserve", "spool %s: cannot persist the seq reservation", self.directory)
+        return seq
+
+    def _prepare(self, size: int) -> bool:
+        """Room for one more frame, per the policy: True = go ahead, False = dropped (counted)."""
+        deadline = time.monotonic() + self.options.block_timeout_s
+        while True:
+            active = self._writer.segment
+            need = size + (0 if active is not None else SEGMENT_HEADER_SIZE)
+            if self._bytes + need > self.options.max_bytes:
+                self._reclaim(force_active=True)
+                if self._bytes + need > self.options.max_bytes and not self._full(deadline):
+                    return False
+                continue
+            if active is not None and active.size + size > self.options.segment_bytes:
+                self._writer.seal()
+                continue
+            return True
+
+    def _full(self, deadline: float, *, disk: bool = False) -> bool:
+        """Apply the policy once. True: retry (room may have been made). False: drop the new
+        record (counted). ``block`` waits for acks until ``deadline``, then raises."""
+        if disk:
+            self._c["disk_full"] += 1
+            self._warn("disk", "spool %s: disk full; policy %s applies", self.directory, self.options.policy)
+        policy = self.options.policy
+        if policy == "drop_oldest" and self._segments:
+            self._warn("evict", "spool %s: full; evicting the oldest segment (counted)", self.directory)
+            self._remove_first()
+            return True
+        if policy == "block":
+            remaining = deadline - time.monotonic()
+            if remaining > 0:
+                self._blocked += 1
+                try:
+                    self._space.wait(remaining)
+                finally:
+                    self._blocked -= 1
+                self._check_open()
+                return True
+            self._c["block_timeouts"] += 1
+            self._warn("block", "spool %s: full for %ss; refusing records", self.directory,
+                       self.options.block_timeout_s)
+            raise SpoolFullError("the spool is full", path=self.directory)
+        self._c["dropped_newest"] += 1
+        self._warn("drop_newest", "spool %s: full; dropping new records (counted)", self.directory)
+        return False
+
+    def _write_chunk(self, chunk: list[Item], results: list[int | None]) -> None:
+        if not chunk:
+            return
+        try:
+            self._write(chunk)
+            return
+        except DiskFull:
+            pass
+        deadline = time.monotonic() + self.options.block_timeout_s
+        for n, item in enumerate(chunk):  # one frame at a time, the policy applied to each
+            while True:
+                try:
+                    self._write([item])
+                    break
+                except DiskFull:
+                    active = self._writer.segment
+                    if active is not None and active.count > 0:
+                        self._writer.seal()  # a per-file size limit: a fresh segment may take it
+                        continue
+                    try:
+                        retry = self._full(deadline, disk=True)
+                    except SpoolFullError:
+                        del results[len(results) - len(chunk) + n :]
+                        raise
+                    if not retry:
+                        results[len(results) - len(chunk) + n] = None
+                        break
+
+    def _write(self, items: list[Item]) -> None:
+        if self._writer.segment is None:
+            self._segments.append(self._writer.create(items[0][0]))
+            self._bytes += SEGMENT_HEADER_SIZE
+        data = b"".join(frame for _, _, frame in items)
+        self._writer.write(data, [(seq, ts, len(frame)) for seq, ts, frame in items])
+        self._bytes += len(data)
+        self._depth += len(items)
+        self._c["appended"] += len(items)
+
+    # -- leaving the spool -----------------------------------------------------------------------
+    def _remove_first(self) -> None:
+        segment = self._segments.pop(0)
+        if segment is self._writer.segment:
+            self._writer.seal()
+        dropped, orphaned = self._tracker.segment_removed(segment)
+        self._c["dropped_oldest"] += dropped
+        self._depth -= dropped + orphaned
+        self._bytes -= segment.size
+        segment.path.unlink(missing_ok=True)
+        self._space.notify_all()
+
+    def _reclaim(self, *, force_active: bool) -> None:
+        """Delete the segments every record of which is acknowledged."""
+        mark = self._tracker.mark()
+        while self._segments and self._segments[0].last_seq <= mark:
+            if self._segments[0] is self._writer.segment and not force_active:
+                break
+            self._remove_first()
+
+    def _mark_moved(self) -> None:
+        mark = self._tracker.mark()
+        if mark > self._persisted_mark and self._ledger.record_ack(mark, sync=self.options.fsync == "always"):
+            self._persisted_mark = mark
+        self._reclaim(force_active=False)
+        self._space.notify_all()
+
+    # -- the sender's side -----------------------------------------------------------------------
+    def read_unacked(
+        self, max_records: int = 500, max_bytes: int = 1 << 20, *, skip_in_flight: bool = True
+    ) -> SpoolBatch | None:
+        """The next batch to send (released ones first), marked in flight; None if none."""
+        if max_records < 1 or max_bytes < 1:
+            raise SpoolError("max_records and max_bytes must be positive")
+        with self._lock:
+            self._check_open()
+            if not skip_in_flight:
+                self._release_all_locked()
+            queued = self._tracker.take_retry()
+            if queued is not None:
+                found = read_frames(queued.segment, queued.offset, queued.end, after_seq=queued.first_seq - 1,
+                                    max_records=queued.count, max_bytes=1 << 62, max_len=self._max_len)
+                return self._batch(queued, found.frames)
+            cursor = self._tracker.cursor
+            while cursor.index < len(self._segments):
+                segment = self._segments[cursor.index]
+                if cursor.offset >= segment.size:
+                    if segment is self._writer.segment:
+                        return None
+                    cursor.index, cursor.offset, cursor.consumed = cursor.index + 1, SEGMENT_HEADER_SIZE, 0
+                    continue
+                found = read_frames(segment, cursor.offset, segment.size, after_seq=cursor.next_seq - 1,
+                                    max_records=max_records, max_bytes=max_bytes, max_len=self._max_len)
+                self._c["corrupt_skipped"] += found.lost
+                self._depth -= found.lost
+                if not found.frames:
+                    cursor.offset = found.end
+                    continue
+                first, last = found.frames[0], found.frames[-1]
+                piece = Slice(first.seq, last.seq, len(found.frames), segment, cursor.offset, found.end,
+                              first.timestamp_ms)
+                self._tracker.start(piece, len(found.frames))
+                return self._batch(piece, found.frames)
+            return None
+
+    def _batch(self, piece: Slice, frames: Sequence[Frame]) -> SpoolBatch:
+        records = tuple(SpoolRecord(f.seq, f.timestamp_ms, f.payload) for f in frames)
+        return SpoolBatch(stream=self._stream, first_seq=piece.first_seq, last_seq=piece.last_seq,
+                          records=records)
+
+    def ack(self, first_seq: int) -> bool:
+        """The batch starting at ``first_seq`` is in Kafka; False (counted) if unknown."""
+        with self._lock:
+            self._check_open()
+            piece = self._tracker.finish(first_seq)
+            if piece is None:
+                self._c["stale_acks"] += 1
+                return False
+            self._c["acked"] += piece.count
+            if not piece.orphan:
+                self._depth -= piece.count
+            self._mark_moved()
+            return True
+
+    def release(self, first_seq: int) -> bool:
+        """The batch starting at ``first_seq`` must be sent again (read back first)."""
+        with self._lock:
+            self._check_open()
+            return self._release_locked(first_seq)
+
+    def _release_locked(self, first_seq: int) -> bool:
+        piece = self._tracker.release(first_seq)
+        if piece is None:
+            return False
+        if piece.orphan:  # its segment was evicted: these records are now lost, and counted
+            self._c["dropped_oldest"] += piece.count
+            self._mark_moved()
+        return True
+
+    def release_all(self) -> int:
+        with self._lock:
+            self._check_open()
+            return self._release_all_locked()
+
+    def _release_all_locked(self) -> int:
+        firsts = list(self._tracker.in_flight)
+        for first in firsts:
+            self._release_locked(first)
+        return len(firsts)
+
+    # -- durability and statistics ---------------------------------------------------------------
+    def _sync_locked(self) -> None:
+        if self._writer.sync():
+            self._c["fsyncs"] += 1
+        self._ledger.sync()
+
+    def flush(self) -> None:
+        """fsync what was appended so far, without blocking appends while the disk works."""
+        with self._lock:
+            if self._state != "open":
+                return
+            pending = self._writer.unsynced
+            fd = self._writer.dup()
+        if fd is not None:
+            try:
+                os.fdatasync(fd)
+            except OSError:
+                with self._lock:
+                    self._writer.unsynced += pending
+                self._warn("fsync", "spool %s: fsync failed", self.directory)
+                return
+            finally:
+                os.close(fd)
+        with self._lock:
+            if fd is not None:
+                self._c["fsyncs"] += 1
+            if self._state == "open":
+                self._ledger.sync()
+
+    def _flush_loop(self) -> None:
+        interval = self.options.fsync_interval_ms / 1000
+        while not self._stop.wait(interval):
+            try:
+                self.flush()
+            except (OSError, SpoolError):
+                log.exception("spool %s: background fsync failed", self.directory)
+
+    def stats(self) -> SpoolStats:
+        with self._lock:
+            stamps = [t for t in (self._tracker.oldest_ts(), self._cursor_ts()) if t is not None]
+            return SpoolStats(
+                stream=self._stream, **self._c, bytes=self._bytes, depth=self._depth,
+                in_flight=self._tracker.in_flight_records(), oldest_append_ms=min(stamps, default=None),
+                segments=len(self._segments), next_seq=self._next_seq, blocked_appenders=self._blocked,
+            )
+
+    def _cursor_ts(self) -> int | None:
+        cursor = self._tracker.cursor
+        for segment in self._segments[cursor.index :]:
+            offset = cursor.offset if segment is self._segments[cursor.index] else SEGMENT_HEADER_SIZE
+            if offset < segment.size:
+                if offset == SEGMENT_HEADER_SIZE:
+                    return segment.first_ts
+                fd = os.open(segment.path, os.O_RDONLY)
+                try:
+                    return peek_timestamp(os.pread(fd, HEADER_SIZE, offset))
+                finally:
+                    os.close(fd)
+        return None
+
+    def _warn(self, key: str, message: str, *args: object) -> None:
+        """A condition is logged once at WARNING, then at DEBUG: one fault, few log lines."""
+        level = logging.DEBUG if key in self._warned else logging.WARNING
+        self._warned.add(key)
+        log.log(level, message, *args)
