@@ -284,7 +284,7 @@ def write_ca(ca: CertificateAuthority, directory: Path) -> tuple[Path, Path]:
     cert_path, key_path = directory / "ca.pem", directory / "ca-key.pem"
     _write_public(cert_path, ca.certificate.public_bytes(serialization.Encoding.PEM))
     _write_private(key_path, _key_pem(ca.key))
-    log.info("wrote CA certificate path=%s cn=%s", cert_path, ca.common_name)
+    log.debug("wrote CA certificate path=%s cn=%s", cert_path, ca.common_name)
     return cert_path, key_path
 
 
@@ -296,7 +296,7 @@ def write_identity(identity: Identity, directory: Path, name: str | None = None)
     cert_path, key_path = directory / f"{name}.pem", directory / f"{name}-key.pem"
     _write_public(cert_path, identity.certificate.public_bytes(serialization.Encoding.PEM))
     _write_private(key_path, _key_pem(identity.key))
-    log.info("wrote certificate path=%s cn=%s", cert_path, identity.common_name)
+    log.debug("wrote certificate path=%s cn=%s", cert_path, identity.common_name)
     return IdentityFiles(name, cert_path, key_path)
 
 

@@ -20,6 +20,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.stack_cli",
     "roswire.cli",
     "schemas.cli",
+    "fleetlink.certs_cli",
 )
 
 Handler = Callable[[argparse.Namespace], int]

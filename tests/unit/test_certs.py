@@ -22,6 +22,7 @@ from fleetlink.certs import (
     new_ca,
     write_identity,
 )
+from fleetlink.cli import main
 
 NOW = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
 SERVER = ExtendedKeyUsageOID.SERVER_AUTH
@@ -124,3 +125,40 @@ def test_bundle_lookup_and_load_errors(tmp_path: Path) -> None:
         load_ca(tmp_path / "missing")
     with pytest.raises(CertError, match="requested twice"):
         generate_bundle(tmp_path / "dup", now=NOW, clients=["edge-a"], sites=["a"])
+
+
+# --- fleetlink certs (CLI) -------------------------------------------------------------------
+
+
+def test_cli_init_issue_show(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out_dir = tmp_path / "certs"
+    assert main(["certs", "init", str(out_dir), "--site", "wh-a", "--host", "cloud.example.com"]) == 0
+    assert main(["certs", "issue", str(out_dir), "--site", "wh-b"]) == 0
+    assert main(["certs", "issue", str(out_dir), "--name", "cloud-2", "--server", "--host", "10.0.0.2"]) == 0
+    assert main(["certs", "show", str(out_dir)]) == 0
+    out = capsys.readouterr().out
+    for name in ("fleetlink-cloud", "fleetlink-uplink", "edge-wh-a", "edge-wh-b", "cloud-2"):
+        assert (out_dir / f"{name}.pem").is_file()
+        assert f"CN={name},O=fleetlink" in out
+    assert "PRIVATE KEY" not in out
+    cloud = x509.load_pem_x509_certificate((out_dir / "fleetlink-cloud.pem").read_bytes())
+    alt = cloud.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert [str(n.value) for n in alt] == ["cloud.example.com"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["certs", "issue", "{dir}", "--name", "x", "--server"], "give at least one host"),
+        (["certs", "issue", "{dir}/missing", "--site", "a"], "cannot read CA"),
+        (["certs", "init", "{dir}"], "exists; use `issue`"),
+        (["certs", "show", "{dir}/empty"], "no certificates"),
+    ],
+)
+def test_cli_errors(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    assert main(["certs", "init", str(tmp_path)]) == 0
+    (tmp_path / "empty").mkdir()
+    assert main([a.replace("{dir}", str(tmp_path)) for a in argv]) == 1
+    assert message in capsys.readouterr().err
