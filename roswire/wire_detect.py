@@ -65,30 +65,35 @@ class WireTally:
 
 
 def probe_wire(session: zenoh.Session, domain: int, seconds: float = 2.0) -> WireVerdict:
-    """Listen to ``<domain>/**`` for ``seconds`` and read the current tokens; return what was seen."""
+    """Listen to ``<domain>/**`` and the domain's tokens (present ones included) for ``seconds``."""
     tally = WireTally()
     lock = threading.Lock()
+    seen: set[str] = set()
 
     def on_sample(sample: zenoh.Sample) -> None:
         att = sample.attachment
         with lock:
             tally.observe_attachment(att.to_bytes() if att is not None else None)
 
-    deadline = time.monotonic() + seconds
-    sub = session.declare_subscriber(f"{domain}/**", on_sample)
+    def on_token(sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        if sample.kind != zenoh.SampleKind.PUT or key in seen:
+            return
+        try:
+            entity = parse_token(key)
+        except TokenError:
+            return
+        if isinstance(entity, EndpointInfo):
+            with lock:
+                seen.add(key)
+                tally.observe_endpoint(entity)
+
+    data = session.declare_subscriber(f"{domain}/**", on_sample)
+    tokens = session.liveliness().declare_subscriber(liveliness_prefix(domain), on_token, history=True)
     try:
-        for reply in session.liveliness().get(liveliness_prefix(domain), timeout=seconds):
-            if reply.ok is None:
-                continue
-            try:
-                entity = parse_token(str(reply.ok.key_expr))
-            except TokenError:
-                continue
-            if isinstance(entity, EndpointInfo):
-                with lock:
-                    tally.observe_endpoint(entity)
-        time.sleep(max(0.0, deadline - time.monotonic()))
+        time.sleep(seconds)
     finally:
-        sub.undeclare()
+        tokens.undeclare()
+        data.undeclare()
     with lock:
         return tally.verdict()
