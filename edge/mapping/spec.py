@@ -80,7 +80,7 @@ def check_ros_type(ros_type: str, *, mapping: str | None = None) -> str:
     return ros_type
 
 
-def _check_captures(template: Template, pattern: TopicPattern, what: str, mapping: str) -> None:
+def check_captures(template: Template, pattern: TopicPattern, what: str, mapping: str) -> None:
     captured = set(pattern.captures)
     for name in sorted(template.captures - captured):
         have = ", ".join(pattern.captures) or "nothing"
@@ -91,7 +91,7 @@ def _check_captures(template: Template, pattern: TopicPattern, what: str, mappin
         )
 
 
-def _check_topic_literal(template: Template, mapping: str) -> None:
+def check_topic_literal(template: Template, mapping: str) -> None:
     if template.is_literal:
         problem = kafka_topic_problem(template.literal_text)
         if problem:
@@ -125,8 +125,8 @@ def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> Comp
             "robot as one segment, e.g. '/{robot}/imu'", mapping=name, template=spec.source,
         )
     topic = Template.parse(spec.topic, mapping=name, what="Kafka topic template")
-    _check_captures(topic, pattern, "Kafka topic template", name)
-    _check_topic_literal(topic, name)
+    check_captures(topic, pattern, "Kafka topic template", name)
+    check_topic_literal(topic, name)
     if spec.key is None:
         if "robot" not in pattern.captures:
             raise MappingError(
@@ -137,7 +137,7 @@ def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> Comp
     else:
         key_text = spec.key
     key = Template.parse(key_text, mapping=name, what="key template")
-    _check_captures(key, pattern, "key template", name)
+    check_captures(key, pattern, "key template", name)
     paths = topic.field_paths + tuple(p for p in key.field_paths if p not in topic.field_paths)
     return CompiledMapping(spec=spec, robot_type=robot_type, pattern=pattern, topic=topic, key=key,
                            field_paths=paths)

@@ -1,0 +1,309 @@
+"""The edge agent's one config model (``fleetlink edge run -c edge.yaml``).
+
+Load it with ``fleetlink.configfile.load_config(EdgeConfig, path)``: every problem is reported
+with its YAML path (``robot_types.turtlebot4.mappings[1].to (line 14): ...``) and no socket
+is opened. Durations are text with a unit (``250ms``, ``5s``) or seconds, held as nanoseconds;
+sizes are bytes or text (``64MiB``, ``1GiB``). See deploy/edge.example.yaml.
+"""
+
+from __future__ import annotations
+
+import re
+import socket
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import (
+    BaseModel,
+    ByteSize,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from edge.errors import EdgeError, MappingError
+from edge.mapping import (
+    Delivery,
+    MappingSpec,
+    MappingTable,
+    RobotTypeSpec,
+    Template,
+    TopicPattern,
+    check_ros_type,
+)
+from edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
+from edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
+from edge.stages import DurationNs, StageSpec
+from fleetlink.wan import Codec, WireError, check_key_name
+from fleetlink.zenoh_options import ZenohSection
+
+_NS = 1_000_000_000
+Name = Annotated[str, StringConstraints(pattern=f"^{NAME_PATTERN.pattern}$", max_length=128)]
+_GLOB = re.compile(r"/?[A-Za-z0-9_/*?\[\]!-]+")
+_ROS_TOPIC = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+
+
+def _why(exc: EdgeError | WireError) -> str:
+    """The reason without the 'mapping X:' prefix (the YAML path already says where)."""
+    return str(exc).split(": ", 1)[1] if str(exc).startswith("mapping ") else str(exc)
+
+
+def default_edge_id() -> str:
+    """The host name, cut to a valid key-expression chunk."""
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", socket.gethostname()).strip("-.") or "edge"
+    return name[:64]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class RosSection(_Section):
+    domain_id: int = Field(default=0, ge=0, le=232)
+    distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "jazzy"
+    """Decides type hashes and the rmw_zenoh wire details."""
+    message_paths: list[Path] = []
+    """Folders of custom ``.msg`` packages (e.g. irobot_create_msgs)."""
+    attachment: Literal["auto", "v1", "v2"] = "auto"
+
+
+class MappingConfig(_Section):
+    """One mapping: ROS topic pattern ``from`` -> Kafka topic template ``to``."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    name: Name
+    from_: str = Field(alias="from")
+    to: str
+    key: str | None = Field(default=None, validate_default=True)
+    type: str | None = None
+    delivery: Delivery = "at_least_once"
+    stages: list[StageSpec] = []
+
+    @field_validator("from_")
+    @classmethod
+    def _pattern(cls, value: str) -> str:
+        try:
+            TopicPattern.parse(value)
+        except MappingError as exc:
+            raise ValueError(_why(exc)) from None
+        return value
+
+    @field_validator("to")
+    @classmethod
+    def _topic(cls, value: str, info: ValidationInfo) -> str:
+        return _check_template(value, info, "Kafka topic template", topic=True)
+
+    @field_validator("key")
+    @classmethod
+    def _key(cls, value: str | None, info: ValidationInfo) -> str | None:
+        source = info.data.get("from_")
+        if value is None:
+            if source is not None and "robot" not in TopicPattern.parse(source).captures:
+                raise ValueError(f"the key defaults to '{{robot}}' but 'from' ({source!r}) captures no "
+                                 "robot; set a key (a capture, a {msg.field} or fixed text)")
+            return None
+        return _check_template(value, info, "key template", topic=False)
+
+    @field_validator("type")
+    @classmethod
+    def _type(cls, value: str | None) -> str | None:
+        if value is not None:
+            try:
+                check_ros_type(value)
+            except MappingError as exc:
+                raise ValueError(_why(exc)) from None
+        return value
+
+    def spec(self) -> MappingSpec:
+        return MappingSpec(name=self.name, source=self.from_, topic=self.to, key=self.key,
+                           ros_type=self.type, delivery=self.delivery, stages=tuple(self.stages))
+
+
+def _check_template(value: str, info: ValidationInfo, what: str, *, topic: bool) -> str:
+    try:
+        template = Template.parse(value, what=what)
+        source = info.data.get("from_")
+        if source is not None:
+            check_captures(template, TopicPattern.parse(source), what, "")
+        if topic:
+            check_topic_literal(template, "")
+    except MappingError as exc:
+        raise ValueError(_why(exc)) from None
+    return value
+
+
+class RobotMappingConfig(MappingConfig):
+    """A robot type's mapping template: ``from`` must capture ``{robot}`` as one segment."""
+
+    @field_validator("from_")
+    @classmethod
+    def _robot(cls, value: str) -> str:
+        if not TopicPattern.parse(value).is_single("robot"):
+            raise ValueError(f"{value!r}: a robot type's mappings capture the robot as one segment, "
+                             "e.g. '/{robot}/imu'")
+        return value
+
+
+class RobotTypeConfig(_Section):
+    match: str
+    """Glob over robot namespaces, e.g. ``/tb4_*``."""
+    mappings: list[RobotMappingConfig] = []
+
+    @field_validator("match")
+    @classmethod
+    def _glob(cls, value: str) -> str:
+        if _GLOB.fullmatch(value) is None:
+            raise ValueError(f"{value!r} is not a namespace glob such as '/tb4_*'")
+        return value
+
+
+class RegistrationSection(_Section):
+    topic: str = "/fleetlink/register"
+    """ROS topic on which robots may register explicitly."""
+    discover: bool = True
+    """Register robots found in the ROS graph whose namespace matches a robot type."""
+    grace_period: DurationNs = 5 * _NS
+    """How long a robot may be gone (liveliness lost) before it is deregistered."""
+
+    @field_validator("topic")
+    @classmethod
+    def _topic(cls, value: str) -> str:
+        if _ROS_TOPIC.fullmatch(value) is None:
+            raise ValueError(f"{value!r} is not an absolute ROS topic name")
+        return value
+
+
+class SpoolSection(_Section):
+    dir: Path
+    max_bytes: ByteSize = ByteSize(1 << 30)
+    segment_bytes: ByteSize = ByteSize(16 << 20)
+    policy: FullPolicy = "block"
+    block_timeout: DurationNs = 1 * _NS
+    fsync: FsyncPolicy = "interval"
+    fsync_interval: DurationNs = 100_000_000
+    fsync_batch: int = Field(default=1000, ge=1)
+
+    @model_validator(mode="after")
+    def _coherent(self) -> SpoolSection:
+        try:
+            self.options()
+        except EdgeError as exc:
+            raise ValueError(str(exc)) from None
+        return self
+
+    def options(self) -> SpoolOptions:
+        return SpoolOptions(
+            max_bytes=int(self.max_bytes), segment_bytes=int(self.segment_bytes), policy=self.policy,
+            block_timeout_s=self.block_timeout / _NS, fsync=self.fsync,
+            fsync_interval_ms=max(1, self.fsync_interval // 1_000_000), fsync_batch=self.fsync_batch,
+        )
+
+
+class MemorySection(_Section):
+    """The in-memory buffer of ``best_effort`` mappings."""
+
+    max_bytes: ByteSize = ByteSize(64 << 20)
+    max_records: int = Field(default=100_000, ge=1)
+
+    def buffer(self) -> MemoryBuffer:
+        return MemoryBuffer(max_bytes=int(self.max_bytes), max_records=self.max_records)
+
+
+class WanSection(_Section):
+    batch_max_records: int = Field(default=500, ge=1, le=100_000)
+    batch_max_bytes: ByteSize = ByteSize(1 << 20)
+    linger: DurationNs = 20_000_000
+    """How long a partial batch may wait for more records."""
+    ack_timeout: DurationNs = 10 * _NS
+    max_in_flight: int = Field(default=8, ge=1, le=1024)
+    retry_backoff_min: DurationNs = 200_000_000
+    retry_backoff_max: DurationNs = 30 * _NS
+    codec: Codec = "zstd"
+
+    @model_validator(mode="after")
+    def _backoff(self) -> WanSection:
+        if not 0 < self.retry_backoff_min <= self.retry_backoff_max:
+            raise ValueError("retry_backoff_min must be above 0s and at most retry_backoff_max")
+        if self.ack_timeout <= 0:
+            raise ValueError("ack_timeout must be above 0s")
+        return self
+
+
+class AdminSection(_Section):
+    listen: str = "127.0.0.1:8480"
+    """host:port of the admin HTTP API."""
+
+    @field_validator("listen")
+    @classmethod
+    def _host_port(cls, value: str) -> str:
+        host, sep, port = value.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"{value!r} is not host:port")
+        return value
+
+
+class EdgeConfig(_Section):
+    """Everything one edge process needs; one YAML file."""
+
+    site: str
+    edge_id: str = Field(default_factory=default_edge_id)
+    ros: RosSection = RosSection()
+    zenoh: ZenohSection = ZenohSection()
+    robot_types: dict[Name, RobotTypeConfig] = {}
+    mappings: list[MappingConfig] = []
+    """Site-level mappings, not tied to a robot type (patterns may still capture ``{robot}``)."""
+    registration: RegistrationSection = RegistrationSection()
+    spool: SpoolSection
+    memory: MemorySection = MemorySection()
+    wan: WanSection = WanSection()
+    admin: AdminSection | None = None
+
+    @field_validator("site", "edge_id")
+    @classmethod
+    def _key_chunk(cls, value: str, info: ValidationInfo) -> str:
+        try:
+            if "/" in value:
+                raise WireError(f"{value!r} must be a single key chunk (no '/')")
+            return check_key_name(value, str(info.field_name))
+        except WireError as exc:
+            raise ValueError(str(exc)) from None
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> EdgeConfig:
+        seen: dict[str, str] = {}
+        places = [(m.name, f"mappings[{i}]") for i, m in enumerate(self.mappings)]
+        places += [(m.name, f"robot_types.{t}.mappings[{i}]")
+                   for t, rt in self.robot_types.items() for i, m in enumerate(rt.mappings)]
+        for name, where in places:
+            if name in seen:
+                raise ValueError(f"mapping name {name!r} is used twice ({seen[name]} and {where}); "
+                                 "names must be unique per edge")
+            seen[name] = where
+        return self
+
+    def robot_type_specs(self) -> list[RobotTypeSpec]:
+        return [RobotTypeSpec(name=n, match=t.match, mappings=tuple(m.spec() for m in t.mappings))
+                for n, t in self.robot_types.items()]
+
+    def mapping_table(self) -> MappingTable:
+        """A fresh mapping table with every declared mapping (no robots registered yet)."""
+        return MappingTable(self.robot_type_specs(), [m.spec() for m in self.mappings])
+
+
+__all__ = [
+    "AdminSection",
+    "EdgeConfig",
+    "MappingConfig",
+    "MemorySection",
+    "RegistrationSection",
+    "RobotMappingConfig",
+    "RobotTypeConfig",
+    "RosSection",
+    "SpoolSection",
+    "WanSection",
+    "default_edge_id",
+]
