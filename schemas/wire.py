@@ -92,19 +92,26 @@ def read_long(buf: bytes, pos: int) -> tuple[int, int]:
     return (u >> 1) ^ -(u & 1), i
 
 
-def read_bytes(buf: bytes, pos: int) -> tuple[bytes, int]:
-    """An Avro ``bytes``/``string`` value: (raw bytes, position after it)."""
+def read_span(buf: bytes, pos: int) -> tuple[int, int]:
+    """Where the content of the Avro ``bytes``/``string`` at ``pos`` starts and ends."""
     length, start = read_long(buf, pos)
     end = start + length
     if length < 0 or end > len(buf):
         raise WireError(pos, f"byte length {length} does not fit in the {len(buf)}-byte input")
-    return buf[start:end], end
+    return start, end
+
+
+def read_bytes(buf: bytes, pos: int) -> tuple[memoryview, int]:
+    """An Avro ``bytes`` value as a view into ``buf`` (no copy): (content, position after it)."""
+    start, end = read_span(buf, pos)
+    return memoryview(buf)[start:end], end
 
 
 def read_text(buf: bytes, pos: int, bound: int) -> tuple[bytes, int]:
     """An Avro ``string`` checked for UTF-8 and the ROS bound (0 = none): (UTF-8 bytes, pos after)."""
-    raw, end = read_bytes(buf, pos)
-    check_utf8(raw, end - len(raw))
+    start, end = read_span(buf, pos)
+    raw = buf[start:end]
+    check_utf8(raw, start)
     if bound and len(raw) > bound:
         raise WireError(pos, f"string of {len(raw)} bytes exceeds its bound {bound}")
     return raw, end
@@ -119,9 +126,9 @@ def check_utf8(raw: bytes, offset: int) -> None:
             raise WireError(offset + exc.start, f"invalid UTF-8: {exc.reason}") from None
 
 
-def check_bools(raw: bytes, offset: int) -> None:
+def check_bools(raw: bytes | memoryview, offset: int) -> None:
     """Raise ``WireError`` unless every byte of ``raw`` is 0 or 1."""
-    rest = raw.translate(None, b"\x00\x01")
+    rest = bytes(raw).translate(None, b"\x00\x01")
     if rest:
         bad = next(i for i, b in enumerate(raw) if b > 1)
         raise WireError(offset + bad, f"invalid bool byte 0x{raw[bad]:02x}")
@@ -142,10 +149,11 @@ def swap(buf: bytes, start: int, nbytes: int, size: int) -> bytes:
     return np.frombuffer(buf, f">u{size}", nbytes // size, start).byteswap().tobytes()
 
 
-def read_array_raw(buf: bytes, pos: int, itemsize: int) -> tuple[int, bytes, int]:
+def read_array_raw(buf: bytes, pos: int, itemsize: int) -> tuple[int, bytes | memoryview, int]:
     """An Avro array of fixed-size items (float/double/boolean): (count, raw items, pos after)."""
     total = 0
-    parts: list[bytes] = []
+    parts: list[memoryview] = []
+    view = memoryview(buf)
     while True:
         n, pos = read_long(buf, pos)
         if n == 0:
@@ -156,10 +164,12 @@ def read_array_raw(buf: bytes, pos: int, itemsize: int) -> tuple[int, bytes, int
         end = pos + n * itemsize
         if end > len(buf):
             raise WireError(pos, f"array block of {n} items does not fit in the {len(buf)}-byte input")
-        parts.append(buf[pos:end])
+        parts.append(view[pos:end])
         total += n
         pos = end
-    return total, parts[0] if len(parts) == 1 else b"".join(parts), pos
+    if len(parts) == 1:
+        return total, parts[0], pos
+    return total, b"".join(parts), pos
 
 
 def read_array_longs(buf: bytes, pos: int) -> tuple[list[int], int]:
