@@ -152,7 +152,9 @@ class Ledger:
                 os.ftruncate(self._fd, self._size)
             except OSError:
                 self._needs_rewrite = True  # a partial entry may remain: replace the file next time
-            log.warning("spool ledger %s: could not append an entry (disk full?)", self.path)
+            if self.failures == 1 or self.failures % 1000 == 0:  # a full disk must not flood the log
+                log.warning("spool ledger %s: could not append an entry (disk full?); %d failures so far",
+                            self.path, self.failures)
             return False
         self._size += len(entry)
         self._dirty = True

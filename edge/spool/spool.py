@@ -69,6 +69,7 @@ class Spool:
         self._bytes = 0
         self._depth = 0
         self._blocked = 0
+        self._evicting_helps = True
         self._warned: set[str] = set()
         self._c = dict.fromkeys(COUNTERS, 0)
         self._stop = threading.Event()
@@ -219,9 +220,12 @@ class Spool:
             self._c["disk_full"] += 1
             self._warn("disk", "spool %s: disk full; policy %s applies", self.directory, self.options.policy)
         policy = self.options.policy
-        if policy == "drop_oldest" and self._segments:
+        # on a full disk, evicting goes on only while it helps (a write succeeded since the last
+        # eviction): a disk filled by something else must not wipe the whole spool
+        if policy == "drop_oldest" and self._segments and (not disk or self._evicting_helps):
             self._warn("evict", "spool %s: full; evicting the oldest segment (counted)", self.directory)
             self._remove_first()
+            self._evicting_helps = not disk
             return True
         if policy == "block":
             remaining = deadline - time.monotonic()
@@ -278,6 +282,7 @@ class Spool:
         self._bytes += len(data)
         self._depth += len(items)
         self._c["appended"] += len(items)
+        self._evicting_helps = True
 
     # -- leaving the spool -----------------------------------------------------------------------
     def _remove_first(self) -> None:
