@@ -1,7 +1,7 @@
 """Per-type converters between CDR payloads and Avro binary records.
 
 ``get_codec(ts, typename, distro)`` builds (once, then cached per type store) a :class:`Codec`
-whose ``cdr_to_avro`` / ``avro_to_cdr`` are functions generated for that type. Round trips are
+whose ``cdr_to_avro`` / ``avro_to_cdr`` / ``decode`` are functions generated for that type. Round trips are
 byte-exact: ``avro_to_cdr(cdr_to_avro(x)) == x`` for every CDR message rosbags or Fast-CDR
 writes (little-endian; big-endian input is accepted and converted, trailing alignment bytes
 are dropped).
@@ -22,6 +22,7 @@ from schemas.avro_schema import avro_schema
 from schemas.errors import DecodeError, SchemaError, ValueRangeError
 from schemas.gen_avro_cdr import AvroToCdr
 from schemas.gen_cdr_avro import CdrToAvro
+from schemas.gen_cdr_dict import CdrToDict
 from schemas.layout import Record, build
 from schemas.typestore import Distro, normalize_typename
 
@@ -47,6 +48,8 @@ class Codec:
     """CDR payload (with its 4-byte encapsulation header) -> Avro binary body."""
     avro_to_cdr: Converter
     """Avro binary body -> CDR payload (``00 01 00 00`` header, little-endian)."""
+    decode: Callable[[bytes], dict[str, Any]]
+    """CDR payload -> the dict an Avro reader returns for it (bytes for uint8[], lists for arrays)."""
 
     def __init__(self, ts: Typestore, typename: str, distro: Distro) -> None:
         self.typename = typename
@@ -55,26 +58,23 @@ class Codec:
         self.parsed_schema: Any = fastavro.parse_schema(copy.deepcopy(self.schema))
         self.type_hash: str = self.schema["ros_type_hash"]
         self._root: Record = build(ts, typename)
-        self._namespace: dict[str, Any] = {
-            "_DecodeError": DecodeError,
-            "_ValueRangeError": ValueRangeError,
-            "_TYPENAME": typename,
-            "_other_encapsulation": self._other_encapsulation,
-        }
-        self._big_endian: Converter | None = None
-        self.cdr_to_avro = CdrToAvro(self._root, little_endian=True).compile(self._namespace)
-        self.avro_to_cdr = AvroToCdr(self._root).compile(self._namespace)
+        self._big_endian: dict[str, Callable[[bytes], Any]] = {}
+        self.cdr_to_avro = CdrToAvro(self._root, little_endian=True).compile(self._namespace("avro"))
+        self.avro_to_cdr = AvroToCdr(self._root).compile(self._namespace("cdr"))
+        self.decode = CdrToDict(self._root, little_endian=True).compile_decoder(self._namespace("dict"))
 
-    def decode(self, cdr: bytes) -> dict[str, Any]:
-        """The message as the dict an Avro reader returns (bytes for uint8[], lists for arrays)."""
-        body = self.cdr_to_avro(cdr)
-        datum = fastavro.schemaless_reader(io.BytesIO(body), self.parsed_schema, None)
+    def read_avro(self, body: bytes) -> dict[str, Any]:
+        """An Avro body of this type read with fastavro (same shape as :attr:`decode`)."""
+        try:
+            datum = fastavro.schemaless_reader(io.BytesIO(body), self.parsed_schema, None)
+        except (EOFError, ValueError, IndexError, UnicodeDecodeError) as exc:
+            raise DecodeError(self.typename, 0, f"not an Avro {self.typename}: {exc}", body) from exc
         if not isinstance(datum, dict):
-            raise DecodeError(self.typename, 0, "Avro reader returned no record", cdr)
+            raise DecodeError(self.typename, 0, "Avro reader returned no record", body)
         return datum
 
     def encode_datum(self, datum: dict[str, Any]) -> bytes:
-        """Avro binary body of a datum shaped like :meth:`decode`'s result."""
+        """Avro binary body of a datum shaped like :attr:`decode`'s result."""
         out = io.BytesIO()
         try:
             fastavro.schemaless_writer(out, self.parsed_schema, datum)
@@ -82,7 +82,18 @@ class Codec:
             raise EncodeError(self.typename, f"{type(exc).__name__}: {exc}") from exc
         return out.getvalue()
 
-    def _other_encapsulation(self, buf: bytes) -> bytes:
+    def _namespace(self, output: str) -> dict[str, Any]:
+        def other_encapsulation(buf: bytes) -> Any:
+            return self._other_encapsulation(buf, output)
+
+        return {
+            "_DecodeError": DecodeError,
+            "_ValueRangeError": ValueRangeError,
+            "_TYPENAME": self.typename,
+            "_other_encapsulation": other_encapsulation,
+        }
+
+    def _other_encapsulation(self, buf: bytes, output: str) -> Any:
         if len(buf) < 4:
             reason = f"{len(buf)} bytes cannot hold the 4-byte CDR encapsulation header"
             raise DecodeError(self.typename, len(buf), reason, buf)
@@ -94,9 +105,14 @@ class Codec:
                 "or 00 00 (CDR big-endian)",
                 buf,
             )
-        if self._big_endian is None:
-            self._big_endian = CdrToAvro(self._root, little_endian=False).compile(self._namespace)
-        return self._big_endian(buf)
+        convert = self._big_endian.get(output)
+        if convert is None:
+            if output == "dict":
+                convert = CdrToDict(self._root, little_endian=False).compile_decoder(self._namespace(output))
+            else:
+                convert = CdrToAvro(self._root, little_endian=False).compile(self._namespace(output))
+            self._big_endian[output] = convert
+        return convert(buf)
 
 
 _CACHE: weakref.WeakKeyDictionary[Typestore, dict[tuple[str, str], Codec]] = weakref.WeakKeyDictionary()

@@ -29,6 +29,7 @@ BASE_NAMESPACE: dict[str, Any] = {
     "_read_block": wire.read_block,
     "_pack_ints": wire.pack_ints,
     "_check_utf8": wire.check_utf8,
+    "_utf8": wire.utf8,
     "_check_bools": wire.check_bools,
     "_check_uint64": wire.check_uint64,
     "_swap": wire.swap,

@@ -126,6 +126,14 @@ def check_utf8(raw: bytes, offset: int) -> None:
             raise WireError(offset + exc.start, f"invalid UTF-8: {exc.reason}") from None
 
 
+def utf8(raw: bytes, offset: int) -> str:
+    """``raw`` (found at ``offset``) decoded as UTF-8, or ``WireError`` at the first bad byte."""
+    try:
+        return raw.decode()
+    except UnicodeDecodeError as exc:
+        raise WireError(offset + exc.start, f"invalid UTF-8: {exc.reason}") from None
+
+
 def check_bools(raw: bytes | memoryview, offset: int) -> None:
     """Raise ``WireError`` unless every byte of ``raw`` is 0 or 1."""
     rest = bytes(raw).translate(None, b"\x00\x01")

@@ -15,6 +15,7 @@ from schemas.codec import get_codec
 from schemas.errors import DecodeError, SchemaError, UnknownTypeError, ValueRangeError
 from schemas.typestore import load_typestore, message_types
 from schemas.wire import zz
+from tests.unit.schemas.ros_values import same
 
 TS = load_typestore("jazzy")
 
@@ -83,6 +84,10 @@ def test_bad_cdr(typename: str, payload: bytes, offset: int, words: str) -> None
     assert words in err.reason
     assert err.data == payload
     assert typename in str(err)
+    # decode() walks the same bytes and fails the same way
+    with pytest.raises(DecodeError) as again:
+        get_codec(TS, typename, "jazzy").decode(payload)
+    assert (again.value.offset, again.value.reason) == (err.offset, err.reason)
 
 
 def test_up_to_three_alignment_bytes_are_accepted() -> None:
@@ -118,6 +123,9 @@ def test_every_truncation_of_imu(cut: int) -> None:
 def test_uint64_above_long_range(typename: str, payload: bytes, field: str, offset: int) -> None:
     with pytest.raises(ValueRangeError) as info:
         get_codec(TS, typename, "jazzy").cdr_to_avro(payload)
+    with pytest.raises(ValueRangeError) as again:
+        get_codec(TS, typename, "jazzy").decode(payload)
+    assert (again.value.field, again.value.offset) == (field, offset)
     assert info.value.field == field
     assert info.value.offset == offset
     assert info.value.typename == typename
@@ -221,13 +229,20 @@ def test_garbage_never_leaks_low_level_errors(typename: str, payload: bytes, hea
     codec = get_codec(TS, typename, "jazzy")
     data = header + payload
     avro, error = _outcome(codec.cdr_to_avro, data)
+    try:
+        decoded: object = codec.decode(data)
+    except SchemaError as exc:
+        decoded = exc
     if error is not None:
         assert isinstance(error, DecodeError)
+        assert isinstance(decoded, DecodeError)
+        assert (decoded.offset, decoded.reason) == (error.offset, error.reason)
         assert error.typename == typename
         assert 0 <= error.offset <= len(data)
     else:
         # whatever decodes must convert back and forth consistently
         assert codec.cdr_to_avro(codec.avro_to_cdr(avro)) == avro
+        assert same(decoded, codec.read_avro(avro))
     _, error = _outcome(codec.avro_to_cdr, payload)
     if error is not None:
         assert isinstance(error, DecodeError)

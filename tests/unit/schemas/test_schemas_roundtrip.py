@@ -39,7 +39,9 @@ def test_round_trip(typename: str, data: st.DataObject) -> None:
     # the Avro body is exactly what fastavro writes for the decoded datum
     decoded = codec.decode(cdr)
     assert codec.encode_datum(decoded) == avro
+    assert same(decoded, codec.read_avro(avro))
     assert same(decoded, avro_shaped(TS, TS.deserialize_cdr(cdr, typename), typename))
     # big-endian input gives the same record
     big = bytes(TS.serialize_cdr(obj, typename, little_endian=False))
     assert codec.cdr_to_avro(big) == avro
+    assert same(codec.decode(big), decoded)
