@@ -20,10 +20,10 @@ from rosbags.typesys.store import Typestore
 from schemas.avro_schema import avro_schema
 from schemas.codec import get_codec
 from schemas.errors import IncompatibleSchemaError
-from schemas.registry import SchemaRegistry, subject_for_topic
+from schemas.registry import RegistryUnavailableError, SchemaRegistry, subject_for_topic
 from schemas.single_object import confluent_frame
 from schemas.typestore import load_typestore, types_from_msg
-from tests.helpers import wait_until
+from tests.helpers import free_port, wait_until
 from tests.unit.schemas.ros_values import avro_shaped, same
 
 BAG = Path(__file__).resolve().parents[3] / "shared" / "data" / "bags" / "robot_localization_husky"
@@ -151,3 +151,15 @@ def test_incompatible_change_is_refused_with_the_registry_message(registry: Sche
     assert registry.schema_by_id(first)["fields"] == v1["fields"]
     client = SchemaRegistryClient({"url": registry.url})
     assert client.get_versions(subject) == [1]
+
+
+def test_unreachable_registry_is_reported_as_unavailable() -> None:
+    url = f"http://127.0.0.1:{free_port()}/apis/ccompat/v7"
+    schema = avro_schema(_store_with("int32 level\n"), "fleet_msgs/msg/Reading", "jazzy")
+    with SchemaRegistry(url) as reg:
+        with pytest.raises(RegistryUnavailableError) as registering:
+            reg.register("down-value", schema)
+        assert registering.value.subject == "down-value"
+        assert url in registering.value.reason
+        with pytest.raises(RegistryUnavailableError):
+            reg.check_compatible("down-value", schema)
