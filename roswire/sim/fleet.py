@@ -63,6 +63,7 @@ class SimRobot:
     publishers: dict[str, RosPublisher] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
     ticks: int = 0
+    stopped: bool = False
 
 
 class Fleet:
@@ -173,7 +174,9 @@ class Fleet:
         if robot is None:
             raise RoswireError(f"no robot named {name}")
         with robot.lock:
-            robot.node.stop()
+            robot.stopped = True
+        # outside the lock: undeclaring may wait for a light-ring callback that takes the lock
+        robot.node.stop()
         log.info("robot %s stopped", name)
 
     def _get(self, name: str) -> SimRobot:
@@ -230,7 +233,7 @@ class Fleet:
 
     def _tick(self, robot: SimRobot, now: float) -> None:
         with robot.lock:
-            if not robot.node.started:
+            if robot.stopped or not robot.node.started:
                 return
             readings = robot.model.step(now)
             robot.ticks += 1
