@@ -116,8 +116,8 @@ class QoS:
     def parse(cls, text: str) -> QoS:
         """Parse a compact QoS string; empty fields take rmw_zenoh's defaults.
 
-        Like rmw_zenoh, at least 6 ``:``-separated fields are required (extra ones are
-        ignored) with 1/1/2/2/2/3 ``,``-separated sub-fields.
+        Like rmw_zenoh's ``keyexpr_to_qos``, at least 6 ``:``-separated fields are required, with
+        at least 1/1/2/2/2/3 ``,``-separated sub-fields; extra fields and sub-fields are ignored.
         """
         fields = text.split(":")
         if len(fields) < 6:
@@ -139,9 +139,9 @@ class QoS:
 
 def _parts(text: str, what: str, field: str, count: int) -> list[str]:
     parts = field.split(",")
-    if len(parts) != count:
+    if len(parts) < count:
         raise QosParseError(text, f"{what} field {field!r} needs {count} ','-separated parts")
-    return parts
+    return parts[:count]
 
 
 def _int(text: str, what: str, raw: str, default: int) -> int:

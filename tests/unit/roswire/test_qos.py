@@ -54,6 +54,7 @@ def test_parse_fills_rmw_zenoh_defaults() -> None:
 
 def test_parse_ignores_extra_fields_like_rmw_zenoh() -> None:
     assert QoS.parse("::,10:,:,:,,:extra") == DEFAULT
+    assert QoS.parse("::,10,7:,,9:,:,,,x") == DEFAULT
 
 
 @pytest.mark.parametrize(
@@ -68,7 +69,7 @@ def test_parse_ignores_extra_fields_like_rmw_zenoh() -> None:
         ("9::,10:,:,:,,", "reliability 9"),
         ("::,-1:,:,:,,", "depth"),
         ("::,10:a,:,:,,", "deadline"),
-        ("::,10:,,:,:,,", "deadline"),
+        ("::,10:5:,:,,", "deadline field '5'"),
     ],
 )
 def test_parse_rejects(text: str, reason: str) -> None:
