@@ -203,9 +203,10 @@ def test_edge_keeps_raw_ros_traffic_and_other_sites_keys_on_the_site(tmp_path: P
         on_site, tokens_on_site = Collector(), Collector()
         cloud.session.declare_subscriber("0/**", at_cloud)
         cloud.session.declare_subscriber("fleetlink/**", at_cloud)
-        cloud.session.liveliness().declare_subscriber("@ros2_lv/**", tokens_at_cloud)
+        # history=True: tokens declared before the subscriber's interest got through count too.
+        cloud.session.liveliness().declare_subscriber("@ros2_lv/**", tokens_at_cloud, history=True)
         other_robot.declare_subscriber("0/**", on_site)
-        other_robot.liveliness().declare_subscriber("@ros2_lv/**", tokens_on_site)
+        other_robot.liveliness().declare_subscriber("@ros2_lv/**", tokens_on_site, history=True)
         token = robot.liveliness().declare_token(token_key)
         sentinel = _unique("own").encode()
 
