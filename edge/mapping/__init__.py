@@ -6,7 +6,9 @@
         topic = bound.kafka_topic or bound.render_topic(decoded_message)
         key = bound.key or bound.render_key(decoded_message)
 
-See ``docs/`` and the module docstrings for the pattern and template syntax.
+Pattern syntax: ``edge.mapping.patterns``; template syntax and Kafka topic rules:
+``edge.mapping.templates``; validation: ``edge.mapping.spec``; the live table:
+``edge.mapping.table``. ``edge.config.EdgeConfig.mapping_table()`` builds a table from the YAML.
 """
 
 from edge.mapping.patterns import Capture, TopicPattern, check_robot_name
