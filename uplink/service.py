@@ -1,0 +1,133 @@
+"""The uplink process: a Zenoh queryable for edge batches in front of a Kafka producer.
+
+Edges send each batch as a Zenoh query on ``fleetlink/<site>/ingest/<edge_id>``; the uplink
+answers with an ``Ack`` only when Kafka has acknowledged (or dead-lettered) every record.
+Several uplinks may serve the same sites: a query reaches one of them. Nothing is kept on
+disk here: an unanswered batch stays in the edge's spool and comes again.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from types import TracebackType
+from typing import Any
+
+import zenoh
+
+from fleetlink.ratelimit import LogLimiter
+from fleetlink.wan import Ack, WireError, decode_batch, encode_ack
+from fleetlink.zenoh_options import ZenohOptions
+from schemas.registry import SchemaRegistry
+from uplink.config import UplinkConfig
+from uplink.ingest import BatchJob, IngestStats
+from uplink.producer import KafkaSink
+from uplink.schema_ids import SchemaIds
+from uplink.topics import ensure_topics
+
+log = logging.getLogger(__name__)
+
+
+class Uplink:
+    def __init__(self, config: UplinkConfig, zenoh_options: ZenohOptions | None = None) -> None:
+        self.config = config
+        self._zenoh_options = zenoh_options or config.zenoh.options()
+        self.stats = IngestStats()
+        self._session: zenoh.Session | None = None
+        self._queryables: list[Any] = []
+        self._sink: KafkaSink | None = None
+        self._registry: SchemaRegistry | None = None
+        self._ids: SchemaIds | None = None
+        self._pool: ThreadPoolExecutor | None = None
+        self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
+        self._limiter = LogLimiter(log)
+
+    # -- lifecycle -------------------------------------------------------------------------
+
+    def start(self) -> Uplink:
+        cfg = self.config
+        ensure_topics(cfg.kafka, cfg.topics)
+        self._registry = SchemaRegistry(cfg.registry.url)
+        self._registry.start()
+        self._ids = SchemaIds(self._registry, compatibility=cfg.registry.compatibility)
+        self._sink = KafkaSink(cfg.kafka).start()
+        self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uplink-batch")
+        self._session = zenoh.open(self._zenoh_options.to_config())
+        for site in cfg.ingest.sites:
+            key = f"fleetlink/{site}/ingest/*"
+            self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
+            log.info("serving edge batches on %s", key)
+        return self
+
+    def stop(self) -> None:
+        for queryable in self._queryables:
+            queryable.undeclare()
+        self._queryables.clear()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=False)
+            self._pool = None
+        if self._sink is not None:
+            left = self._sink.stop()
+            if left:
+                log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
+            self._sink = None
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+        if self._registry is not None:
+            self._registry.stop()
+            self._registry = None
+
+    def __enter__(self) -> Uplink:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    # -- batches ---------------------------------------------------------------------------
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        payload = query.payload
+        if payload is None:
+            query.reply_err(b"empty query: a batch is expected as the payload")
+            query.drop()
+            return
+        try:
+            batch = decode_batch(payload.to_bytes())
+        except WireError as exc:
+            self._limiter.log(logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s",
+                              str(query.key_expr), exc)
+            query.reply_err(f"malformed batch: {exc}".encode())
+            query.drop()
+            return
+        if not self._slots.acquire(blocking=False):
+            query.reply(query.key_expr, encode_ack(Ack(
+                edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
+                last_seq=batch.last_seq, status="error", detail="uplink busy: retry later",
+            )))
+            query.drop()
+            return
+        sink, ids, pool = self._sink, self._ids, self._pool
+        if sink is None or ids is None or pool is None:
+            self._slots.release()
+            query.reply_err(b"uplink stopping")
+            query.drop()
+            return
+
+        def done(ack: Ack) -> None:
+            self._slots.release()
+            if ack.status == "error":
+                self._limiter.log(logging.WARNING, "batch-error",
+                                  "batch %s/%s %d..%d not fully delivered: %s",
+                                  ack.edge_id, ack.stream, ack.first_seq, ack.last_seq, ack.detail)
+            try:
+                query.reply(query.key_expr, encode_ack(ack))
+            finally:
+                query.drop()
+
+        job = BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
+                       on_done=done, stats=self.stats)
+        pool.submit(job.run)
