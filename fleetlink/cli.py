@@ -21,6 +21,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "roswire.cli",
     "schemas.cli",
     "fleetlink.certs_cli",
+    "uplink.cli",
 )
 
 Handler = Callable[[argparse.Namespace], int]

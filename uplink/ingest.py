@@ -69,11 +69,13 @@ class BatchJob:
         dead_letter_topic: str,
         on_done: Callable[[Ack], None],
         stats: IngestStats,
+        dead_letter_max_bytes: int = 900_000,
     ) -> None:
         self._batch = batch
         self._sink = sink
         self._ids = schema_ids
         self._dlq = dead_letter_topic
+        self._dlq_max = dead_letter_max_bytes
         self._on_done = on_done
         self._stats = stats
         self._pending = _Pending(remaining=len(batch.records))
@@ -132,6 +134,7 @@ class BatchJob:
         dl = dead_letter(
             dlq_topic=self._dlq, stage=stage, reason=reason, intended_topic=record.kafka_topic,
             key=record.key, raw=record.value, headers=record.headers, timestamp_ms=record.timestamp_ms,
+            max_value_bytes=self._dlq_max,
         )
 
         def on_dlq(delivery: Delivery) -> None:

@@ -42,6 +42,8 @@ class Uplink:
         self._pool: ThreadPoolExecutor | None = None
         self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
         self._limiter = LogLimiter(log)
+        # a dead letter must itself fit: keep room for its headers below the producer's limit
+        self._dlq_max = max(1_000, config.kafka.message_max_bytes - 64 * 1024)
 
     # -- lifecycle -------------------------------------------------------------------------
 
@@ -129,5 +131,5 @@ class Uplink:
                 query.drop()
 
         job = BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
-                       on_done=done, stats=self.stats)
+                       on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max)
         pool.submit(job.run)

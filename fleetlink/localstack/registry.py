@@ -7,7 +7,7 @@ from pathlib import Path
 
 import httpx
 
-from fleetlink.localstack.process import ServerProcess, ensure_port_free, log_tail
+from fleetlink.localstack.process import ServerProcess, ensure_port_free, free_port, log_tail
 
 CCOMPAT_PATH = "/apis/ccompat/v7"
 
@@ -17,6 +17,7 @@ class RegistrySettings:
     port: int
     data_dir: Path
     host: str = "127.0.0.1"
+    management_port: int | None = None
 
     @property
     def url(self) -> str:
@@ -34,6 +35,9 @@ class SchemaRegistry:
                 java, "-Xms128m", "-Xmx768m",
                 f"-Dquarkus.http.host={settings.host}",
                 f"-Dquarkus.http.port={settings.port}",
+                # Quarkus' management interface (health, metrics) would take 0.0.0.0:9000
+                f"-Dquarkus.management.host={settings.host}",
+                f"-Dquarkus.management.port={settings.management_port or free_port()}",
                 "-Dapicurio.storage.kind=sql",
                 "-Dapicurio.storage.sql.kind=h2",
                 "-Dquarkus.log.level=WARN",
