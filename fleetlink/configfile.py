@@ -33,7 +33,7 @@ def format_path(parts: Sequence[PathPart]) -> str:
 
 
 def _line_index(node: yaml.Node, prefix: tuple[PathPart, ...], out: dict[tuple[PathPart, ...], int]) -> None:
-    out[prefix] = node.start_mark.line + 1
+    out.setdefault(prefix, node.start_mark.line + 1)
     if isinstance(node, yaml.MappingNode):
         for key_node, value_node in node.value:
             key = key_node.value
