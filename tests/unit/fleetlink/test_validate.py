@@ -60,7 +60,9 @@ def test_bad_config_exits_non_zero_naming_yaml_paths(
         ("site: a\nspool: {dir: /tmp/x}\nrobot_types: {tb4: {match: 7}}\n", "robot_types.tb4.match"),
     ],
 )
-def test_validate_messages(tmp_path: Path, text: str, message: str, capsys: pytest.CaptureFixture[str]) -> None:
+def test_validate_messages(
+    tmp_path: Path, text: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     path = tmp_path / "c.yaml"
     path.write_text(text)
     assert main(["validate", str(path)]) == 1
