@@ -158,7 +158,10 @@ def sim_command(args: argparse.Namespace, out: TextIO = sys.stdout, inp: TextIO 
 
     if args.robots < 0:
         raise ConfigError("--robots must be >= 0")
-    ts = load_typestore(args.distro, _msg_paths(args))
+    from schemas.bundled import bundled_message_paths
+
+    # the Create 3 definitions ship with fleetlink; --msg-path adds (or overrides) packages
+    ts = load_typestore(args.distro, [*bundled_message_paths(), *_msg_paths(args)])
     if IR_VECTOR not in ts.fielddefs:
         raise ConfigError("the simulator needs the irobot_create_msgs definitions: pass "
                           f"--msg-path DIR/irobot_create_msgs (or set ${MSG_PATH_ENV})")
