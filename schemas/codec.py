@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import fastavro
 
 from schemas.avro_schema import avro_schema
-from schemas.errors import DecodeError, SchemaError, ValueRangeError
+from schemas.errors import DecodeError, EncodeError, ValueRangeError
 from schemas.gen_avro_cdr import AvroToCdr
 from schemas.gen_cdr_avro import CdrToAvro
 from schemas.gen_cdr_dict import CdrToDict
@@ -30,15 +30,6 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 Converter = Callable[[bytes], bytes]
-
-
-class EncodeError(SchemaError):
-    """A datum does not match the Avro schema of ``typename``."""
-
-    def __init__(self, typename: str, reason: str) -> None:
-        self.typename = typename
-        self.reason = reason
-        super().__init__(f"cannot encode {typename}: {reason}")
 
 
 class Codec:
@@ -74,7 +65,11 @@ class Codec:
         return datum
 
     def encode_datum(self, datum: dict[str, Any]) -> bytes:
-        """Avro binary body of a datum shaped like :attr:`decode`'s result."""
+        """Avro binary body of a datum shaped like :attr:`decode`'s result.
+
+        Checks what Avro checks (field presence, types, long range); ROS ranges such as uint8 are
+        checked when the body is turned into CDR (:attr:`avro_to_cdr`).
+        """
         out = io.BytesIO()
         try:
             fastavro.schemaless_writer(out, self.parsed_schema, datum)

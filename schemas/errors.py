@@ -59,6 +59,15 @@ class ValueRangeError(DecodeError):
         super().__init__(typename, offset, f"{field} = {value!r} out of range: {reason}", data)
 
 
+class EncodeError(SchemaError):
+    """A datum does not match the Avro schema of ``typename``."""
+
+    def __init__(self, typename: str, reason: str) -> None:
+        self.typename = typename
+        self.reason = reason
+        super().__init__(f"cannot encode {typename}: {reason}")
+
+
 class RegistryError(SchemaError):
     """The schema registry refused a request or could not be reached."""
 

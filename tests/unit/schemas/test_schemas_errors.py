@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from schemas.codec import get_codec
-from schemas.errors import DecodeError, SchemaError, UnknownTypeError, ValueRangeError
+from schemas.errors import DecodeError, EncodeError, SchemaError, UnknownTypeError, ValueRangeError
 from schemas.typestore import load_typestore, message_types
 from schemas.wire import zz
 from tests.unit.schemas.ros_values import same
@@ -254,3 +254,18 @@ def _outcome(func: Callable[[bytes], bytes], data: bytes) -> tuple[bytes, Schema
         return func(data), None
     except SchemaError as exc:
         return b"", exc
+
+
+@pytest.mark.parametrize(
+    ("typename", "datum", "words"),
+    [
+        ("std_msgs/msg/UInt64", {"data": 2**63}, "OverflowError"),
+        ("std_msgs/msg/Int32", {"other": 1}, "data"),
+        ("std_msgs/msg/String", {"data": 5}, "data"),
+    ],
+)
+def test_encode_datum_errors(typename: str, datum: dict[str, Any], words: str) -> None:
+    with pytest.raises(EncodeError) as info:
+        get_codec(TS, typename, "jazzy").encode_datum(datum)
+    assert info.value.typename == typename
+    assert words in info.value.reason
