@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
-from confluent_kafka import Consumer, KafkaException, Producer, TopicPartition
+from confluent_kafka import Consumer, KafkaError, KafkaException, Producer, TopicPartition
 from confluent_kafka.admin import AdminClient, NewTopic
 from confluent_kafka.schema_registry import Schema, SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer
@@ -47,7 +47,9 @@ IROBOT = Path("/work/shared/data/msgs/irobot_create_msgs")
 REPO = Path(__file__).resolve().parents[2]
 PKG = "irobot_create_msgs/msg/"
 WINDOW_MS = 2000
-T0 = 1_700_000_000_000  # event time of the first record (ms)
+# Event time of the first record (ms): ten minutes ago, in whole seconds. Recent on purpose:
+# the broker's time-based retention (7 days) deletes records stamped long ago within minutes.
+T0 = (time.time_ns() // 1_000_000_000 - 600) * 1000
 PERIOD_MS = 100
 DURATION_MS = 9000
 HEALTHY_IR = [12, 40, 7, 300, 25, 0, 18]
@@ -187,6 +189,14 @@ def produce_scenario(
     return len(timeline)
 
 
+COORDINATOR_PENDING = {
+    KafkaError.NOT_COORDINATOR,
+    KafkaError.COORDINATOR_NOT_AVAILABLE,
+    KafkaError.COORDINATOR_LOAD_IN_PROGRESS,
+    KafkaError._TIMED_OUT,
+}
+
+
 def wait_all_committed(bootstrap: str, group: str, topic_names: list[str], timeout: float) -> None:
     """Wait until ``group`` has committed the end offset of every partition of ``topic_names``."""
     consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": group, "enable.auto.commit": False})
@@ -196,8 +206,8 @@ def wait_all_committed(bootstrap: str, group: str, topic_names: list[str], timeo
         tps = [TopicPartition(t, p) for t in topic_names for p in metadata.topics[t].partitions]
         try:
             offsets = consumer.committed(tps, timeout=5)
-        except KafkaException as exc:  # e.g. the group coordinator is still being elected
-            if exc.args[0].retriable():
+        except KafkaException as exc:  # e.g. a fresh broker still electing the group coordinator
+            if exc.args[0].retriable() or exc.args[0].code() in COORDINATOR_PENDING:
                 return False
             raise
         committed = {(tp.topic, tp.partition): tp.offset for tp in offsets}
