@@ -35,6 +35,7 @@ from edge.mapping import (
     check_ros_type,
 )
 from edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
+from edge.mapping.templates import kafka_topic_problem
 from edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
 from edge.stages import DurationNs, StageSpec
 from fleetlink.wan import Codec, WireError, check_key_name
@@ -233,6 +234,23 @@ class WanSection(_Section):
         return self
 
 
+class TopicsSection(_Section):
+    """Kafka topics the edge writes to besides the mappings' own."""
+
+    dead_letter: str = "fleetlink.dead-letter"
+    """Records that could not be received, decoded, mapped or encoded (raw bytes + reason)."""
+    registrations: str = "fleetlink.robots"
+    """Robot registration events, keyed by robot (create it with cleanup.policy=compact)."""
+
+    @field_validator("dead_letter", "registrations")
+    @classmethod
+    def _legal(cls, value: str) -> str:
+        problem = kafka_topic_problem(value)
+        if problem is not None:
+            raise ValueError(problem)
+        return value
+
+
 class AdminSection(_Section):
     listen: str = "127.0.0.1:8480"
     """host:port of the admin HTTP API."""
@@ -260,6 +278,7 @@ class EdgeConfig(_Section):
     spool: SpoolSection
     memory: MemorySection = MemorySection()
     wan: WanSection = WanSection()
+    topics: TopicsSection = TopicsSection()
     admin: AdminSection | None = None
 
     @field_validator("site", "edge_id")
@@ -304,6 +323,7 @@ __all__ = [
     "RobotTypeConfig",
     "RosSection",
     "SpoolSection",
+    "TopicsSection",
     "WanSection",
     "default_edge_id",
 ]

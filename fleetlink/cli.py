@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "roswire.cli",
     "schemas.cli",
     "fleetlink.certs_cli",
+    "edge.cli",
     "uplink.cli",
 )
 

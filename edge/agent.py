@@ -1,0 +1,325 @@
+"""The edge agent: one process per robot network, between its Zenoh router and the uplink.
+
+    with EdgeAgent(load_config(EdgeConfig, path)) as agent:   # start(): sockets, files, threads
+        ...                                                   # stop(): bounded, flushes the spool
+
+Inside: one Zenoh session (the config's ``zenoh:`` section, command-line options on top);
+robot registration (discovered or explicit) instantiating the robot types' mappings; one
+subscriber per mapped topic; a bounded intake queue; one processing thread (decode, stages,
+Avro, dead letters); the durable spool (``at_least_once``) and the memory buffer
+(``best_effort``); one WAN sender per buffer. Nothing opens a socket or a file before ``start``.
+See docs/edge.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import threading
+import time
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import zenoh
+
+from edge.config import EdgeConfig
+from edge.errors import MappingError
+from edge.mapping import Delivery, MappingSpec, MappingTable
+from edge.runtime.errors import RuntimeSetupError
+from edge.runtime.intake import Intake
+from edge.runtime.processor import Emit, Item, Processor
+from edge.runtime.records import Outgoing, RecordMaker
+from edge.runtime.registration import (
+    EVENT_FINGERPRINT,
+    EVENT_SCHEMA_JSON,
+    Registrar,
+    RobotChange,
+    event_record,
+)
+from edge.runtime.schema_book import SchemaBook
+from edge.runtime.sender import SenderOptions, WanSender
+from edge.runtime.subscriptions import SubscriptionManager
+from edge.runtime.transport import ZenohTransport
+from edge.runtime.types import TypeStoreCodecs, schema_distro
+from edge.spool import MemoryBuffer, RecordBuffer, Spool
+from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
+from fleetlink.wan import ingest_key
+from fleetlink.zenoh_options import ZenohOptions
+from roswire.attachment import AttachmentVersion
+from roswire.errors import RobotError
+from roswire.node import RosNode
+from roswire.robots import RobotType
+from roswire.session import DEFAULT_ROUTER, open_session
+from schemas.errors import SchemaError
+from schemas.typestore import load_typestore
+
+log = logging.getLogger(__name__)
+
+_NS = 1_000_000_000
+_RECORD_MARGIN = 64 << 10
+"""Room left in a spool frame for a record's topic, key and headers around its value."""
+
+
+def edge_session_config(options: ZenohOptions) -> zenoh.Config:
+    """The agent's session: what the options say; without a Zenoh config file the defaults are
+    an rmw_zenoh-like peer of the router on localhost:7447 (a router listens, connects nowhere)."""
+    if options.config_file is None:
+        mode = options.mode or "peer"
+        options = options.with_defaults(
+            mode=mode,
+            connect=() if mode == "router" else (DEFAULT_ROUTER,),
+            listen=("tcp/127.0.0.1:0",) if mode == "peer" else (),
+        )
+    conf = options.to_config()
+    if options.config_file is None:
+        conf.insert_json5("timestamping/enabled", json.dumps(True))
+    return conf
+
+
+class EdgeAgent:
+    def __init__(
+        self,
+        config: EdgeConfig,
+        zenoh_options: ZenohOptions | None = None,
+        *,
+        intake_items: int = 100_000,
+        intake_bytes: int = 64 << 20,
+        stop_timeout_s: float = 5.0,
+    ) -> None:
+        self.config = config
+        self.zenoh_options = config.zenoh.merged_with(zenoh_options or ZenohOptions())
+        self.table: MappingTable = config.mapping_table()
+        self.stop_timeout_s = stop_timeout_s
+        self.intake: Intake[Item] = Intake(max_items=intake_items, max_bytes=intake_bytes)
+        self._lock = threading.Lock()
+        self._started = False
+        self._session: zenoh.Session | None = None
+        self._node: RosNode | None = None
+        self._spool: Spool | None = None
+        self._memory: MemoryBuffer | None = None
+        self._book: SchemaBook | None = None
+        self._maker: RecordMaker | None = None
+        self._processor: Processor | None = None
+        self._senders: dict[Delivery, WanSender] = {}
+        self._subscriptions: SubscriptionManager | None = None
+        self._registrar: Registrar | None = None
+        self.robot_errors = 0
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def start(self) -> EdgeAgent:
+        with self._lock:
+            if self._started:
+                return self
+            try:
+                self._start()
+            except BaseException:
+                self._teardown(0.0)
+                raise
+            self._started = True
+        log.info("edge %s of site %s started: %d mapping(s), %d robot type(s)", self.config.edge_id,
+                 self.config.site, len(self.table.list()), len(self.config.robot_types))
+        return self
+
+    def _start(self) -> None:
+        config = self.config
+        distro = schema_distro(config.ros.distro)
+        try:
+            typestore = load_typestore(distro, config.ros.message_paths)
+        except SchemaError as exc:
+            raise RuntimeSetupError(f"ros.message_paths: {exc}") from None
+        types = [self._robot_type(name, rt.match) for name, rt in config.robot_types.items()]
+        codecs = TypeStoreCodecs(typestore, distro)
+        spool_dir = Path(config.spool.dir)
+        self._book = book = SchemaBook(spool_dir / "schemas").load()
+        book.add(EVENT_FINGERPRINT, EVENT_SCHEMA_JSON)
+        self._spool = Spool(spool_dir / "durable", config.spool.options(), stream="durable").open()
+        self._memory = MemoryBuffer(stream="memory", max_bytes=int(config.memory.max_bytes),
+                                    max_records=config.memory.max_records)
+        buffers: dict[Delivery, RecordBuffer] = {"at_least_once": self._spool, "best_effort": self._memory}
+        limit = min(int(config.spool.segment_bytes) - SEGMENT_HEADER_SIZE - HEADER_SIZE,
+                    int(config.memory.max_bytes)) - _RECORD_MARGIN
+        self._maker = RecordMaker(site=config.site, edge_id=config.edge_id, match=self.table.match,
+                                  types=codecs, dead_letter_topic=config.topics.dead_letter,
+                                  max_value_bytes=max(limit, 1024), on_schema=book.add)
+        self._session = session = open_session(edge_session_config(self.zenoh_options))
+        transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
+        options = SenderOptions.from_wan(config.wan)
+        self._senders = {
+            delivery: WanSender(buffer, transport, book, site=config.site, edge_id=config.edge_id,
+                                options=options)
+            for delivery, buffer in buffers.items()
+        }
+        senders = self._senders
+        self._processor = Processor(self.intake, self._maker, buffers,
+                                    on_appended=lambda delivery: senders[delivery].wake())
+        attachment: AttachmentVersion = 1 if config.ros.attachment == "v1" else 2
+        self._node = RosNode("fleetlink_edge", "/", domain_id=config.ros.domain_id, session=session,
+                             typestore=typestore, distro=distro, attachment_version=attachment).start()
+        self._subscriptions = SubscriptionManager(self._node, self.table, self.intake,
+                                                  known_type=lambda t: _known(codecs, t))
+        registration = config.registration
+        self._registrar = Registrar(
+            self._node, types, self._on_robot, site=config.site, edge_id=config.edge_id,
+            grace_s=registration.grace_period / _NS, discover=registration.discover,
+            register_topic=registration.topic, clock_ms=lambda: time.time_ns() // 1_000_000,
+        )
+        self._processor.start()
+        for sender in self._senders.values():
+            sender.start()
+        self._subscriptions.start()
+        self._registrar.start()
+
+    @staticmethod
+    def _robot_type(name: str, match: str) -> RobotType:
+        try:
+            return RobotType(name, match if match.startswith("/") else "/" + match)
+        except RobotError as exc:
+            raise RuntimeSetupError(f"robot_types.{name}.match: {exc}") from None
+
+    def stop(self, timeout_s: float | None = None) -> None:
+        """Stop receiving, spool what was received, give the senders up to ``timeout_s`` (default
+        ``stop_timeout_s``) to deliver, close everything. Unsent spooled records stay on disk."""
+        with self._lock:
+            if not self._started:
+                return
+            self._started = False
+            self._teardown(self.stop_timeout_s if timeout_s is None else timeout_s)
+        log.info("edge %s stopped", self.config.edge_id)
+
+    def _teardown(self, timeout_s: float) -> None:
+        if self._registrar is not None:
+            self._registrar.stop()
+        if self._subscriptions is not None:
+            self._subscriptions.stop()
+        self.intake.close()
+        if self._processor is not None:
+            self._processor.stop()
+        for sender in self._senders.values():
+            sender.request_stop(timeout_s)
+        for sender in self._senders.values():
+            sender.join()
+        if self._node is not None:
+            self._node.stop()
+        if self._session is not None:
+            try:
+                self._session.close()
+            except zenoh.ZError as exc:
+                log.debug("closing the zenoh session: %s", exc)
+        for buffer in (self._spool, self._memory):
+            if buffer is not None:
+                buffer.close()
+        self._registrar = None
+        self._subscriptions = None
+        self._processor = None
+        self._node = None
+        self._session = None
+        self._spool = None
+        self._memory = None
+
+    def __enter__(self) -> EdgeAgent:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    @property
+    def session(self) -> zenoh.Session:
+        if self._session is None:
+            raise RuntimeSetupError("the edge agent is not started")
+        return self._session
+
+    # -- robots and mappings ---------------------------------------------------------------------
+    def _on_robot(self, change: RobotChange) -> None:
+        try:
+            if change.registered:
+                self.table.add_robot(change.robot, change.robot_type)
+            else:
+                self.table.remove_robot(change.robot)
+        except MappingError as exc:
+            self.robot_errors += 1
+            log.warning("robot %s: %s", change.robot, exc)
+        if self._subscriptions is not None:
+            self._subscriptions.refresh()
+        record = event_record(change, site=self.config.site, edge_id=self.config.edge_id,
+                              topic=self.config.topics.registrations)
+        self.intake.offer(Emit((Outgoing("at_least_once", record),)), force=True)
+
+    def register_robot(self, robot_type: str, name: str) -> None:
+        """Register a robot explicitly (as a message on the register topic would)."""
+        if self._registrar is None:
+            raise RuntimeSetupError("the edge agent is not started")
+        self._registrar.register(robot_type, name)
+
+    def add_mapping(self, spec: MappingSpec, robot_type: str | None = None) -> None:
+        """Add a mapping at runtime (``MappingError`` if invalid); subscriptions follow."""
+        self.table.add_mapping(spec, robot_type)
+        if self._subscriptions is not None:
+            self._subscriptions.refresh()
+
+    def remove_mapping(self, name: str) -> bool:
+        removed = self.table.remove_mapping(name)
+        if removed and self._subscriptions is not None:
+            self._subscriptions.refresh()
+        return removed
+
+    def reload(self, config: EdgeConfig) -> tuple[str, ...]:
+        """Take the mappings and robot types of ``config`` (the rest needs a restart); returns
+        the robots dropped because their type is gone."""
+        gone = self.table.reload(config.robot_type_specs(), [m.spec() for m in config.mappings])
+        if self._subscriptions is not None:
+            self._subscriptions.refresh()
+        return gone
+
+    # -- state -----------------------------------------------------------------------------------
+    def subscribed_topics(self) -> dict[str, str | None]:
+        return {} if self._subscriptions is None else self._subscriptions.topics()
+
+    def robots(self) -> dict[str, str]:
+        return self.table.robots()
+
+    def snapshot(self) -> dict[str, Any]:
+        """Every counter, as plain data (JSON-ready)."""
+        out: dict[str, Any] = {
+            "site": self.config.site, "edge_id": self.config.edge_id, "running": self._started,
+            "robots": self.table.robots(), "intake": self.intake.stats().as_dict(),
+            "robot_errors": self.robot_errors,
+        }
+        if self._processor is not None:
+            out.update(self._processor.counters())
+        if self._subscriptions is not None:
+            out["subscriptions"] = self._subscriptions.snapshot()
+        if self._registrar is not None:
+            out["registration"] = {"events": self._registrar.events,
+                                   "bad_registrations": self._registrar.bad_registrations}
+        streams: dict[str, Any] = {}
+        buffers: dict[Delivery, RecordBuffer | None] = {"at_least_once": self._spool,
+                                                        "best_effort": self._memory}
+        for delivery, buffer in buffers.items():
+            if buffer is None:
+                continue
+            entry: dict[str, Any] = {"buffer": _stats_dict(buffer)}
+            sender = self._senders.get(delivery)
+            if sender is not None:
+                entry["sender"] = sender.snapshot()
+            streams[buffer.stream] = entry
+        out["streams"] = streams
+        if self._book is not None:
+            out["schemas"] = {"known": len(self._book), "corrupt": self._book.corrupt,
+                              "write_errors": self._book.write_errors}
+        return out
+
+
+def _stats_dict(buffer: RecordBuffer) -> dict[str, Any]:
+    return dataclasses.asdict(buffer.stats())
+
+
+def _known(codecs: TypeStoreCodecs, typename: str) -> bool:
+    try:
+        codecs.codec(typename)
+    except SchemaError:
+        return False
+    return True

@@ -1,0 +1,10 @@
+"""The edge agent's runtime: the adapters between Zenoh, the mapping engine, the spool and the WAN.
+
+- ``records``: ROS samples -> Kafka records (pure: mappings, stages, Avro, dead letters).
+- ``encoding`` / ``schema_book``: Avro encoders for derived schemas; fingerprint -> schema JSON.
+- ``intake``: the bounded hand-off from Zenoh callbacks to the processing thread.
+- ``processor``: the thread that turns samples into records and appends them to the buffers.
+- ``subscriptions``: discovered publishers -> one ``RosSubscriber`` per mapped topic.
+- ``registration``: robot registration events (Kafka record + ROS topic).
+- ``backoff`` / ``sender`` / ``transport``: the acknowledged WAN hop to the uplink.
+"""

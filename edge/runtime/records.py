@@ -1,0 +1,416 @@
+"""ROS samples -> Kafka records (pure: no sockets, no disk, the time is passed in).
+
+For every mapping a sample's topic feeds (``MappingTable.match``):
+
+* **fast path** (no stages, no ``{msg.…}`` in the topic or key): the Avro body comes straight
+  from the CDR bytes through the type's generated converter, framed as an Avro single object;
+* otherwise the CDR is decoded to a dict, run through the mapping's stages, and encoded with the
+  (possibly derived) schema; untouched samples still take the fast encoder.
+
+Anything that goes wrong with one sample (a payload the subscriber refused, a type not in the
+type store, CDR that does not decode, a topic template that renders an illegal name, a value
+that does not fit its schema, a record too large) becomes a **dead-letter record**: the raw
+bytes as value and the reason, stage and ROS key in headers. The next sample flows.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Any, Protocol
+
+from edge.errors import RenderError
+from edge.mapping import BoundMapping, Delivery
+from edge.runtime.encoding import AvroWriter, SchemaIdentity, identity_of
+from edge.runtime.errors import EncodingError
+from edge.stages import Pipeline, Sample, StageConfigError, build_pipeline
+from fleetlink.wan import Record, single_object
+from roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
+from roswire.subscriber import RosSample
+from schemas.codec import Codec
+from schemas.errors import SchemaError
+
+H_SOURCE_TOPIC = "fleetlink.source_topic"
+H_ROS_TYPE = "fleetlink.ros_type"
+H_TYPE_HASH = "fleetlink.type_hash"
+H_SITE = "fleetlink.site"
+H_ROBOT = "fleetlink.robot"
+H_SEQ = "fleetlink.seq"
+H_MAPPING = "fleetlink.mapping"
+H_EDGE = "fleetlink.edge"
+# dead letters (the same names the uplink uses for the ones it makes)
+H_DLQ_STAGE = "fleetlink.dlq.stage"
+H_DLQ_REASON = "fleetlink.dlq.reason"
+H_DLQ_TOPIC = "fleetlink.dlq.topic"
+H_DLQ_SIZE = "fleetlink.dlq.size"
+H_DLQ_SHA256 = "fleetlink.dlq.sha256"
+H_DLQ_TRUNCATED = "fleetlink.dlq.truncated"
+H_ROS_KEY = "fleetlink.ros_key"
+
+Matcher = Callable[[str], Sequence[BoundMapping]]
+
+
+class TypeSource(Protocol):
+    """Where codecs come from (``schemas.codec.get_codec`` over the edge's type store)."""
+
+    def codec(self, typename: str) -> Codec: ...
+
+
+@dataclass(frozen=True, slots=True)
+class WireSample(Sample):
+    """A stage ``Sample`` that remembers where it came from (kept when a stage forwards it)."""
+
+    typename: str = ""
+    type_hash: str = ""
+    seq: int | None = None
+    key_expr: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Origin:
+    """Where a record comes from: what its headers and a dead letter say about it."""
+
+    topic: str
+    typename: str
+    type_hash: str
+    seq: int | None
+    key_expr: str
+    stamp_ns: int
+    raw: bytes | None
+
+
+@dataclass(frozen=True, slots=True)
+class Outgoing:
+    """One record for the buffer of its delivery class."""
+
+    delivery: Delivery
+    record: Record
+
+
+@dataclass(slots=True)
+class MappingCounters:
+    """Per mapping, in samples (``emitted`` in records)."""
+
+    received: int = 0
+    emitted: int = 0
+    dropped: int = 0
+    """Dropped on purpose by stages (filtered, throttled, unchanged, late) or by a stage error."""
+    dead_lettered: int = 0
+    type_mismatch: int = 0
+    """Samples of another type than the mapping declares (not mapped, not dead-lettered)."""
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(slots=True)
+class _Route:
+    """How one mapping handles one ROS type."""
+
+    stages: tuple[Any, ...]
+    codec: Codec
+    source: SchemaIdentity
+    pipeline: Pipeline | None
+    writer: AvroWriter | None
+    """Set when the stages change the schema (project, aggregate)."""
+    fast: bool
+    problem: str | None = None
+    dead_lettered_problem: bool = False
+    last_totals: dict[str, int] = field(default_factory=dict)
+
+
+class RecordMaker:
+    """Turns samples into ``Outgoing`` records; not thread-safe (one processing thread)."""
+
+    def __init__(
+        self,
+        *,
+        site: str,
+        edge_id: str,
+        match: Matcher,
+        types: TypeSource,
+        dead_letter_topic: str,
+        max_value_bytes: int = 16 << 20,
+        max_dead_letter_bytes: int = 900_000,
+        on_schema: Callable[[bytes, str], None] | None = None,
+    ) -> None:
+        self.site = site
+        self.edge_id = edge_id
+        self._match = match
+        self._types = types
+        self.dead_letter_topic = dead_letter_topic
+        self.max_value_bytes = max_value_bytes
+        self.max_dead_letter_bytes = max_dead_letter_bytes
+        self._on_schema = on_schema or _ignore_schema
+        self._site_header = (H_SITE, site.encode())
+        self._routes: dict[tuple[str, str], _Route] = {}
+        self._unknown_types: set[str] = set()
+        self.counters: dict[str, MappingCounters] = {}
+        self.unknown_type_samples = 0
+        self.rejected = 0
+        """Samples the subscriber refused (no attachment, bad CDR header, bad key)."""
+
+    # -- entry points ----------------------------------------------------------------------------
+    def make(self, sample: RosSample, now_ns: int) -> list[Outgoing]:
+        """Every record one received sample produces (possibly none, possibly dead letters)."""
+        out: list[Outgoing] = []
+        for bound in self._match(sample.topic):
+            counters = self._counters(bound.name)
+            counters.received += 1
+            if bound.ros_type is not None and bound.ros_type != sample.typename:
+                counters.type_mismatch += 1
+                continue
+            self._one(bound, sample, now_ns, out)
+        return out
+
+    def tick(self, now_ns: int) -> list[Outgoing]:
+        """Time-driven stage output (held samples, heartbeats, closed windows)."""
+        out: list[Outgoing] = []
+        for (name, _typename), route in list(self._routes.items()):
+            if route.pipeline is None:
+                continue
+            for result in route.pipeline.tick(now_ns):
+                bound = next((b for b in self._match(result.topic) if b.name == name), None)
+                if bound is None:  # the robot or the mapping is gone
+                    self._counters(name).dropped += 1
+                    continue
+                self._emit(bound, route, result, out)
+            self._account(name, route)
+        return out
+
+    def rejected_sample(self, topic: str, error: RoswireError, now_ns: int) -> list[Outgoing]:
+        """A sample the subscriber refused (``on_error``) -> one dead letter with its bytes."""
+        self.rejected += 1
+        bounds = self._match(topic)
+        raw = b""
+        key_expr = topic
+        if isinstance(error, PayloadError):
+            raw, key_expr = error.raw, error.key
+        elif isinstance(error, AttachmentError):
+            raw = error.raw
+        elif isinstance(error, KeyParseError):
+            key_expr = error.key
+        bound = bounds[0] if bounds else None
+        if bound is not None:
+            self._counters(bound.name).dead_lettered += 1
+        typename = error.typename if isinstance(error, PayloadError) and error.typename else ""
+        origin = Origin(topic, typename, "", None, key_expr, now_ns, raw)
+        return [self._dead_letter("receive", str(error), origin, bound, _delivery_of(bounds))]
+
+    # -- one mapping, one sample -----------------------------------------------------------------
+    def _one(self, bound: BoundMapping, sample: RosSample, now_ns: int, out: list[Outgoing]) -> None:
+        stamp_ns = sample.source_ts_ns if sample.source_ts_ns else sample.received_ns
+        origin = Origin(sample.topic, sample.typename, sample.type_hash, sample.seq, sample.key, stamp_ns,
+                        sample.payload)
+        route = self._route(bound, sample.typename)
+        problem = self._problem(bound, route, sample.typename)
+        if problem is not None:
+            self._dead(problem[0], problem[1], origin, bound, out)
+            return
+        if route is None or route.problem is not None:
+            return
+        if route.fast:
+            try:
+                body = route.codec.cdr_to_avro(sample.payload)
+                value = single_object(route.source.fingerprint, body)
+                topic, key = bound.render_topic(), bound.render_key()
+            except (SchemaError, RenderError) as exc:
+                self._dead("map" if isinstance(exc, RenderError) else "decode", str(exc), origin, bound, out)
+                return
+            self._finish(bound, (topic, key, value), origin, out)
+            return
+        try:
+            decoded = route.codec.decode(sample.payload)
+        except SchemaError as exc:
+            self._dead("decode", str(exc), origin, bound, out)
+            return
+        wire = WireSample(robot=bound.robot or "", topic=sample.topic, stamp_ns=stamp_ns, value=decoded,
+                          raw=sample.payload, typename=sample.typename, type_hash=sample.type_hash,
+                          seq=sample.seq, key_expr=sample.key)
+        if route.pipeline is None:
+            self._emit(bound, route, wire, out)
+            return
+        for result in route.pipeline.process(wire, now_ns):
+            self._emit(bound, route, result, out)
+        self._account(bound.name, route)
+
+    def _problem(self, bound: BoundMapping, route: _Route | None, typename: str) -> tuple[str, str] | None:
+        """A per-(mapping, type) problem: dead-lettered the first time, then only counted
+        (``None``: no problem, or already reported: ``route`` is None or unusable then)."""
+        if route is None:  # the type is not in the type store
+            self.unknown_type_samples += 1
+            if typename in self._unknown_types:
+                self._counters(bound.name).dropped += 1
+                return None
+            self._unknown_types.add(typename)
+            return ("decode", f"unknown ROS type {typename!r}: not in the edge's type store (add its "
+                              "package to ros.message_paths); further samples are only counted")
+        if route.problem is None:
+            return None
+        if route.dead_lettered_problem:
+            self._counters(bound.name).dropped += 1
+            return None
+        route.dead_lettered_problem = True
+        return ("setup", route.problem)
+
+    def _dead(self, stage: str, reason: str, origin: Origin, bound: BoundMapping,
+              out: list[Outgoing]) -> None:
+        self._counters(bound.name).dead_lettered += 1
+        out.append(self._dead_letter(stage, reason, origin, bound, bound.delivery))
+
+    def _emit(self, bound: BoundMapping, route: _Route, result: Sample, out: list[Outgoing]) -> None:
+        """Encode one stage output (or an unstaged decoded sample) and add its record."""
+        if isinstance(result, WireSample):
+            origin = Origin(result.topic, result.typename, result.type_hash, result.seq, result.key_expr,
+                            result.stamp_ns, result.raw)
+        else:  # made by a stage (aggregate, project): no wire identity of its own
+            origin = Origin(result.topic, route.codec.typename, route.codec.type_hash, None, "",
+                            result.stamp_ns, result.raw)
+        raw = result.raw
+        try:
+            if route.writer is None:
+                body = (route.codec.cdr_to_avro(raw) if raw is not None
+                        else route.codec.encode_datum(dict(result.value)))
+                value = single_object(route.source.fingerprint, body)
+            else:
+                value = single_object(route.writer.fingerprint, route.writer.body(result.value))
+            topic = bound.render_topic(result.value)
+            key = bound.render_key(result.value)
+        except (SchemaError, EncodingError, RenderError) as exc:
+            if raw is None:
+                origin = Origin(origin.topic, origin.typename, origin.type_hash, origin.seq, origin.key_expr,
+                                origin.stamp_ns, repr(result.value).encode("utf-8", "replace"))
+            self._dead("map" if isinstance(exc, RenderError) else "encode", str(exc), origin, bound, out)
+            return
+        self._finish(bound, (topic, key, value), origin, out)
+
+    def _finish(self, bound: BoundMapping, made: tuple[str, str, bytes], origin: Origin,
+                out: list[Outgoing]) -> None:
+        """Add the record ``made`` = (Kafka topic, key, value), or a dead letter when too large."""
+        topic, key, value = made
+        if len(value) > self.max_value_bytes:
+            reason = (f"Avro value of {len(value)} bytes exceeds the edge's record limit of "
+                      f"{self.max_value_bytes} bytes")
+            if origin.raw is None:
+                origin = Origin(origin.topic, origin.typename, origin.type_hash, origin.seq, origin.key_expr,
+                                origin.stamp_ns, value)
+            self._counters(bound.name).dead_lettered += 1
+            out.append(self._dead_letter("size", reason, origin, bound, bound.delivery, intended=topic))
+            return
+        self._counters(bound.name).emitted += 1
+        out.append(Outgoing(bound.delivery, Record(
+            kafka_topic=topic, key=key.encode("utf-8"), value=value, headers=self._headers(bound, origin),
+            timestamp_ms=origin.stamp_ns // 1_000_000,
+        )))
+
+    # -- routes ----------------------------------------------------------------------------------
+    def _route(self, bound: BoundMapping, typename: str) -> _Route | None:
+        fast = not bound.stages and not bound.needs_message_fields
+        route = self._routes.get((bound.name, typename))
+        if route is not None and route.stages is bound.stages and route.fast == fast:
+            return route
+        try:
+            codec = self._types.codec(typename)
+        except SchemaError:
+            return None
+        source = identity_of(codec.schema)
+        self._on_schema(source.fingerprint, source.json)
+        pipeline: Pipeline | None = None
+        writer: AvroWriter | None = None
+        problem: str | None = None
+        if bound.stages:
+            try:
+                pipeline = build_pipeline(list(bound.stages), name=bound.name)
+                derived = pipeline.output_schema(codec.schema)
+                if derived != codec.schema:
+                    writer = AvroWriter(derived)
+                    self._on_schema(writer.fingerprint, writer.identity.json)
+            except StageConfigError as exc:
+                problem = f"mapping {bound.name!r} cannot handle {typename}: {exc}"
+                pipeline = None
+        route = _Route(stages=bound.stages, codec=codec, source=source, pipeline=pipeline, writer=writer,
+                       fast=fast, problem=problem)
+        self._routes[(bound.name, typename)] = route
+        return route
+
+    def _account(self, name: str, route: _Route) -> None:
+        """Fold the pipeline's drop counters into the mapping's (deltas since the last call)."""
+        if route.pipeline is None:
+            return
+        totals = route.pipeline.totals()
+        now = {"dropped": totals.dropped + totals.late + totals.errors}
+        delta = now["dropped"] - route.last_totals.get("dropped", 0)
+        if delta:
+            self._counters(name).dropped += delta
+        route.last_totals = now
+
+    def stage_counters(self) -> dict[str, dict[str, dict[str, int]]]:
+        """``{mapping: {stage: counters}}`` summed over the ROS types the mapping has seen."""
+        out: dict[str, dict[str, dict[str, int]]] = {}
+        for (name, _typename), route in self._routes.items():
+            if route.pipeline is None:
+                continue
+            per_stage = out.setdefault(name, {})
+            for stage, counts in route.pipeline.stage_counters().items():
+                into = per_stage.setdefault(stage, dict.fromkeys(counts, 0))
+                for k, v in counts.items():
+                    into[k] = into.get(k, 0) + v
+        return out
+
+    # -- records ---------------------------------------------------------------------------------
+    def _counters(self, name: str) -> MappingCounters:
+        counters = self.counters.get(name)
+        if counters is None:
+            counters = self.counters[name] = MappingCounters()
+        return counters
+
+    def _headers(self, bound: BoundMapping | None, origin: Origin) -> tuple[tuple[str, bytes], ...]:
+        headers = [(H_SOURCE_TOPIC, origin.topic.encode())]
+        if origin.typename:
+            headers.append((H_ROS_TYPE, origin.typename.encode()))
+        if origin.type_hash:
+            headers.append((H_TYPE_HASH, origin.type_hash.encode()))
+        headers.append(self._site_header)
+        if bound is not None and bound.robot:
+            headers.append((H_ROBOT, bound.robot.encode()))
+        if origin.seq is not None:
+            headers.append((H_SEQ, str(origin.seq).encode()))
+        if bound is not None:
+            headers.append((H_MAPPING, bound.name.encode()))
+        return tuple(headers)
+
+    def _dead_letter(self, stage: str, reason: str, origin: Origin, bound: BoundMapping | None,
+                     delivery: Delivery, *, intended: str | None = None) -> Outgoing:
+        if intended is None and bound is not None:
+            intended = bound.kafka_topic or bound.topic_template.text
+        raw = origin.raw or b""
+        headers = [
+            *self._headers(bound, origin),
+            (H_DLQ_STAGE, stage.encode()),
+            (H_DLQ_REASON, reason.encode("utf-8", "replace")[:2000]),
+            (H_DLQ_TOPIC, (intended or "").encode()),
+            (H_DLQ_SIZE, str(len(raw)).encode()),
+            (H_ROS_KEY, origin.key_expr.encode("utf-8", "replace")),
+            (H_EDGE, self.edge_id.encode()),
+        ]
+        value = raw
+        if len(raw) > self.max_dead_letter_bytes:
+            headers += [(H_DLQ_SHA256, hashlib.sha256(raw).hexdigest().encode()), (H_DLQ_TRUNCATED, b"true")]
+            value = b""
+        robot = bound.robot if bound is not None else None
+        return Outgoing(delivery, Record(
+            kafka_topic=self.dead_letter_topic, key=robot.encode() if robot else None, value=value,
+            headers=tuple(headers), timestamp_ms=origin.stamp_ns // 1_000_000, raw_value=True,
+        ))
+
+
+def _delivery_of(bounds: Sequence[BoundMapping]) -> Delivery:
+    """Dead letters of a topic travel durably if any mapping of it is ``at_least_once``."""
+    if bounds and all(b.delivery == "best_effort" for b in bounds):
+        return "best_effort"
+    return "at_least_once"
+
+
+def _ignore_schema(_fp: bytes, _text: str) -> None:
+    """Default ``on_schema``: nothing to remember."""

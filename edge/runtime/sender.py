@@ -1,0 +1,339 @@
+"""The WAN sender: one thread per record buffer (stream), batches out, acknowledgements in.
+
+Loop: read the next batch from the buffer (``read_unacked`` marks it in flight), encode it with
+the schema of every fingerprint it uses, send it; when the uplink answers ``ok`` the batch is
+``ack``\\ ed (it leaves the spool); on an ``error`` answer, no answer or a timeout it is
+``release``\\ d (it will be read again, first) and sending pauses for a bounded, jittered,
+exponential backoff, after which one batch probes the link before the full window of
+``max_in_flight`` batches is used again. A partial batch waits up to ``linger`` for more
+records. One warning is logged when an outage starts and one line when it ends.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+import random
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+
+from edge.config import WanSection
+from edge.errors import SpoolError
+from edge.runtime.backoff import Backoff
+from edge.runtime.schema_book import SchemaBook
+from edge.runtime.transport import Transport
+from edge.spool import RecordBuffer, SpoolBatch
+from fleetlink.ratelimit import LogLimiter
+from fleetlink.wan import Codec, WireError, decode_ack, encode_batch_payloads, payload_fingerprint
+
+log = logging.getLogger(__name__)
+_NS = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class SenderOptions:
+    batch_max_records: int = 500
+    batch_max_bytes: int = 1 << 20
+    linger_s: float = 0.02
+    ack_timeout_s: float = 10.0
+    max_in_flight: int = 8
+    backoff_min_s: float = 0.2
+    backoff_max_s: float = 30.0
+    codec: Codec = "zstd"
+
+    @classmethod
+    def from_wan(cls, wan: WanSection) -> SenderOptions:
+        """From the config's ``wan:`` section (durations there are nanoseconds)."""
+        return cls(
+            batch_max_records=wan.batch_max_records, batch_max_bytes=int(wan.batch_max_bytes),
+            linger_s=wan.linger / _NS, ack_timeout_s=wan.ack_timeout / _NS, max_in_flight=wan.max_in_flight,
+            backoff_min_s=wan.retry_backoff_min / _NS, backoff_max_s=wan.retry_backoff_max / _NS,
+            codec=wan.codec,
+        )
+
+
+@dataclass(slots=True)
+class SenderStats:
+    batches_sent: int = 0
+    batches_acked: int = 0
+    batches_retried: int = 0
+    records_sent: int = 0
+    records_acked: int = 0
+    records_dead_lettered: int = 0
+    """Records the uplink could not produce and wrote to the dead-letter topic instead."""
+    bytes_sent: int = 0
+    stale_acks: int = 0
+    missing_schemas: int = 0
+    outages: int = 0
+    in_flight: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(slots=True)
+class _Flight:
+    first_seq: int
+    last_seq: int
+    records: int
+    sent_at: float
+
+
+class WanSender:
+    """Sends one buffer's records to the uplink. ``start()`` / ``stop()``; thread-safe ``wake()``."""
+
+    def __init__(
+        self,
+        buffer: RecordBuffer,
+        transport: Transport,
+        schemas: SchemaBook,
+        *,
+        site: str,
+        edge_id: str,
+        options: SenderOptions | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        rng: random.Random | None = None,
+    ) -> None:
+        self.buffer = buffer
+        self.transport = transport
+        self.schemas = schemas
+        self.site = site
+        self.edge_id = edge_id
+        self.options = options or SenderOptions()
+        self._clock = clock
+        self._backoff = Backoff(self.options.backoff_min_s, self.options.backoff_max_s, rng=rng)
+        self._events: queue.SimpleQueue[tuple[int, bytes | None, str | None] | None] = queue.SimpleQueue()
+        self._in_flight: dict[int, _Flight] = {}
+        self._retry_at = 0.0
+        self._healthy = True
+        self._linger_from: float | None = None
+        self._outage_since: float | None = None
+        self._last_error = ""
+        self._stopping = threading.Event()
+        self._stop_deadline = 0.0
+        self._thread: threading.Thread | None = None
+        self._limiter = LogLimiter(log)
+        self.stats = SenderStats()
+
+    @property
+    def stream(self) -> str:
+        return self.buffer.stream
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def start(self) -> WanSender:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name=f"wan-{self.stream}", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Send what can be sent within ``timeout_s`` (in-flight batches get their answer), then
+        stop; whatever is left stays in the buffer (released, so it is read again first)."""
+        self.request_stop(timeout_s)
+        self.join()
+
+    def request_stop(self, timeout_s: float) -> None:
+        """Begin stopping (see ``stop``) without waiting: stop several senders in parallel."""
+        self._stop_deadline = self._clock() + timeout_s
+        self._stopping.set()
+        self.wake()
+
+    def join(self) -> None:
+        thread = self._thread
+        if thread is not None:
+            thread.join(max(0.0, self._stop_deadline - self._clock()) + 2.0)
+            self._thread = None
+
+    def wake(self) -> None:
+        """New records were appended (or something changed): look again now."""
+        self._events.put(None)
+
+    def __enter__(self) -> WanSender:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def outage_s(self) -> float:
+        since = self._outage_since
+        return 0.0 if since is None else self._clock() - since
+
+    @property
+    def last_error(self) -> str:
+        return self._last_error
+
+    # -- the loop --------------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except SpoolError as exc:  # the buffer was closed under us: nothing more to do
+            log.debug("sender %s stops: %s", self.stream, exc)
+        finally:
+            if self._in_flight:
+                with contextlib.suppress(SpoolError):
+                    self.buffer.release_all()
+                self._in_flight.clear()
+            self.stats.in_flight = 0
+
+    def _loop(self) -> None:
+        idle = max(0.05, self.options.linger_s)
+        while True:
+            now = self._clock()
+            if self._stopping.is_set() and (
+                now >= self._stop_deadline or (not self._in_flight and not self._unsent())
+            ):
+                return
+            wait_until: float | None = None
+            if now < self._retry_at:
+                wait_until = self._retry_at
+            elif len(self._in_flight) < self._window():
+                batch, wait_until = self._next_batch(now)
+                if batch is not None:
+                    self._send(batch)
+                    continue
+            timeout = idle if wait_until is None else max(0.0, wait_until - now)
+            if self._stopping.is_set():
+                timeout = min(timeout, max(0.0, self._stop_deadline - now))
+            self._wait(timeout)
+
+    def _window(self) -> int:
+        return self.options.max_in_flight if self._healthy else 1
+
+    def _unsent(self) -> int:
+        stats = self.buffer.stats()
+        return max(0, stats.depth - stats.in_flight)
+
+    def _next_batch(self, now: float) -> tuple[SpoolBatch | None, float | None]:
+        unsent = self._unsent()
+        if unsent <= 0:
+            self._linger_from = None
+            return None, None
+        if unsent < self.options.batch_max_records and not self._stopping.is_set():
+            if self._linger_from is None:
+                self._linger_from = now
+            due = self._linger_from + self.options.linger_s
+            if now < due:
+                return None, due
+        self._linger_from = None
+        batch = self.buffer.read_unacked(self.options.batch_max_records, self.options.batch_max_bytes)
+        return batch, None
+
+    def _wait(self, timeout: float) -> None:
+        """Handle completions (and wake-ups) for up to ``timeout`` seconds; returns after the first."""
+        try:
+            event = self._events.get(timeout=timeout) if timeout > 0 else self._events.get_nowait()
+        except queue.Empty:
+            return
+        while True:
+            if event is not None:
+                self._complete(*event)
+            try:
+                event = self._events.get_nowait()
+            except queue.Empty:
+                return
+
+    # -- one batch -------------------------------------------------------------------------------
+    def _send(self, batch: SpoolBatch) -> None:
+        payloads = [record.payload for record in batch.records]
+        fps = {fp for p in payloads if (fp := payload_fingerprint(p)) is not None}
+        schemas, missing = self.schemas.lookup(fps)
+        if missing:
+            self.stats.missing_schemas += len(missing)
+            self._limiter.log(logging.WARNING, "missing-schema",
+                              "stream %s: no schema known for fingerprint(s) %s; the uplink will "
+                              "dead-letter those records", self.stream, ", ".join(m.hex() for m in missing))
+        try:
+            data = encode_batch_payloads(
+                site=self.site, edge_id=self.edge_id, stream=self.stream,
+                items=[(r.seq, r.payload) for r in batch.records], schemas=schemas, codec=self.options.codec,
+            )
+        except WireError as exc:  # cannot happen for what the spool hands out; never loop on it
+            log.error("stream %s: cannot encode batch %d..%d: %s", self.stream, batch.first_seq,
+                      batch.last_seq, exc)
+            self.buffer.release(batch.first_seq)
+            self._failed(f"batch encoding: {exc}")
+            return
+        self._in_flight[batch.first_seq] = _Flight(batch.first_seq, batch.last_seq, len(batch.records),
+                                                   self._clock())
+        stats = self.stats
+        stats.batches_sent += 1
+        stats.records_sent += len(batch.records)
+        stats.bytes_sent += len(data)
+        stats.in_flight = len(self._in_flight)
+        first = batch.first_seq
+
+        def done(reply: bytes | None, error: str | None) -> None:
+            self._events.put((first, reply, error))
+
+        try:
+            self.transport.send(data, self.options.ack_timeout_s, done)
+        except Exception as exc:  # noqa: BLE001 - a closed session or a Zenoh error: retry later
+            done(None, f"send failed: {exc}")
+
+    def _complete(self, first_seq: int, reply: bytes | None, error: str | None) -> None:
+        flight = self._in_flight.pop(first_seq, None)
+        self.stats.in_flight = len(self._in_flight)
+        if flight is None:
+            return
+        if reply is not None:
+            error = self._accept(flight, reply)
+        if error is not None:
+            self.buffer.release(first_seq)
+            self._failed(error)
+
+    def _accept(self, flight: _Flight, reply: bytes) -> str | None:
+        """Apply an acknowledgement; returns why the batch must be sent again, if it must."""
+        try:
+            ack = decode_ack(reply)
+        except WireError as exc:
+            return f"unreadable acknowledgement: {exc}"
+        if (ack.edge_id, ack.stream, ack.first_seq, ack.last_seq) != (
+            self.edge_id, self.stream, flight.first_seq, flight.last_seq,
+        ):
+            return (f"acknowledgement for {ack.edge_id}/{ack.stream} {ack.first_seq}..{ack.last_seq} "
+                    f"does not match batch {flight.first_seq}..{flight.last_seq}")
+        if ack.status != "ok":
+            return f"uplink: {ack.detail or 'batch not produced'}"
+        if not self.buffer.ack(flight.first_seq):
+            self.stats.stale_acks += 1
+        stats = self.stats
+        stats.batches_acked += 1
+        stats.records_acked += flight.records
+        dead = sum(1 for f in ack.failures if f.dead_lettered)
+        if dead:
+            stats.records_dead_lettered += dead
+            self._limiter.log(logging.WARNING, "dead-lettered",
+                              "stream %s: the uplink dead-lettered %d record(s) of batch %d..%d: %s",
+                              self.stream, dead, flight.first_seq, flight.last_seq, ack.failures[0].reason)
+        self._succeeded()
+        return None
+
+    def _succeeded(self) -> None:
+        if self._outage_since is not None:
+            log.warning("stream %s: the uplink acknowledges again after %.1f s (%d batch(es) retried)",
+                        self.stream, self._clock() - self._outage_since, self.stats.batches_retried)
+        self._outage_since = None
+        self._healthy = True
+        self._backoff.reset()
+
+    def _failed(self, error: str) -> None:
+        now = self._clock()
+        self.stats.batches_retried += 1
+        self._last_error = error
+        self._healthy = False
+        self._retry_at = max(self._retry_at, now + self._backoff.next_delay())
+        if self._outage_since is None:
+            self._outage_since = now
+            self.stats.outages += 1
+            log.warning("stream %s: batch not acknowledged (%s); records stay in the buffer and are "
+                        "retried with backoff (up to %g s)", self.stream, error, self.options.backoff_max_s)
+        else:
+            self._limiter.log(logging.DEBUG, "retry", "stream %s: still failing: %s", self.stream, error)
+
+    def snapshot(self) -> dict[str, object]:
+        return {**self.stats.as_dict(), "healthy": self._healthy, "outage_s": round(self.outage_s, 3),
+                "last_error": self._last_error}

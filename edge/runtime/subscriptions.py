@@ -1,0 +1,248 @@
+"""Discovered publishers -> one ``RosSubscriber`` per topic that feeds at least one mapping.
+
+A ``GraphWatcher`` reports every publisher (``MP`` token) with its topic and type. Whenever the
+graph or the mapping table changes, the wanted subscriptions are recomputed (``plan``, pure)
+and the difference applied on a small thread of its own (never on a Zenoh callback thread):
+new topics are subscribed, topics no mapping wants any more are dropped. A topic is subscribed
+with the type a mapping declares, else the type its publishers announce (any type, ``*``, when
+they disagree), and always with any type hash (``*``): a robot built against a slightly
+different definition is still received, and the hash each sample really carried goes into its
+record's headers. A mapping that declares its type subscribes as soon as its topic is known
+(a robot registered), before any publisher shows up.
+
+Samples are handed to the ``Intake`` at once; refused samples (no attachment, broken CDR header)
+are handed over as ``Rejected`` so they become dead letters.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Collection, Mapping
+from dataclasses import dataclass
+from types import TracebackType
+
+from edge.errors import MappingError
+from edge.mapping import MappingTable, TopicPattern
+from edge.runtime.intake import Intake
+from edge.runtime.processor import Item, Rejected
+from roswire.discovery import GraphWatcher
+from roswire.errors import RoswireError
+from roswire.graph import EventKind, GraphEvent
+from roswire.node import RosNode
+from roswire.subscriber import RosSample, RosSubscriber
+from roswire.tokens import EndpointInfo, EntityKind
+from schemas.errors import SchemaError
+
+log = logging.getLogger(__name__)
+
+
+def eager_topics(table: MappingTable) -> dict[str, str]:
+    """Concrete topics of mappings that declare a ROS type (robot templates bound to each
+    registered robot, literal site-level patterns) -> that type."""
+    out: dict[str, str] = {}
+    for info in table.list():
+        if info.ros_type is None:
+            continue
+        pattern = TopicPattern.parse(info.source)
+        bindings = [pattern.bind({"robot": robot}) for robot in info.robots] if info.robot_type else [pattern]
+        for bound in bindings:
+            if bound.is_literal:
+                out.setdefault(bound.text, info.ros_type)
+    return out
+
+
+def plan(
+    publishers: Mapping[str, Collection[str]],
+    table: MappingTable,
+    eager: Mapping[str, str] | None = None,
+) -> dict[str, str | None]:
+    """The wanted subscriptions: topic -> ROS type to subscribe with (``None``: any type).
+
+    ``publishers`` maps each topic with live publishers to their announced types.
+    """
+    eager = eager_topics(table) if eager is None else eager
+    wanted: dict[str, str | None] = {}
+    for topic in sorted(set(publishers) | set(eager)):
+        bounds = table.match(topic)
+        if not bounds:
+            continue
+        declared = {b.ros_type for b in bounds if b.ros_type is not None}
+        announced = set(publishers.get(topic, ()))
+        if len(declared) == 1:
+            wanted[topic] = next(iter(declared))
+        elif declared:
+            wanted[topic] = None
+        else:
+            wanted[topic] = next(iter(announced)) if len(announced) == 1 else None
+    return wanted
+
+
+@dataclass
+class _Active:
+    typename: str | None
+    subscriber: RosSubscriber
+
+
+class SubscriptionManager:
+    """Keeps the node's subscriptions equal to ``plan(...)``. ``start()`` / ``stop()``."""
+
+    def __init__(
+        self,
+        node: RosNode,
+        table: MappingTable,
+        intake: Intake[Item],
+        *,
+        known_type: Callable[[str], bool] | None = None,
+    ) -> None:
+        self.node = node
+        self.table = table
+        self.intake = intake
+        self._known_type = known_type or _any_type
+        self._publishers: dict[str, dict[str, str]] = {}  # topic -> token key -> type
+        self._active: dict[str, _Active] = {}
+        self._lock = threading.Lock()
+        self._dirty = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._watcher: GraphWatcher | None = None
+        self.generation = 0
+        """Bumped after every reconciliation (tests and the admin API wait on it)."""
+        self.errors = 0
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def start(self) -> SubscriptionManager:
+        if self._thread is not None:
+            return self
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="edge-subscriptions", daemon=True)
+        self._thread.start()
+        self._watcher = GraphWatcher(self.node.session, self.node.domain_id, listeners=(self._on_graph,))
+        self._watcher.start()
+        self.refresh()
+        return self
+
+    def stop(self) -> None:
+        if self._watcher is not None:
+            self._watcher.stop()
+            self._watcher = None
+        self._stop.set()
+        self._dirty.set()
+        if self._thread is not None:
+            self._thread.join(10)
+            self._thread = None
+        with self._lock:
+            active, self._active = self._active, {}
+        for entry in active.values():
+            self._close(entry.subscriber)
+
+    def __enter__(self) -> SubscriptionManager:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    def refresh(self) -> None:
+        """Recompute the subscriptions soon (after the mapping table or the robots changed)."""
+        self._dirty.set()
+
+    # -- state -----------------------------------------------------------------------------------
+    def topics(self) -> dict[str, str | None]:
+        """Subscribed topic -> the type subscribed with."""
+        with self._lock:
+            return {topic: entry.typename for topic, entry in self._active.items()}
+
+    def publishers(self) -> dict[str, list[str]]:
+        with self._lock:
+            return {topic: sorted(set(types.values())) for topic, types in self._publishers.items()}
+
+    def snapshot(self) -> dict[str, dict[str, object]]:
+        with self._lock:
+            active = dict(self._active)
+        out: dict[str, dict[str, object]] = {}
+        for topic, entry in sorted(active.items()):
+            stats = entry.subscriber.stats
+            out[topic] = {
+                "type": entry.typename, "received": stats.received, "delivered": stats.delivered,
+                "rejected": stats.rejected, "gaps": stats.gaps, "missing": stats.missing,
+                "duplicates": stats.duplicates,
+            }
+        return out
+
+    # -- discovery -------------------------------------------------------------------------------
+    def _on_graph(self, event: GraphEvent) -> None:
+        entity = event.entity
+        if not isinstance(entity, EndpointInfo) or entity.kind is not EntityKind.PUBLISHER:
+            return
+        with self._lock:
+            per_topic = self._publishers.setdefault(entity.topic, {})
+            if event.kind is EventKind.APPEARED:
+                per_topic[entity.key] = entity.ros_type
+            else:
+                per_topic.pop(entity.key, None)
+                if not per_topic:
+                    del self._publishers[entity.topic]
+        self._dirty.set()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._dirty.wait()
+            if self._stop.is_set():
+                return
+            self._dirty.clear()
+            try:
+                self._reconcile()
+            except (RoswireError, SchemaError, MappingError, OSError) as exc:
+                self.errors += 1
+                log.warning("subscriptions: reconciliation failed (retrying): %s", exc)
+                self._stop.wait(0.5)
+                self._dirty.set()
+
+    def _reconcile(self) -> None:
+        with self._lock:
+            publishers = {topic: set(types.values()) for topic, types in self._publishers.items()}
+            current = {topic: entry.typename for topic, entry in self._active.items()}
+        wanted = plan(publishers, self.table)
+        for topic, typename in current.items():
+            if wanted.get(topic, "\0") != typename:
+                with self._lock:
+                    entry = self._active.pop(topic)
+                self._close(entry.subscriber)
+                log.info("unsubscribed %s", topic)
+        for topic, typename in wanted.items():
+            with self._lock:
+                present = topic in self._active
+            if present:
+                continue
+            subscriber = self._open(topic, typename)
+            with self._lock:
+                self._active[topic] = _Active(typename, subscriber)
+            log.info("subscribed %s (type %s)", topic, typename or "any")
+        self.generation += 1
+
+    def _open(self, topic: str, typename: str | None) -> RosSubscriber:
+        intake = self.intake
+
+        def on_sample(sample: RosSample) -> None:
+            intake.offer(sample, len(sample.payload))
+
+        def on_error(error: RoswireError) -> None:
+            intake.offer(Rejected(topic, error, time.time_ns()), len(getattr(error, "raw", b"")))
+
+        token = typename is not None and self._known_type(typename)
+        return self.node.create_subscriber(topic, typename, on_sample, on_error=on_error, declare_token=token)
+
+    @staticmethod
+    def _close(subscriber: RosSubscriber) -> None:
+        try:
+            subscriber.stop()
+        except Exception as exc:  # noqa: BLE001 - a closed session must not stop the rest of the cleanup
+            log.debug("stopping subscriber on %s failed: %r", subscriber.topic, exc)
+
+
+def _any_type(_typename: str) -> bool:
+    """Default ``known_type``: assume the node can hash every type."""
+    return True

@@ -1,0 +1,73 @@
+"""The intake queue: bounded by items and bytes, never blocking the offering side."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from edge.runtime.intake import Intake
+
+
+@pytest.mark.parametrize(
+    ("max_items", "max_bytes", "sizes", "accepted"),
+    [
+        (3, 1000, [1, 1, 1, 1, 1], [True, True, True, False, False]),
+        (10, 10, [4, 4, 4, 2], [True, True, False, True]),
+        (10, 10, [11], [False]),
+        (1, 1 << 20, [0, 0], [True, False]),
+    ],
+)
+def test_bounds(max_items: int, max_bytes: int, sizes: list[int], accepted: list[bool]) -> None:
+    intake: Intake[int] = Intake(max_items=max_items, max_bytes=max_bytes)
+    assert [intake.offer(i, size) for i, size in enumerate(sizes)] == accepted
+    stats = intake.stats()
+    assert stats.dropped == accepted.count(False)
+    assert stats.dropped_bytes == sum(s for s, ok in zip(sizes, accepted, strict=True) if not ok)
+    assert stats.queued == accepted.count(True)
+
+
+def test_fifo_chunks_and_byte_accounting() -> None:
+    intake: Intake[str] = Intake(max_items=100, max_bytes=100)
+    for i in range(7):
+        intake.offer(f"s{i}", 10)
+    assert intake.take(3, timeout=0) == ["s0", "s1", "s2"]
+    assert intake.stats().queued_bytes == 40
+    assert intake.take(10, timeout=0) == ["s3", "s4", "s5", "s6"]
+    assert intake.take(10, timeout=0) == []
+    stats = intake.stats()
+    assert (stats.offered, stats.taken, stats.queued, stats.queued_bytes, stats.high_water) == (7, 7, 0, 0, 7)
+
+
+def test_forced_items_pass_a_full_queue() -> None:
+    intake: Intake[str] = Intake(max_items=1, max_bytes=10)
+    assert intake.offer("a", 10)
+    assert not intake.offer("b", 1)
+    assert intake.offer("event", 1, force=True)
+    assert intake.take(5, timeout=0) == ["a", "event"]
+
+
+def test_close_refuses_new_items_but_keeps_queued_ones() -> None:
+    intake: Intake[str] = Intake()
+    intake.offer("a")
+    intake.close()
+    assert not intake.offer("b")
+    assert not intake.offer("c", force=True)
+    assert intake.take(5, timeout=1) == ["a"]
+    assert intake.take(5, timeout=1) == []  # closed and empty: returns at once
+
+
+def test_take_wakes_up_when_an_item_arrives() -> None:
+    intake: Intake[str] = Intake()
+    got: list[list[str]] = []
+    taker = threading.Thread(target=lambda: got.append(intake.take(5, timeout=10)))
+    taker.start()
+    intake.offer("x")
+    taker.join(5)
+    assert not taker.is_alive()
+    assert got == [["x"]]
+
+
+def test_invalid_bounds() -> None:
+    with pytest.raises(ValueError, match="positive"):
+        Intake(max_items=0)

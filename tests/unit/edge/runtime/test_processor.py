@@ -1,0 +1,122 @@
+"""The processing thread: samples in, records appended per delivery class, full buffers counted."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import cache
+
+from edge.errors import SpoolFullError
+from edge.mapping import MappingSpec, MappingTable
+from edge.runtime.intake import Intake
+from edge.runtime.processor import Emit, Item, Processor, Rejected
+from edge.runtime.records import Outgoing, RecordMaker
+from edge.runtime.types import TypeStoreCodecs
+from edge.spool import MemoryBuffer, RecordBuffer, SpoolBatch, SpoolStats
+from fleetlink.wan import Record, decode_payload
+from roswire import cdr
+from roswire.errors import PayloadError
+from roswire.subscriber import RosSample
+from schemas.typestore import load_typestore
+from tests.helpers import wait_until
+
+STRING = "std_msgs/msg/String"
+
+
+@cache
+def codecs() -> TypeStoreCodecs:
+    return TypeStoreCodecs(load_typestore("jazzy"), "jazzy")
+
+
+def string_sample(topic: str, text: str, seq: int) -> RosSample:
+    return RosSample(topic=topic, typename=STRING, type_hash="RIHS01_" + "0" * 64,
+                     payload=cdr.encode_string(text), seq=seq, source_ts_ns=seq * 1_000_000, gid=None,
+                     key="k", received_ns=0)
+
+
+def maker() -> RecordMaker:
+    table = MappingTable([], [
+        MappingSpec(name="chat", source="/{robot}/chat", topic="fleet.chat"),
+        MappingSpec(name="fast", source="/{robot}/fast", topic="fleet.fast", delivery="best_effort"),
+    ])
+    return RecordMaker(site="s", edge_id="e", match=table.match, types=codecs(), dead_letter_topic="dlq")
+
+
+class RefusingBuffer(MemoryBuffer):
+    """Takes ``room`` records, then behaves like a spool whose ``block`` policy timed out."""
+
+    def __init__(self, room: int) -> None:
+        super().__init__(stream="durable", first_seq=1)
+        self.room = room
+
+    def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
+        taken = min(self.room, len(payloads))
+        self.room -= taken
+        results = super().append_many(payloads[:taken])
+        if taken < len(payloads):
+            raise SpoolFullError("the spool is full", taken=taken)
+        return results
+
+
+def topics_in(buffer: RecordBuffer) -> list[tuple[str, bytes | None]]:
+    batch: SpoolBatch | None = buffer.read_unacked(10_000, 1 << 30)
+    if batch is None:
+        return []
+    records = [decode_payload(r.payload) for r in batch.records]
+    return [(r.kafka_topic, r.value[-3:] if r.raw_value else r.key) for r in records]
+
+
+def test_order_and_delivery_classes() -> None:
+    intake: Intake[Item] = Intake()
+    durable, memory = MemoryBuffer(stream="durable", first_seq=1), MemoryBuffer(first_seq=1)
+    woken: list[str] = []
+    processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": memory},
+                          on_appended=woken.append)
+    event = Outgoing("at_least_once", Record(kafka_topic="fleetlink.robots", key=b"r9", value=b"ev",
+                                             raw_value=True))
+    items: list[Item] = [
+        string_sample("/r1/chat", "a", 1),
+        string_sample("/r2/fast", "b", 1),
+        string_sample("/r1/chat", "c", 2),
+        Emit((event,)),
+        Rejected("/r1/chat", PayloadError("0/r1/chat/x/y", STRING, b"bad", "no attachment"), 5),
+        string_sample("/nobody/else", "d", 1),
+    ]
+    for item in items:
+        intake.offer(item)
+    with processor:
+        wait_until(lambda: processor.stats.appended == 5, 5)
+    assert topics_in(durable) == [("fleet.chat", b"r1"), ("fleet.chat", b"r1"), ("fleetlink.robots", b"ev"),
+                                  ("dlq", b"bad")]
+    assert topics_in(memory) == [("fleet.fast", b"r2")]
+    stats = processor.counters()
+    assert stats["processor"] == {"samples": 4, "records": 5, "appended": 5, "spool_dropped": 0,
+                                  "spool_refused": 0, "errors": 0}
+    assert set(woken) == {"at_least_once", "best_effort"}
+
+
+def test_a_full_spool_refuses_and_counts() -> None:
+    intake: Intake[Item] = Intake()
+    durable = RefusingBuffer(room=3)
+    processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": MemoryBuffer()})
+    for i in range(5):
+        intake.offer(string_sample("/r1/chat", f"m{i}", i))
+    with processor:
+        wait_until(lambda: processor.stats.appended + processor.stats.spool_refused == 5, 5)
+    assert (processor.stats.appended, processor.stats.spool_refused) == (3, 2)
+    stats: SpoolStats = durable.stats()
+    assert stats.appended == 3
+
+
+def test_drop_newest_results_are_counted() -> None:
+    intake: Intake[Item] = Intake()
+    small = MemoryBuffer(stream="durable", first_seq=1, max_records=2)
+    small.read_unacked(10, 100)  # nothing yet
+    processor = Processor(intake, maker(), {"at_least_once": small, "best_effort": MemoryBuffer()})
+    intake.offer(string_sample("/r1/chat", "x", 1))
+    intake.offer(string_sample("/r1/chat", "y", 2))
+    with processor:
+        wait_until(lambda: processor.stats.appended == 2, 5)
+        batch = small.read_unacked(10, 1 << 20)  # both in flight: the next record cannot make room
+        assert batch is not None
+        intake.offer(string_sample("/r1/chat", "z", 3))
+        wait_until(lambda: processor.stats.spool_dropped == 1, 5)

@@ -1,0 +1,239 @@
+"""The WAN sender against a scripted uplink (no sockets): acks, retries, window, linger, stop."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import pytest
+
+from edge.runtime.encoding import identity_of
+from edge.runtime.schema_book import SchemaBook
+from edge.runtime.sender import SenderOptions, WanSender
+from edge.runtime.transport import Done
+from edge.spool import MemoryBuffer
+from fleetlink.wan import (
+    Ack,
+    Batch,
+    Record,
+    RecordFailure,
+    decode_batch,
+    encode_ack,
+    encode_payload,
+    single_object,
+)
+from tests.helpers import wait_until
+
+SCHEMA_A = identity_of({"type": "record", "name": "A", "fields": [{"name": "x", "type": "long"}]})
+SCHEMA_B = identity_of({"type": "record", "name": "B", "fields": [{"name": "y", "type": "long"}]})
+FAST = SenderOptions(batch_max_records=10, batch_max_bytes=1 << 20, linger_s=0.0, ack_timeout_s=1.0,
+                     max_in_flight=4, backoff_min_s=0.001, backoff_max_s=0.005, codec="zlib")
+
+Answer = tuple[bytes | None, str | None] | None
+Policy = Callable[[Batch, int], Answer]
+
+
+def ok(batch: Batch, failures: tuple[RecordFailure, ...] = ()) -> Answer:
+    return encode_ack(Ack(batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, "ok", failures)), None
+
+
+class ScriptedUplink:
+    """A transport whose answers come from ``policy(batch, attempt)``; ``None`` holds the batch."""
+
+    def __init__(self, policy: Policy) -> None:
+        self.policy = policy
+        self.batches: list[Batch] = []
+        self.held: list[tuple[Batch, Done]] = []
+        self.lock = threading.Lock()
+
+    def send(self, payload: bytes, timeout_s: float, done: Done) -> None:
+        batch = decode_batch(payload)
+        with self.lock:
+            attempt = sum(1 for b in self.batches if b.first_seq == batch.first_seq)
+            self.batches.append(batch)
+            answer = self.policy(batch, attempt)
+            if answer is None:
+                self.held.append((batch, done))
+                return
+        done(*answer)
+
+    def release_held(self, answer: Callable[[Batch], Answer]) -> None:
+        with self.lock:
+            held, self.held = self.held, []
+        for batch, done in held:
+            result = answer(batch)
+            if result is not None:
+                done(*result)
+
+    def delivered_seqs(self) -> list[int]:
+        return [r.seq for b in self.batches for r in b.records]
+
+
+def payload(i: int, schema: bytes = SCHEMA_A.fingerprint) -> bytes:
+    return encode_payload(Record(kafka_topic="t", key=b"k", value=single_object(schema, bytes([i % 256]))))
+
+
+@contextmanager
+def running(uplink: ScriptedUplink, buffer: MemoryBuffer, options: SenderOptions = FAST,
+            book: SchemaBook | None = None) -> Iterator[WanSender]:
+    if book is None:
+        book = SchemaBook()
+        book.add(SCHEMA_A.fingerprint, SCHEMA_A.json)
+        book.add(SCHEMA_B.fingerprint, SCHEMA_B.json)
+    sender = WanSender(buffer, uplink, book, site="s1", edge_id="e1", options=options)
+    sender.start()
+    try:
+        yield sender
+    finally:
+        sender.stop(timeout_s=1.0)
+
+
+def drained(buffer: MemoryBuffer) -> Callable[[], bool]:
+    return lambda: buffer.stats().depth == 0
+
+
+def test_everything_is_delivered_in_batches_with_their_schemas() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(25)] + [payload(99, SCHEMA_B.fingerprint)])
+    uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
+    with running(uplink, buffer) as sender:
+        sender.wake()
+        wait_until(drained(buffer), 5, message="buffer drained")
+    assert [len(b.records) for b in uplink.batches] == [10, 10, 6]
+    assert uplink.delivered_seqs() == list(range(1, 27))
+    assert [set(b.schemas) for b in uplink.batches] == [
+        {SCHEMA_A.fingerprint}, {SCHEMA_A.fingerprint}, {SCHEMA_A.fingerprint, SCHEMA_B.fingerprint}]
+    assert uplink.batches[0].schemas[SCHEMA_A.fingerprint] == SCHEMA_A.json
+    assert {(b.site, b.edge_id, b.stream) for b in uplink.batches} == {("s1", "e1", "memory")}
+    stats = sender.stats
+    assert (stats.batches_sent, stats.batches_acked) == (3, 3)
+    assert (stats.records_acked, stats.batches_retried) == (26, 0)
+    assert buffer.stats().acked == 26
+
+
+@pytest.mark.parametrize(
+    "failure",
+    [
+        (None, "no uplink answered on fleetlink/s1/ingest/e1"),
+        (b"not an ack", None),
+        ("error-ack", None),
+        ("wrong-range", None),
+    ],
+)
+def test_failed_batches_are_resent_until_acknowledged(
+    failure: tuple[bytes | str | None, str | None], caplog: pytest.LogCaptureFixture
+) -> None:
+    def policy(batch: Batch, attempt: int) -> Answer:
+        if attempt >= 3:
+            return ok(batch)
+        reply, error = failure
+        if reply == "error-ack":
+            return encode_ack(Ack("e1", batch.stream, batch.first_seq, batch.last_seq, "error",
+                                  detail="Kafka is down")), None
+        if reply == "wrong-range":
+            return encode_ack(Ack("e1", batch.stream, batch.first_seq, batch.last_seq + 1, "ok")), None
+        return (reply if isinstance(reply, bytes) else None), error
+
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(5)])
+    uplink = ScriptedUplink(policy)
+    caplog.set_level(logging.WARNING, logger="edge.runtime.sender")
+    with running(uplink, buffer) as sender:
+        sender.wake()
+        wait_until(drained(buffer), 5, message="buffer drained")
+    assert [b.first_seq for b in uplink.batches] == [1, 1, 1, 1]
+    assert uplink.delivered_seqs() == [1, 2, 3, 4, 5] * 4
+    assert sender.stats.batches_retried == 3
+    assert sender.stats.outages == 1
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 2  # the outage started, the outage ended: not one per retry
+    assert "not acknowledged" in warnings[0].getMessage()
+    assert "acknowledges again" in warnings[1].getMessage()
+
+
+def test_dead_lettered_records_are_counted_and_acked() -> None:
+    def policy(batch: Batch, attempt: int) -> Answer:
+        failures = (RecordFailure(batch.first_seq, "MSG_SIZE_TOO_LARGE", dead_lettered=True),)
+        return ok(batch, failures)
+
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(3)])
+    uplink = ScriptedUplink(policy)
+    with running(uplink, buffer) as sender:
+        sender.wake()
+        wait_until(drained(buffer), 5)
+    assert sender.stats.records_dead_lettered == 1
+    assert sender.stats.records_acked == 3
+
+
+def test_window_of_batches_in_flight() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(100)])
+    uplink = ScriptedUplink(lambda batch, attempt: None)  # hold every batch
+    with running(uplink, buffer) as sender:
+        sender.wake()
+        wait_until(lambda: len(uplink.held) == 4, 5, message="4 batches in flight")
+        assert buffer.stats().in_flight == 40
+        assert sender.stats.in_flight == 4
+        uplink.policy = lambda batch, attempt: ok(batch)
+        uplink.release_held(ok)
+        wait_until(drained(buffer), 5)
+    assert sorted(b.first_seq for b in uplink.batches) == list(range(1, 101, 10))
+
+
+def test_after_a_failure_one_batch_probes_before_the_window_opens() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(60)])
+    uplink = ScriptedUplink(lambda batch, attempt: None)
+    with running(uplink, buffer):
+        wait_until(lambda: len(uplink.held) == 4, 5)
+        uplink.release_held(lambda batch: (None, "timeout"))  # the whole window fails
+        wait_until(lambda: len(uplink.held) == 1, 5, message="one probe")
+        probe = uplink.held[0][0]
+        assert probe.first_seq == 1  # released batches are sent again first, in order
+        assert len(uplink.batches) == 5
+        uplink.policy = lambda batch, attempt: ok(batch)
+        uplink.release_held(ok)
+        wait_until(drained(buffer), 5)
+    firsts = [b.first_seq for b in uplink.batches]
+    assert firsts[:5] == [1, 11, 21, 31, 1]
+    assert sorted(set(firsts)) == [1, 11, 21, 31, 41, 51]
+
+
+def test_linger_fills_a_batch() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
+    options = SenderOptions(batch_max_records=10, linger_s=0.3, backoff_min_s=0.001, backoff_max_s=0.01)
+    with running(uplink, buffer, options) as sender:
+        for i in range(5):
+            buffer.append(payload(i))
+            sender.wake()
+        wait_until(drained(buffer), 5)
+    assert [len(b.records) for b in uplink.batches] == [5]
+
+
+def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(30)])
+    uplink = ScriptedUplink(lambda batch, attempt: None)  # the uplink never answers
+    sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=FAST).start()
+    wait_until(lambda: len(uplink.held) == 3, 5)
+    sender.stop(timeout_s=0.2)
+    stats = buffer.stats()
+    assert (stats.depth, stats.in_flight, stats.acked) == (30, 0, 0)
+    again = buffer.read_unacked(100, 1 << 20)
+    assert again is not None
+    assert again.first_seq == 1
+    assert sender.stats.missing_schemas > 0
+
+
+def test_stop_drains_what_can_be_sent() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(30)])
+    uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
+    sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1",
+                       options=SenderOptions(linger_s=10.0, batch_max_records=100)).start()
+    sender.stop(timeout_s=5.0)  # the linger would hold the partial batch; stopping sends it now
+    assert buffer.stats().depth == 0
