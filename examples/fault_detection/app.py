@@ -82,23 +82,18 @@ class _RateLimitedLog:
 
 
 def lightring_schema(settings: FaultDetectionSettings) -> dict[str, Any]:
-    """The Avro schema of LightringLeds, from the irobot_create_msgs package in ``msg_paths``."""
+    """The Avro schema of LightringLeds, from ``msg_paths`` or else the packages fleetlink ships."""
     from schemas.avro_schema import avro_schema
+    from schemas.bundled import bundled_message_paths
     from schemas.errors import SchemaError
     from schemas.typestore import load_typestore
 
-    if not settings.msg_paths:
-        raise SettingsError(
-            f"no message paths: the {LIGHTRING_TYPE} definition is needed to write commands "
-            "(pass the irobot_create_msgs package folder, e.g. --msg-path .../irobot_create_msgs)"
-        )
+    paths = settings.msg_paths or tuple(bundled_message_paths())
     try:
-        ts = load_typestore(settings.distro, settings.msg_paths)
+        ts = load_typestore(settings.distro, paths)
         return avro_schema(ts, LIGHTRING_TYPE, settings.distro)
     except SchemaError as exc:
-        raise SettingsError(
-            f"cannot derive the {LIGHTRING_TYPE} schema from {settings.msg_paths}: {exc}"
-        ) from exc
+        raise SettingsError(f"cannot derive the {LIGHTRING_TYPE} schema from {paths}: {exc}") from exc
 
 
 def _classifier(sensor: Sensor, config: RuleConfig) -> Callable[[Any], dict[str, Any]]:

@@ -76,7 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="DIR",
-        help="ROS package folder holding irobot_create_msgs (msg/LightringLeds.msg); repeatable",
+        help="ROS package folder to read irobot_create_msgs from (repeatable; default: the copy "
+        "fleetlink ships)",
     )
     parser.add_argument(
         "--distro",

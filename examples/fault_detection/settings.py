@@ -56,7 +56,11 @@ class Topics(BaseModel):
 
 
 class FaultDetectionSettings(BaseModel):
-    """Everything the app needs; ``msg_paths`` must hold the irobot_create_msgs package."""
+    """Everything the app needs.
+
+    ``msg_paths``: ROS package folders to take the irobot_create_msgs definitions from; empty
+    means the copy fleetlink ships (``schemas/msgs``).
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 

@@ -36,6 +36,7 @@ from confluent_kafka.serialization import MessageField, SerializationContext
 from examples.fault_detection.app import COMMAND_ID_HEADER, run
 from examples.fault_detection.rules import HAZARD_WHEEL_DROP, LightCommand
 from examples.fault_detection.settings import FaultDetectionSettings, Topics
+from schemas.bundled import BUNDLED
 from schemas.codec import get_codec
 from schemas.typestore import load_typestore
 from tests.helpers import wait_until
@@ -43,7 +44,7 @@ from tests.helpers import wait_until
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-IROBOT = Path("/work/shared/data/msgs/irobot_create_msgs")
+IROBOT = BUNDLED / "irobot_create_msgs"
 REPO = Path(__file__).resolve().parents[2]
 PKG = "irobot_create_msgs/msg/"
 WINDOW_MS = 2000
@@ -394,7 +395,7 @@ def test_cli_subprocess_detects_a_fault_and_stops_on_sigterm(
         sys.executable, "-m", "examples.fault_detection",
         "--bootstrap", kafka_bootstrap, "--registry", schema_registry_url,
         "--window", "1500ms", "--group", f"fd-cli-{uuid.uuid4().hex[:8]}",
-        "--state-dir", str(tmp_path / "state"), "--from-beginning", "--msg-path", str(IROBOT),
+        "--state-dir", str(tmp_path / "state"), "--from-beginning",
         "--ir-topic", topics.ir_intensity, "--hazard-topic", topics.hazard_detection,
         "--kidnap-topic", topics.kidnap_status, "--commands-topic", topics.commands, "-v",
     ]  # fmt: skip

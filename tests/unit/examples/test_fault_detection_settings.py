@@ -21,8 +21,9 @@ from examples.fault_detection.settings import (
     parse_duration_ms,
 )
 from fleetlink.errors import ConfigError
+from schemas.bundled import BUNDLED
 
-IROBOT = Path("/work/shared/data/msgs/irobot_create_msgs")
+IROBOT = BUNDLED / "irobot_create_msgs"
 REQUIRED = ["--bootstrap", "127.0.0.1:9092", "--registry", "http://127.0.0.1:8081"]
 
 
@@ -150,23 +151,26 @@ def test_command_line_rejects(argv: list[str], capsys: pytest.CaptureFixture[str
     assert "error:" in capsys.readouterr().err
 
 
-def test_lightring_schema_from_the_irobot_package() -> None:
-    schema = lightring_schema(FaultDetectionSettings(bootstrap="k", registry_url="r", msg_paths=(IROBOT,)))
+@pytest.mark.parametrize("msg_paths", [(IROBOT,), ()])  # given, or the copy fleetlink ships
+def test_lightring_schema(msg_paths: tuple[Path, ...]) -> None:
+    schema = lightring_schema(FaultDetectionSettings(bootstrap="k", registry_url="r", msg_paths=msg_paths))
     assert schema["name"] == "LightringLeds"
     assert schema["ros_type"] == LIGHTRING_TYPE
     assert [f["name"] for f in schema["fields"]] == ["header", "leds", "override_system"]
+    leds = schema["fields"][1]
+    assert leds["ros_type"] == "irobot_create_msgs/msg/LedColor[6]"
 
 
 @pytest.mark.parametrize(
-    ("msg_paths", "message"),
+    "msg_paths",
     [
-        ((), "no message paths"),
-        ((Path("/nonexistent/irobot_create_msgs"),), "cannot derive"),
-        ((IROBOT.parent,), "cannot derive"),  # the folder above the package
+        (Path("/nonexistent/irobot_create_msgs"),),
+        (IROBOT.parent,),  # the folder above the package
+        (IROBOT.parent.parent,),
     ],
 )
-def test_lightring_schema_needs_the_package(msg_paths: tuple[Path, ...], message: str) -> None:
-    with pytest.raises(SettingsError, match=message):
+def test_lightring_schema_needs_the_package(msg_paths: tuple[Path, ...]) -> None:
+    with pytest.raises(SettingsError, match="cannot derive"):
         lightring_schema(FaultDetectionSettings(bootstrap="k", registry_url="r", msg_paths=msg_paths))
 
 
