@@ -64,6 +64,9 @@ def server_properties(s: KafkaSettings) -> str:
         "group.initial.rebalance.delay.ms": "0",
         "auto.create.topics.enable": "true",
         "log.segment.bytes": str(64 * 1024 * 1024),
+        # records carry their ROS source time; replayed bags are years old, and time-based
+        # retention would delete them within minutes on this test/demo broker
+        "log.retention.ms": "-1",
     }
     return "".join(f"{k}={v}\n" for k, v in props.items())
 
