@@ -1,0 +1,40 @@
+"""Metrics and health for every fleetlink process, through one small interface.
+
+Components report through ``Metrics`` (``on_received``, ``on_spooled``, ``on_sent``,
+``on_acked``, ``on_dead_letter``, ``on_gap`` ...); ``PrometheusMetrics`` exports them,
+``MetricsRecorder`` keeps them for tests. ``serve_metrics`` serves ``/metrics`` and ``/health``.
+Every metric is listed in ``families`` and in docs/metrics.md.
+"""
+
+from fleetlink.metrics.api import HEALTH_STATES, FamilyMetrics, Metrics, NullMetrics
+from fleetlink.metrics.deltas import CounterDeltas, RecentIncrease
+from fleetlink.metrics.errors import ServeError
+from fleetlink.metrics.families import FAMILIES, Family, family
+from fleetlink.metrics.health import Health, Problem, State
+from fleetlink.metrics.prometheus import CONTENT_TYPE, PrometheusMetrics
+from fleetlink.metrics.recorder import MetricsRecorder
+from fleetlink.metrics.server import HttpServer, add_metrics_routes, metrics_app, serve_metrics, split_listen
+
+__all__ = [
+    "CONTENT_TYPE",
+    "FAMILIES",
+    "HEALTH_STATES",
+    "CounterDeltas",
+    "Family",
+    "FamilyMetrics",
+    "Health",
+    "HttpServer",
+    "Metrics",
+    "MetricsRecorder",
+    "NullMetrics",
+    "Problem",
+    "PrometheusMetrics",
+    "RecentIncrease",
+    "ServeError",
+    "State",
+    "add_metrics_routes",
+    "family",
+    "metrics_app",
+    "serve_metrics",
+    "split_listen",
+]
