@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.certs_cli",
     "edge.cli",
     "uplink.cli",
+    "repeater.cli",
 )
 
 Handler = Callable[[argparse.Namespace], int]

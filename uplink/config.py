@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from fleetlink.zenoh_options import ZenohSection
+from uplink.commands.mapping import CommandMapping, unique_names
 from uplink.kafka_settings import KafkaSettings
 
 
@@ -45,3 +46,10 @@ class UplinkConfig(BaseModel):
     zenoh: ZenohSection = ZenohSection()
     topics: TopicSettings = TopicSettings()
     ingest: IngestSettings = IngestSettings()
+    commands: list[CommandMapping] = []
+    """Command mappings: Kafka topic -> ROS topic per robot (docs/commands.md)."""
+
+    @field_validator("commands")
+    @classmethod
+    def _unique_command_names(cls, value: list[CommandMapping]) -> list[CommandMapping]:
+        return unique_names(value)

@@ -20,6 +20,7 @@ from fleetlink.ratelimit import LogLimiter
 from fleetlink.wan import Ack, WireError, decode_batch, encode_ack
 from fleetlink.zenoh_options import ZenohOptions
 from schemas.registry import SchemaRegistry
+from uplink.commands.router import CommandRouter
 from uplink.config import UplinkConfig
 from uplink.ingest import BatchJob, IngestStats
 from uplink.producer import KafkaSink
@@ -40,6 +41,7 @@ class Uplink:
         self._registry: SchemaRegistry | None = None
         self._ids: SchemaIds | None = None
         self._pool: ThreadPoolExecutor | None = None
+        self._commands: CommandRouter | None = None
         self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
@@ -60,12 +62,18 @@ class Uplink:
             key = f"fleetlink/{site}/ingest/*"
             self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
             log.info("serving edge batches on %s", key)
+        if cfg.commands:
+            self._commands = CommandRouter(cfg, session=self._session, sink=self._sink,
+                                           registry=self._registry).start()
         return self
 
     def stop(self) -> None:
         for queryable in self._queryables:
             queryable.undeclare()
         self._queryables.clear()
+        if self._commands is not None:
+            self._commands.stop()
+            self._commands = None
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=False)
             self._pool = None
@@ -88,6 +96,11 @@ class Uplink:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
+
+    @property
+    def commands(self) -> CommandRouter | None:
+        """The command router (None when no command mappings are configured or not started)."""
+        return self._commands
 
     # -- batches ---------------------------------------------------------------------------
 

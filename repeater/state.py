@@ -1,0 +1,116 @@
+"""What the repeater remembers across restarts, kept in memory and journalled (``journal``).
+
+``CommandStore`` mirrors the journal: writer schemas by fingerprint, every command applied
+whose lease has not ended (with its delivered / ended marks, so a restart neither replays a
+finished command nor reports it delivered twice), and the status events not yet
+acknowledged by the uplink. Not thread-safe: the repeater calls it under its lock.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from repeater.envelope import CommandEnvelope, StatusEvent
+from repeater.journal import (
+    Journal,
+    JournalState,
+    StoredCommand,
+    acked_line,
+    command_line,
+    mark_line,
+    schema_line,
+    status_line,
+)
+
+COMPACT_MIN_LINES = 1_000
+
+Ident = tuple[str, str]
+
+
+class CommandStore:
+    def __init__(self, state_dir: Path) -> None:
+        self._journal = Journal(state_dir)
+        self.schemas: dict[bytes, str] = {}
+        self.commands: dict[Ident, StoredCommand] = {}
+        self.pending: dict[int, StatusEvent] = {}
+        self._next = 1
+        self.skipped_lines = 0
+
+    def open(self) -> JournalState:
+        state = self._journal.open()
+        self.schemas = dict(state.schemas)
+        self.commands = dict(state.commands)
+        self.pending = dict(state.pending)
+        self._next = state.next_status
+        self.skipped_lines = state.skipped
+        return state
+
+    def close(self) -> None:
+        self._journal.close()
+
+    # -- writes ---------------------------------------------------------------------------
+
+    def command(self, env: CommandEnvelope, received_at: float, *, ended: bool = False) -> None:
+        """Record a command (fsynced): applied, or refused but to be recognised when re-delivered."""
+        entries: list[dict[str, Any]] = []
+        if env.schema is not None and env.schema_fp not in self.schemas:
+            self.schemas[env.schema_fp] = env.schema
+            entries.append(schema_line(env.schema_fp, env.schema))
+        ident = (env.command_id, env.robot)
+        self.commands[ident] = StoredCommand(env.without_schema(), received_at, ended=ended)
+        entries.append(command_line(env, received_at))
+        if ended:
+            entries.append(mark_line("end", *ident))
+        self._journal.append(*entries, sync=True)
+
+    def mark(self, ident: Ident, op: str) -> None:
+        stored = self.commands.get(ident)
+        if stored is None:
+            return
+        if op == "end":
+            stored.ended = True
+        elif op == "delivered":
+            stored.delivered = True
+        self._journal.append(mark_line(op, *ident))
+
+    def status(self, event: StatusEvent) -> int:
+        number = self._next
+        self._next += 1
+        self.pending[number] = event
+        self._journal.append(status_line(number, event))
+        return number
+
+    def acked(self, numbers: list[int]) -> None:
+        done = [n for n in numbers if self.pending.pop(n, None) is not None]
+        if done:
+            self._journal.append(*(acked_line(n) for n in done))
+
+    # -- compaction -----------------------------------------------------------------------
+
+    def maybe_compact(self, now: float, *, force: bool = False) -> bool:
+        """Drop commands whose lease ended; rewrite the journal when it is mostly dead lines."""
+        over = [i for i, c in self.commands.items() if c.envelope.lease_until_ms / 1000 <= now and c.ended]
+        for ident in over:
+            del self.commands[ident]
+        live = self.live_entries()
+        if not force and self._journal.lines < max(COMPACT_MIN_LINES, 4 * len(live)):
+            return False
+        self._journal.compact(live)
+        return True
+
+    def live_entries(self) -> list[dict[str, Any]]:
+        used = {c.envelope.schema_fp for c in self.commands.values()}
+        entries = [schema_line(fp, text) for fp, text in self.schemas.items() if fp in used]
+        for ident, stored in self.commands.items():
+            entries.append(command_line(stored.envelope, stored.received_at))
+            if stored.delivered:
+                entries.append(mark_line("delivered", *ident))
+            if stored.ended:
+                entries.append(mark_line("end", *ident))
+        entries += [status_line(n, e) for n, e in sorted(self.pending.items())]
+        return entries
+
+    @property
+    def journal_lines(self) -> int:
+        return self._journal.lines

@@ -1,0 +1,143 @@
+"""Status events to the uplink, and the pulse of the link to it (for the dead-man).
+
+Pending events go out in batches as a Zenoh query on ``fleetlink/<site>/command-status/<id>``;
+the uplink answers once Kafka has them, and only then are they acknowledged (``on_acked``),
+so delivery is at-least-once. With nothing pending, an empty batch every ``heartbeat``
+seconds asks the uplink whether it is there. Any answer (even a refusal: Kafka may be down)
+reports the link up, a query without one reports it down (``on_link``): that is what the
+dead-man watches.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from types import TracebackType
+
+import zenoh
+
+from fleetlink.ratelimit import LogLimiter
+from fleetlink.wan.keys import site_prefix
+from repeater.envelope import StatusBatch, StatusEvent, decode_status_ack, encode_status_batch
+from repeater.errors import EnvelopeError
+
+log = logging.getLogger(__name__)
+
+MAX_BATCH = 200
+LinkCallback = Callable[[bool], None]
+AckCallback = Callable[[list[int]], None]
+
+
+def status_key(site: str, repeater_id: str) -> str:
+    return f"{site_prefix(site)}/command-status/{repeater_id}"
+
+
+class StatusLink:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        site: str,
+        repeater_id: str,
+        *,
+        heartbeat: float,
+        timeout: float,
+        on_link: LinkCallback,
+        on_acked: AckCallback,
+    ) -> None:
+        self._session = session
+        self._site = site
+        self._id = repeater_id
+        self._key = status_key(site, repeater_id)
+        self._heartbeat = heartbeat
+        self._timeout = timeout
+        self._on_link = on_link
+        self._on_acked = on_acked
+        self._pending: dict[int, StatusEvent] = {}
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._limiter = LogLimiter(log)
+        self.sent = 0
+        self.failures = 0
+
+    def start(self) -> StatusLink:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="repeater-status", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(self._timeout + 5)
+            self._thread = None
+
+    def __enter__(self) -> StatusLink:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    def submit(self, number: int, event: StatusEvent) -> None:
+        with self._cond:
+            self._pending[number] = event
+            self._cond.notify_all()
+
+    def pending(self) -> int:
+        with self._cond:
+            return len(self._pending)
+
+    # -- loop -----------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        backoff = 0.0
+        while not self._stop.is_set():
+            with self._cond:
+                if backoff > 0 or not self._pending:
+                    self._cond.wait(backoff if backoff > 0 else self._heartbeat)
+                if self._stop.is_set():
+                    return
+                numbers = sorted(self._pending)[:MAX_BATCH]
+                events = tuple(self._pending[n] for n in numbers)
+            if self._send(events):
+                backoff = 0.0
+                if numbers:
+                    with self._cond:
+                        for n in numbers:
+                            self._pending.pop(n, None)
+                    self._on_acked(numbers)
+            else:
+                backoff = min(max(backoff * 2, 0.2), self._heartbeat)
+
+    def _send(self, events: tuple[StatusEvent, ...]) -> bool:
+        payload = encode_status_batch(StatusBatch(self._id, self._site, events))
+        problem = "no uplink answered"
+        contact = False
+        try:
+            replies = self._session.get(self._key, payload=payload, timeout=self._timeout,
+                                        target=zenoh.QueryTarget.BEST_MATCHING)
+            for reply in replies:
+                contact = True  # an uplink answered, even if it could not take the events now
+                if reply.ok is None:
+                    err = reply.err
+                    problem = f"uplink refused: {err.payload.to_bytes()[:200]!r}" if err else "error reply"
+                    continue
+                ack = decode_status_ack(reply.ok.payload.to_bytes())
+                if ack.accepted == len(events):
+                    self.sent += len(events)
+                    self._on_link(True)
+                    return True
+                problem = f"uplink accepted {ack.accepted} of {len(events)}: {ack.detail}"
+        except (zenoh.ZError, EnvelopeError) as exc:
+            problem = str(exc)
+        self.failures += 1
+        if events:
+            self._limiter.log(logging.WARNING, "status", "status batch of %d not acknowledged: %s",
+                              len(events), problem)
+        self._on_link(contact)
+        return False

@@ -1,0 +1,113 @@
+"""Send one command to its site (a Zenoh query) until a repeater takes it, or its lease ends.
+
+A repeater's reply *settles* the forward when it says ``applied``, ``duplicate`` (applied
+before: the re-delivery after an uplink crash), ``expired``, ``superseded`` or ``rejected``.
+``need-schema`` is answered at once by sending the envelope again with the writer schema.
+No reply (site unreachable, no repeater there), an error reply or a timeout are tried again
+with exponential backoff (100 ms doubling to 2 s) until the lease ends: then the forward gives
+up and the command is reported ``expired``.
+
+Envelopes carry the writer schema's JSON only until the site has acknowledged one command
+with that schema: later ones carry just its fingerprint.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import zenoh
+
+from fleetlink.ratelimit import LogLimiter
+from repeater.envelope import SETTLED, CommandReply, decode_reply, encode_envelope
+from repeater.errors import EnvelopeError
+from uplink.commands.plan import Forward
+
+log = logging.getLogger(__name__)
+
+FIRST_BACKOFF_S = 0.1
+MAX_BACKOFF_S = 2.0
+
+
+@dataclass
+class ForwardResult:
+    forward: Forward
+    settled: bool
+    replies: list[CommandReply] = field(default_factory=list)
+    detail: str = ""
+    attempts: int = 0
+
+
+class Forwarder:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        *,
+        query_timeout: float = 5.0,
+        clock: Callable[[], float],
+        stop: threading.Event,
+    ) -> None:
+        self._session = session
+        self._timeout = query_timeout
+        self._clock = clock
+        self._stop = stop
+        self._known: set[tuple[str, bytes]] = set()  # (site, schema fingerprint) the site acknowledged
+        self._lock = threading.Lock()
+        self._limiter = LogLimiter(log)
+
+    def send(self, fwd: Forward) -> ForwardResult:
+        env = fwd.envelope
+        with self._lock:
+            lean = fwd.site is not None and (fwd.site, env.schema_fp) in self._known
+        if lean:
+            env = env.without_schema()
+        result = ForwardResult(fwd, settled=False)
+        delay = FIRST_BACKOFF_S
+        target = zenoh.QueryTarget.ALL if fwd.site is None else zenoh.QueryTarget.BEST_MATCHING
+        while not self._stop.is_set():
+            remaining = env.lease_until_ms / 1000 - self._clock()
+            if remaining <= 0:
+                result.detail = f"no site acknowledged before the lease ended ({result.detail or 'no reply'})"
+                return result
+            result.attempts += 1
+            replies, problem = self._query(fwd.key_expr, encode_envelope(env), target,
+                                           min(self._timeout, max(remaining, 0.05)))
+            result.replies = replies
+            settled = [r for r in replies if r.result in SETTLED]
+            if settled:
+                with self._lock:
+                    self._known.update((r.site, env.schema_fp) for r in settled if r.site)
+                result.settled = True
+                return result
+            if env.schema is None and any(r.result == "need-schema" for r in replies):
+                env = fwd.envelope  # the full envelope, with the schema: at once
+                continue
+            result.detail = problem or "; ".join(f"{r.result}: {r.detail}" for r in replies) or "no reply"
+            self._limiter.log(logging.WARNING, f"forward:{fwd.site}",
+                              "command %s for %s not acknowledged yet (%s); retrying",
+                              env.command_id, fwd.key_expr, result.detail)
+            self._stop.wait(delay)
+            delay = min(delay * 2, MAX_BACKOFF_S)
+        result.detail = "uplink stopping"
+        return result
+
+    def _query(self, key: str, payload: bytes, target: zenoh.QueryTarget,
+               timeout: float) -> tuple[list[CommandReply], str]:
+        replies: list[CommandReply] = []
+        problems: list[str] = []
+        try:
+            for reply in self._session.get(key, payload=payload, target=target, timeout=timeout,
+                                           consolidation=zenoh.ConsolidationMode.NONE):
+                if reply.ok is not None:
+                    try:
+                        replies.append(decode_reply(reply.ok.payload.to_bytes()))
+                    except EnvelopeError as exc:
+                        problems.append(str(exc))
+                elif reply.err is not None:
+                    text = reply.err.payload.to_bytes()[:300].decode("utf-8", "replace")
+                    problems.append(f"site refused: {text}")
+        except zenoh.ZError as exc:
+            problems.append(f"query failed: {exc}")
+        return replies, "; ".join(problems)

@@ -1,0 +1,66 @@
+"""Which offsets may be committed, when records finish out of order (pure, thread-safe).
+
+Records of a partition are handed out in offset order but settle in any order (one site may
+answer before another). The committable position of a partition is its lowest offset still in
+flight, or one past the highest offset seen when none is: committing it never skips a record
+that has not settled, so after a crash everything not settled comes again (at-least-once).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+
+TopicPartitionKey = tuple[str, int]
+
+
+@dataclass
+class _Partition:
+    pending: set[int] = field(default_factory=set)
+    highest: int = -1
+    committed: int = -1
+
+
+class OffsetTracker:
+    def __init__(self) -> None:
+        self._parts: dict[TopicPartitionKey, _Partition] = {}
+        self._lock = threading.Lock()
+
+    def begin(self, tp: TopicPartitionKey, offset: int) -> None:
+        with self._lock:
+            part = self._parts.setdefault(tp, _Partition())
+            part.pending.add(offset)
+            part.highest = max(part.highest, offset)
+
+    def done(self, tp: TopicPartitionKey, offset: int) -> None:
+        with self._lock:
+            part = self._parts.get(tp)
+            if part is not None:
+                part.pending.discard(offset)
+
+    def in_flight(self) -> int:
+        with self._lock:
+            return sum(len(p.pending) for p in self._parts.values())
+
+    def committable(self) -> dict[TopicPartitionKey, int]:
+        """Partition -> next offset to commit, for partitions that advanced since the last commit."""
+        out: dict[TopicPartitionKey, int] = {}
+        with self._lock:
+            for tp, part in self._parts.items():
+                position = min(part.pending) if part.pending else part.highest + 1
+                if position > part.committed and position > 0:
+                    out[tp] = position
+        return out
+
+    def committed(self, positions: dict[TopicPartitionKey, int]) -> None:
+        with self._lock:
+            for tp, position in positions.items():
+                part = self._parts.get(tp)
+                if part is not None:
+                    part.committed = max(part.committed, position)
+
+    def forget(self, tps: list[TopicPartitionKey]) -> None:
+        """Partitions revoked: their records are someone else's now."""
+        with self._lock:
+            for tp in tps:
+                self._parts.pop(tp, None)

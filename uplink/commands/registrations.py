@@ -1,0 +1,145 @@
+"""Reads the registrations topic from the beginning, continuously, into a RobotDirectory.
+
+No consumer group offsets: every uplink reads the whole compacted topic at start (it is small:
+one record per robot after compaction) and follows it. :meth:`RegistrationsReader.start`
+waits, bounded, until it has caught up, so the first commands are routed with what is known.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from types import TracebackType
+from typing import Any
+
+from confluent_kafka import OFFSET_BEGINNING, Consumer, KafkaError, KafkaException, Message, TopicPartition
+
+from fleetlink.ratelimit import LogLimiter
+from uplink.commands.decode import CommandDecoder
+from uplink.commands.directory import RobotDirectory
+from uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
+from uplink.kafka_settings import KafkaSettings
+
+log = logging.getLogger(__name__)
+
+
+class RegistrationsReader:
+    def __init__(self, kafka: KafkaSettings, topic: str, decoder: CommandDecoder,
+                 directory: RobotDirectory) -> None:
+        self._kafka = kafka
+        self._topic = topic
+        self._decoder = decoder
+        self.directory = directory
+        self._consumer: Consumer | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._caught_up = threading.Event()
+        self._assigned: list[TopicPartition] = []
+        self._limiter = LogLimiter(log)
+        self.undecodable = 0
+
+    def start(self, catch_up_s: float = 10.0) -> RegistrationsReader:
+        conf: dict[str, Any] = dict(self._kafka.common_config())
+        conf.update({
+            "group.id": f"fleetlink-registrations-{uuid.uuid4().hex[:12]}",  # never commits
+            "enable.auto.commit": False, "auto.offset.reset": "earliest",
+            "enable.partition.eof": False,
+        })
+        self._consumer = Consumer(conf)
+        self._consumer.subscribe([self._topic], on_assign=self._on_assign)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="uplink-registrations", daemon=True)
+        self._thread.start()
+        if not self._caught_up.wait(catch_up_s):
+            log.warning("registrations topic %s not read to its end within %.0f s; commands for robots "
+                        "not known yet go to every site", self._topic, catch_up_s)
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(10)
+            self._thread = None
+        if self._consumer is not None:
+            self._consumer.close()
+            self._consumer = None
+
+    def __enter__(self) -> RegistrationsReader:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    @property
+    def caught_up(self) -> bool:
+        return self._caught_up.is_set()
+
+    def _on_assign(self, consumer: Consumer, partitions: list[TopicPartition]) -> None:
+        for tp in partitions:
+            tp.offset = OFFSET_BEGINNING
+        consumer.assign(partitions)
+        self._assigned = list(partitions)
+
+    def _run(self) -> None:
+        consumer = self._consumer
+        if consumer is None:
+            return
+        last_check = 0.0
+        while not self._stop.is_set():
+            msg = consumer.poll(0.2)
+            if msg is not None:
+                self._handle(msg)
+            if not self._caught_up.is_set() and time.monotonic() - last_check > 0.2:
+                last_check = time.monotonic()
+                if self._at_end(consumer):
+                    self._caught_up.set()
+                    log.info("registrations read: %d robots at %d sites", len(self.directory),
+                             len(self.directory.sites()))
+
+    def _at_end(self, consumer: Consumer) -> bool:
+        if not self._assigned:
+            return False
+        try:
+            positions = consumer.position([TopicPartition(tp.topic, tp.partition) for tp in self._assigned])
+            for tp in positions:
+                low, high = consumer.get_watermark_offsets(tp, timeout=1.0, cached=False)
+                if high > low and (tp.offset < 0 or tp.offset < high):
+                    return False
+        except KafkaException:
+            return False
+        return True
+
+    def _handle(self, msg: Message) -> None:
+        err = msg.error()
+        if err is not None:
+            if err.code() != KafkaError._PARTITION_EOF:
+                self._limiter.log(logging.WARNING, "consume", "registrations: %s", err.str())
+            return
+        raw_key = msg.key()
+        key = raw_key.decode("utf-8", "replace") if isinstance(raw_key, bytes) else None
+        value = msg.value()
+        if value is None:
+            self.directory.apply(key, None)
+            return
+        delay = 0.2
+        while not self._stop.is_set():
+            try:
+                decoded = self._decoder.decode(value)
+            except RegistryUnreachableError as exc:
+                self._limiter.log(logging.WARNING, "registry", "registrations: %s; retrying", exc)
+                self._stop.wait(delay)
+                delay = min(delay * 2, 5.0)
+                continue
+            except UndecodableValueError as exc:
+                self.undecodable += 1
+                self._limiter.log(logging.WARNING, "undecodable", "registrations: skipping %s[%d]@%d: %s",
+                                  msg.topic(), msg.partition(), msg.offset(), exc.reason)
+                return
+            if not self.directory.apply(key, decoded.record):
+                self._limiter.log(logging.WARNING, "unusable", "registrations: record %s[%d]@%d has no "
+                                  "robot/site/event", msg.topic(), msg.partition(), msg.offset())
+            return
