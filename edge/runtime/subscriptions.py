@@ -1,4 +1,4 @@
-"""Discovered publishers -> one ``RosSubscriber`` per topic that feeds at least one mapping.
+"""Discovered publishers -> one ``TopicReceiver`` per topic that feeds at least one mapping.
 
 A ``GraphWatcher`` reports every publisher (``MP`` token) with its topic and type. Whenever the
 graph or the mapping table changes, the wanted subscriptions are recomputed (``plan``, pure)
@@ -10,8 +10,8 @@ different definition is still received, and the hash each sample really carried 
 record's headers. A mapping that declares its type subscribes as soon as its topic is known
 (a robot registered), before any publisher shows up.
 
-Samples are handed to the ``Intake`` at once; refused samples (no attachment, broken CDR header)
-are handed over as ``Rejected`` so they become dead letters.
+Each receiver hands its samples to the ``Intake``; refused samples (no attachment, broken CDR
+header) are handed over as ``Rejected`` so they become dead letters.
 """
 
 from __future__ import annotations
@@ -27,11 +27,12 @@ from edge.errors import MappingError
 from edge.mapping import MappingTable, TopicPattern
 from edge.runtime.intake import Intake
 from edge.runtime.processor import Item, Rejected
+from edge.runtime.receiver import TopicReceiver
 from roswire.discovery import GraphWatcher
 from roswire.errors import RoswireError
 from roswire.graph import EventKind, GraphEvent
 from roswire.node import RosNode
-from roswire.subscriber import RosSample, RosSubscriber
+from roswire.subscriber import RosSample
 from roswire.tokens import EndpointInfo, EntityKind
 from schemas.errors import SchemaError
 
@@ -82,7 +83,7 @@ def plan(
 @dataclass
 class _Active:
     typename: str | None
-    subscriber: RosSubscriber
+    subscriber: TopicReceiver
 
 
 class SubscriptionManager:
@@ -95,11 +96,13 @@ class SubscriptionManager:
         intake: Intake[Item],
         *,
         known_type: Callable[[str], bool] | None = None,
+        capacity: int = 65536,
     ) -> None:
         self.node = node
         self.table = table
         self.intake = intake
         self._known_type = known_type or _any_type
+        self.capacity = capacity
         self._publishers: dict[str, dict[str, str]] = {}  # topic -> token key -> type
         self._active: dict[str, _Active] = {}
         self._lock = threading.Lock()
@@ -223,7 +226,7 @@ class SubscriptionManager:
             log.info("subscribed %s (type %s)", topic, typename or "any")
         self.generation += 1
 
-    def _open(self, topic: str, typename: str | None) -> RosSubscriber:
+    def _open(self, topic: str, typename: str | None) -> TopicReceiver:
         intake = self.intake
 
         def on_sample(sample: RosSample) -> None:
@@ -233,10 +236,11 @@ class SubscriptionManager:
             intake.offer(Rejected(topic, error, time.time_ns()), len(getattr(error, "raw", b"")))
 
         token = typename is not None and self._known_type(typename)
-        return self.node.create_subscriber(topic, typename, on_sample, on_error=on_error, declare_token=token)
+        return TopicReceiver(self.node, topic, typename, on_sample, on_error, capacity=self.capacity,
+                             declare_token=token).start()
 
     @staticmethod
-    def _close(subscriber: RosSubscriber) -> None:
+    def _close(subscriber: TopicReceiver) -> None:
         try:
             subscriber.stop()
         except Exception as exc:  # noqa: BLE001 - a closed session must not stop the rest of the cleanup

@@ -1,0 +1,177 @@
+"""The end-to-end test bed: robots -> site router -> edge agent -> (WAN) -> cloud router -> uplink -> Kafka.
+
+Real pieces only: Zenoh routers (router-mode sessions), the uplink service, Kafka and the schema
+registry from the session fixtures, the edge agent, robots replayed from the real bags. Each
+test gets its own site name and topic suffix, so tests sharing one uplink and one broker never
+see each other's records.
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from confluent_kafka import Consumer, Message, TopicPartition
+from confluent_kafka.schema_registry import SchemaRegistryClient
+from confluent_kafka.schema_registry.avro import AvroDeserializer
+from confluent_kafka.serialization import MessageField, SerializationContext
+from rosbags.rosbag2 import Reader
+
+from edge.agent import EdgeAgent
+from edge.config import EdgeConfig
+from fleetlink.localstack.zenoh_router import ZenohRouter
+from roswire.replay import BagReplayer
+from tests.helpers import wait_until, zenoh_peer_config
+from uplink.config import UplinkConfig
+from uplink.service import Uplink
+
+BAGS = Path(__file__).resolve().parents[3] / "shared" / "data" / "bags"
+HUSKY = BAGS / "robot_localization_husky"
+TB3 = BAGS / "fuse_turtlebot3_sim"
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """The cloud side shared by a module's tests: a router and an uplink behind it."""
+
+    router: str
+    bootstrap: str
+    registry_url: str
+    registrations: str
+    dead_letter: str
+
+
+def uplink_config(cloud_router: str, bootstrap: str, registry_url: str, *, suffix: str,
+                  message_max_bytes: int = 1_000_000) -> UplinkConfig:
+    return UplinkConfig.model_validate({
+        "kafka": {"bootstrap_servers": bootstrap, "message_max_bytes": message_max_bytes},
+        "registry": {"url": registry_url},
+        "zenoh": {"mode": "client", "connect": [cloud_router]},
+        "topics": {"dead_letter": f"e2e.dead-letter.{suffix}", "registrations": f"e2e.robots.{suffix}"},
+    })
+
+
+@contextmanager
+def cloud(bootstrap: str, registry_url: str, *, message_max_bytes: int = 1_000_000) -> Iterator[Cloud]:
+    suffix = uuid.uuid4().hex[:8]
+    with ZenohRouter() as router:
+        config = uplink_config(router.endpoint, bootstrap, registry_url, suffix=suffix,
+                               message_max_bytes=message_max_bytes)
+        with Uplink(config):
+            yield Cloud(router.endpoint, bootstrap, registry_url, config.topics.registrations,
+                        config.topics.dead_letter)
+
+
+def edge_config(spool: Path, site_router: str, cloud_: Cloud, *, site: str,
+                robot_types: Mapping[str, Any] | None = None, mappings: Sequence[Mapping[str, Any]] = (),
+                **extra: Any) -> EdgeConfig:
+    data: dict[str, Any] = {
+        "site": site, "edge_id": "edge-1",
+        "zenoh": {"mode": "client", "connect": [site_router]},
+        "robot_types": dict(robot_types or {}), "mappings": list(mappings),
+        "spool": {"dir": str(spool), "segment_bytes": "4MiB", "max_bytes": "64MiB"},
+        "registration": {"grace_period": "1s"},
+        # one batch in flight per stream: the uplink runs batches on a worker pool, so two batches
+        # of a stream in flight at once may reach Kafka in either order (see docs/edge.md)
+        "wan": {"linger": "5ms", "ack_timeout": "20s", "retry_backoff_min": "50ms", "retry_backoff_max": "1s",
+                "max_in_flight": 1},
+        "topics": {"dead_letter": cloud_.dead_letter, "registrations": cloud_.registrations},
+    }
+    data.update(extra)
+    return EdgeConfig.model_validate(data)
+
+
+@contextmanager
+def site(cloud_: Cloud) -> Iterator[ZenohRouter]:
+    """A site's router, joined to the cloud router."""
+    with ZenohRouter(connect=(cloud_.router,)) as router:
+        yield router
+
+
+def replayer(bag: Path, robot: str, router: str, topics: Sequence[str]) -> BagReplayer:
+    """A robot replaying ``topics`` of ``bag`` as fast as the network takes them."""
+    return BagReplayer(bag, robot, config=zenoh_peer_config(router), rate=0, topics=list(topics))
+
+
+def bag_messages(bag: Path, topic: str) -> list[bytes]:
+    with Reader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [bytes(raw) for _, _, raw in reader.messages(connections=conns)]
+
+
+def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float) -> None:
+    """Wait until the durable stream took at least ``records`` and the uplink acked them all."""
+
+    def done() -> bool:
+        stream = agent.snapshot()["streams"]["durable"]
+        buffer = stream["buffer"]
+        return bool(buffer["appended"] >= records and buffer["depth"] == 0)
+
+    try:
+        wait_until(done, timeout, interval=0.1, message=f"{records} records spooled and acknowledged")
+    except AssertionError as exc:
+        snap = agent.snapshot()
+        brief = {k: snap.get(k) for k in ("intake", "processor", "streams", "subscriptions")}
+        raise AssertionError(f"{exc}; edge: {json.dumps(brief, default=str)}") from None
+
+
+class TopicReader:
+    """Reads Kafka topics from the beginning, decoding values with the stock AvroDeserializer."""
+
+    def __init__(self, bootstrap: str, registry_url: str) -> None:
+        self.bootstrap = bootstrap
+        self.deserializer = AvroDeserializer(SchemaRegistryClient({"url": registry_url}))
+
+    def read(self, topic: str, count: int, timeout: float = 30.0) -> list[Message]:
+        """Exactly the first ``count`` records of a one-partition topic, then checks nothing follows."""
+        consumer = Consumer({"bootstrap.servers": self.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}",
+                             "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 500})
+        out: list[Message] = []
+        try:
+            consumer.assign([TopicPartition(topic, 0, 0)])
+
+            def enough() -> bool:
+                for msg in consumer.consume(1000, timeout=0.2):
+                    if msg.error() is None:
+                        out.append(msg)
+                return len(out) >= count
+
+            wait_until(enough, timeout, interval=0.0, message=f"{count} records on {topic} (got {len(out)})")
+            extra = [m for m in consumer.consume(1000, timeout=1.0) if m.error() is None]
+            out.extend(extra)
+        finally:
+            consumer.close()
+        return out
+
+    def value(self, msg: Message) -> Any:
+        topic = msg.topic()
+        if topic is None:
+            raise AssertionError("a record without a topic")
+        return self.deserializer(msg.value(), SerializationContext(topic, MessageField.VALUE))
+
+
+def headers(msg: Message) -> dict[str, str]:
+    return {k: (v or b"").decode("utf-8", "replace") for k, v in (msg.headers() or [])}
+
+
+def by_key(msgs: Sequence[Message]) -> dict[str, list[Message]]:
+    out: dict[str, list[Message]] = {}
+    for msg in msgs:
+        out.setdefault((msg.key() or b"").decode(), []).append(msg)
+    return out
+
+
+def seqs(msgs: Sequence[Message]) -> list[int]:
+    return [int(headers(m)["fleetlink.seq"]) for m in msgs]
+
+
+def unique_site() -> str:
+    return f"site-{uuid.uuid4().hex[:8]}"
+
+
+Check = Callable[[], bool]
