@@ -141,10 +141,10 @@ def test_sim_stdin_commands(zenoh_router: str, domain: int) -> None:
     ]
 
 
-def test_sim_without_create3_types_names_the_fix() -> None:
+def test_sim_with_a_bad_msg_path_names_it() -> None:
     env = {k: v for k, v in os.environ.items() if k != "FLEETLINK_MSG_PATH"}
-    result = subprocess.run(fleetlink("sim", "--robots", "1", "-e", "tcp/127.0.0.1:1"),
+    result = subprocess.run(fleetlink("sim", "--robots", "1", "--msg-path", "/nonexistent/pkg",
+                                      "-m", "client", "-e", "tcp/127.0.0.1:1"),
                             capture_output=True, text=True, timeout=60, check=False, env=env)
     assert result.returncode == 1
-    assert "irobot_create_msgs" in result.stderr
-    assert "--msg-path" in result.stderr
+    assert "--msg-path /nonexistent/pkg: not a directory" in result.stderr

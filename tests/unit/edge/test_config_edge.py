@@ -126,7 +126,7 @@ BAD: list[tuple[str, str, str]] = [
     ("bad glob", BASE.replace('match: "/tb4_*"', 'match: "/tb4 *"'),
      f"robot_types.turtlebot4.match (line 5): {VE}'/tb4 *' is not a namespace glob"),
     ("bad robot type name", BASE.replace("turtlebot4:", "turtle bot:"),
-     "robot_types.turtle bot.[key] (line 5): String should match pattern"),
+     "robot_types.turtle bot.[key] (line 4): String should match pattern"),
     ("site with a slash", BASE.replace("site: warehouse-a", "site: a/b"),
      f"site (line 1): {VE}'a/b' must be a single key chunk"),
     ("site with a wildcard", BASE.replace("site: warehouse-a", "site: '*'"), f"site (line 1): {VE}site '*'"),

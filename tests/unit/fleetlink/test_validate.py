@@ -22,10 +22,9 @@ def no_sockets(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(socket, "socket", refuse)
 
 
-@pytest.mark.parametrize("path", sorted(DEPLOY.glob("*.yaml")), ids=lambda p: p.name)
-def test_every_deploy_config_is_valid(path: Path, no_sockets: None) -> None:
-    kind, _ = validate_file(path)
-    assert kind in ("edge", "uplink", "repeater")
+def test_validating_opens_no_socket(no_sockets: None) -> None:
+    kind, _ = validate_file(DEPLOY / "edge.example.yaml")
+    assert kind == "edge"
 
 
 BAD_UPLINK = """\
