@@ -1,0 +1,112 @@
+"""``AgentBackend``: the admin API's view of a started ``EdgeAgent``, through its public API.
+
+Counters come from ``EdgeAgent.snapshot()`` (``snapshot_from_agent`` reads that dict, pure);
+the ROS graph from a ``GraphWatcher`` of its own on the agent's session (started in ``start``);
+changes go through ``EdgeAgent.reload`` (the mapping table swap plus a subscription refresh).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+from edge.admin.backend import BufferState, EdgeSnapshot, MappingCounts, RobotStatus, WanTotals
+from edge.config import EdgeConfig
+from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from edge.spool import SpoolStats
+from roswire.discovery import GraphWatcher
+from roswire.graph import TopicInfo
+
+if TYPE_CHECKING:
+    from edge.agent import EdgeAgent
+
+_COUNTS = ("received", "emitted", "dropped", "dead_lettered", "type_mismatch")
+_WAN = ("batches_sent", "records_sent", "bytes_sent", "batches_acked", "records_acked", "batches_retried",
+        "in_flight")
+
+
+def _int(value: Any) -> int:
+    return int(value) if isinstance(value, int | float) and not isinstance(value, bool) else 0
+
+
+def _dict(value: Any) -> Mapping[str, Any]:
+    return value if isinstance(value, Mapping) else {}
+
+
+def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnapshot:
+    """``EdgeAgent.snapshot()`` (plain data) -> ``EdgeSnapshot``; missing parts stay neutral."""
+    stages = _dict(data.get("stages"))
+    mappings = {
+        str(name): MappingCounts(**{k: _int(_dict(counts).get(k)) for k in _COUNTS},
+                                 stages={str(s): {str(k): _int(v) for k, v in _dict(c).items()}
+                                         for s, c in _dict(stages.get(name)).items()})
+        for name, counts in _dict(data.get("mappings")).items()
+    }
+    capacity = {"durable": int(config.spool.max_bytes), "memory": int(config.memory.max_bytes)}
+    buffers, wan, healthy = [], {}, []
+    for stream, entry in _dict(data.get("streams")).items():
+        buffer = _dict(_dict(entry).get("buffer"))
+        if buffer:
+            fields: dict[str, Any] = {k: buffer[k] for k in SpoolStats.__dataclass_fields__ if k in buffer}
+            try:
+                stats = SpoolStats(**fields)
+            except TypeError:
+                stats = None
+            if stats is not None:
+                buffers.append(BufferState(stats=stats, capacity_bytes=capacity.get(str(stream), 0)))
+        sender = _dict(_dict(entry).get("sender"))
+        if sender:
+            wan[str(stream)] = WanTotals(**{k: _int(sender.get(k)) for k in _WAN})
+            healthy.append(bool(sender.get("healthy", True)))
+    subscriptions = _dict(data.get("subscriptions"))
+    gaps = {str(topic): _int(_dict(sub).get("missing")) for topic, sub in subscriptions.items()}
+    running = data.get("running")
+    return EdgeSnapshot(
+        mappings=mappings, buffers=tuple(buffers), wan=wan, wan_link_up=all(healthy) if healthy else None,
+        sequence_gaps=gaps, failure=None if running is not False else "the edge agent is not running",
+    )
+
+
+class AgentBackend:
+    def __init__(self, agent: EdgeAgent) -> None:
+        self.agent = agent
+        self._graph: GraphWatcher | None = None
+
+    def start(self) -> AgentBackend:
+        if self._graph is None:
+            self._graph = GraphWatcher(self.agent.session, self.agent.config.ros.domain_id).start()
+        return self
+
+    def stop(self) -> None:
+        if self._graph is not None:
+            self._graph.stop()
+            self._graph = None
+
+    def __enter__(self) -> AgentBackend:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    def install(
+        self, config: EdgeConfig, robot_types: Sequence[RobotTypeSpec], mappings: Sequence[MappingSpec]
+    ) -> None:
+        # EdgeAgent.reload builds its own specs from ``config`` (robot_types/mappings are the same
+        # declarations); it swaps the table atomically and refreshes the subscriptions.
+        del robot_types, mappings
+        self.agent.reload(config)
+
+    def mapping_table(self) -> MappingTable:
+        return self.agent.table
+
+    def topics(self) -> Mapping[str, TopicInfo]:
+        return {} if self._graph is None else self._graph.topics()
+
+    def robots(self) -> Sequence[RobotStatus]:
+        return [RobotStatus(robot=r, robot_type=t) for r, t in sorted(self.agent.robots().items())]
+
+    def snapshot(self) -> EdgeSnapshot:
+        return snapshot_from_agent(self.agent.snapshot(), self.agent.config)

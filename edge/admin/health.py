@@ -1,0 +1,64 @@
+"""The edge's health from a snapshot (pure): which mappings are degraded and why.
+
+Rules (thresholds in ``HealthRules``):
+
+- failed: the agent reports a failure (spool unwritable, a worker stopped);
+- degraded, per mapping: the runtime reports an issue (``unknown_type``, ``setup``), or the
+  mapping dead-lettered records in the last minute (``dead_letters``);
+- degraded, per buffer: filled over 80 % of its capacity (``spool_filling``), or appenders are
+  blocked waiting for room (``spool_full``);
+- degraded: the WAN link is down (``wan_down``: records are held in the buffers).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from edge.admin.backend import EdgeSnapshot
+from fleetlink.metrics.health import Health, Problem
+
+
+@dataclass(frozen=True, slots=True)
+class HealthRules:
+    spool_fill: float = 0.8
+    dead_letter_window_s: float = 60.0
+
+
+def assess(
+    snapshot: EdgeSnapshot,
+    recent_dead_letters: Mapping[str, int],
+    *,
+    now_ms: int,
+    robots: int,
+    rules: HealthRules | None = None,
+) -> Health:
+    rules = rules or HealthRules()
+    problems: list[Problem] = []
+    if snapshot.failure:
+        problems.append(Problem("process", "edge", "failed", snapshot.failure, severity="failed"))
+    for mapping in sorted(snapshot.issues):
+        for issue in snapshot.issues[mapping]:
+            problems.append(Problem("mapping", mapping, issue.reason, issue.detail))
+    window = f"{rules.dead_letter_window_s:g} s"
+    for mapping, count in sorted(recent_dead_letters.items()):
+        if count > 0:
+            problems.append(Problem("mapping", mapping, "dead_letters",
+                                    f"{count} record(s) dead-lettered in the last {window}"))
+    fill: dict[str, float] = {}
+    for buffer in snapshot.buffers:
+        stats = buffer.stats
+        ratio = stats.bytes / buffer.capacity_bytes if buffer.capacity_bytes > 0 else 0.0
+        fill[stats.stream] = round(ratio, 4)
+        if stats.blocked_appenders > 0:
+            problems.append(Problem("spool", stats.stream, "spool_full",
+                                    f"{stats.blocked_appenders} appender(s) wait for room"))
+        elif ratio >= rules.spool_fill:
+            problems.append(Problem("spool", stats.stream, "spool_filling",
+                                    f"{ratio:.0%} of {buffer.capacity_bytes} bytes used; the oldest "
+                                    f"record is {stats.oldest_age_ms(now_ms) / 1000:.1f} s old"))
+    if snapshot.wan_link_up is False:
+        held = sum(b.stats.depth for b in snapshot.buffers)
+        problems.append(Problem("wan", "uplink", "wan_down",
+                                f"the uplink does not answer; {held} record(s) held in the buffers"))
+    return Health.of(problems, spool_fill=fill, wan_link_up=snapshot.wan_link_up, robots=robots)

@@ -1,0 +1,165 @@
+"""The admin operations, shared by the HTTP API and the Zenoh admin space.
+
+``AdminService`` holds the config file's data, the current overlay and the effective config.
+A change is computed (``edge.admin.changes``, validated as a whole), saved (overlay file,
+atomically), then installed in the running edge (``AdminBackend.install``, one atomic swap of
+the mapping table). If installing fails the previous overlay file is put back, so the file
+and the running edge never disagree. Changes are serialised by a lock.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Literal
+
+from edge.admin import changes
+from edge.admin.backend import AdminBackend, EdgeSnapshot
+from edge.admin.errors import FieldProblem, InvalidChangeError, NotFoundError
+from edge.admin.listing import dry_run_matches, mapping_views, robot_views, topic_views
+from edge.admin.overlay import Overlay, config_data
+from edge.admin.specs import declarations
+from edge.admin.store import OverlayStore
+from edge.admin.telemetry import EdgeTelemetry
+from edge.admin.views import ChangeView, DryRunView, MappingView, RobotTypeView, RobotView, TopicView
+from edge.config import EdgeConfig
+from edge.errors import MappingError
+from fleetlink.metrics import Health, NullMetrics
+
+log = logging.getLogger(__name__)
+
+DRY_RUN_NAME = "dry-run"
+
+
+class AdminService:
+    def __init__(
+        self,
+        base: EdgeConfig,
+        backend: AdminBackend,
+        *,
+        overlay: Overlay | None = None,
+        store: OverlayStore | None = None,
+        telemetry: EdgeTelemetry | None = None,
+    ) -> None:
+        self._base = config_data(base)
+        self._overlay = overlay if overlay is not None else Overlay()
+        self._config = changes.effective(self._base, self._overlay)
+        self.backend = backend
+        self.store = store
+        self.telemetry = telemetry if telemetry is not None else EdgeTelemetry(NullMetrics())
+        self._lock = threading.RLock()
+        self.changes = 0
+
+    @property
+    def site(self) -> str:
+        return self._config.site
+
+    @property
+    def config(self) -> EdgeConfig:
+        """The effective config: the config file with the admin changes applied."""
+        return self._config
+
+    @property
+    def overlay(self) -> Overlay:
+        return self._overlay
+
+    # -- reads -----------------------------------------------------------------------------------
+    def mappings(self) -> list[MappingView]:
+        with self._lock:
+            config, overlay = self._config, self._overlay
+        return mapping_views(config, overlay, self.backend.mapping_table(), self._snapshot())
+
+    def mapping(self, name: str) -> MappingView:
+        found = [view for view in self.mappings() if view.name == name]
+        if not found:
+            raise NotFoundError(f"no mapping named {name!r}")
+        return found[0]
+
+    def robot_types(self) -> list[RobotTypeView]:
+        with self._lock:
+            config, overlay = self._config, self._overlay
+        robots = self.backend.mapping_table().robots()
+        return [RobotTypeView(name=name, match=rt.match, mappings=[m.name for m in rt.mappings],
+                              robots=sorted(r for r, t in robots.items() if t == name),
+                              origin="admin" if name in overlay.robot_types else "config")
+                for name, rt in config.robot_types.items()]
+
+    def robots(self) -> list[RobotView]:
+        return robot_views(self.backend.robots())
+
+    def topics(self) -> list[TopicView]:
+        return topic_views(self.backend.topics(), self.backend.mapping_table())
+
+    def dry_run(self, body: Any) -> DryRunView:
+        """Which discovered topics the mapping in ``body`` would match now (nothing is changed)."""
+        if isinstance(body, dict) and "name" not in body:
+            body = {**body, "name": DRY_RUN_NAME}
+        with self._lock:
+            config, name = changes.candidate_mapping(self._base, self._overlay, body)
+        return dry_run_matches(config, name, self.backend.topics(), self.backend.mapping_table())
+
+    def health(self) -> Health:
+        return self.telemetry.observe(self._snapshot(), robots=len(self.backend.mapping_table().robots()))
+
+    def refresh_metrics(self) -> None:
+        self.health()
+
+    # -- changes ---------------------------------------------------------------------------------
+    def add_mapping(self, body: Any) -> ChangeView:
+        with self._lock:
+            proposal = changes.add_mapping(self._base, self._overlay, body)
+            name = str(body["name"])
+            return self._commit(proposal, "mapping", name, "created")
+
+    def change_mapping(self, name: str, body: Any) -> ChangeView:
+        with self._lock:
+            proposal = changes.change_mapping(self._base, self._overlay, name, body)
+            return self._commit(proposal, "mapping", name, "changed")
+
+    def remove_mapping(self, name: str) -> ChangeView:
+        with self._lock:
+            proposal = changes.remove_mapping(self._base, self._overlay, name)
+            return self._commit(proposal, "mapping", name, "removed")
+
+    def put_robot_type(self, name: str, body: Any) -> ChangeView:
+        with self._lock:
+            proposal = changes.put_robot_type(self._base, self._overlay, name, body)
+            return self._commit(proposal, "robot_type", name, "created" if proposal.created else "changed")
+
+    def remove_robot_type(self, name: str) -> ChangeView:
+        with self._lock:
+            proposal = changes.remove_robot_type(self._base, self._overlay, name)
+            return self._commit(proposal, "robot_type", name, "removed")
+
+    def _commit(
+        self,
+        proposal: changes.Proposal,
+        kind: Literal["mapping", "robot_type"],
+        name: str,
+        status: Literal["created", "changed", "removed"],
+    ) -> ChangeView:
+        previous = self._overlay
+        if self.store is not None:
+            self.store.save(proposal.overlay)
+        try:
+            robot_types, mappings = declarations(proposal.config, self.backend.mapping_table())
+            self.backend.install(proposal.config, robot_types, mappings)
+        except MappingError as exc:
+            self._restore(previous)
+            problem = FieldProblem(path="<root>", message=str(exc))
+            raise InvalidChangeError("the mapping table refused the change", (problem,)) from exc
+        except BaseException:
+            self._restore(previous)
+            raise
+        self._overlay, self._config = proposal.overlay, proposal.config
+        self.changes += 1
+        log.info("admin: %s %s %s", kind, name, status)
+        return ChangeView(status=status, kind=kind, name=name,
+                          overlay=str(self.store.path) if self.store is not None else None)
+
+    def _restore(self, previous: Overlay) -> None:
+        if self.store is not None:
+            self.store.save(previous)
+
+    def _snapshot(self) -> EdgeSnapshot:
+        return self.backend.snapshot()

@@ -1,0 +1,129 @@
+"""Response shapes of the admin API (documented in the OpenAPI document)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class _View(BaseModel):
+    model_config = ConfigDict(populate_by_name=True)
+
+
+class ProblemView(_View):
+    path: str = Field(description="where in the request body, e.g. 'stages[1].hz' ('<root>': the body)")
+    message: str
+    config_path: str | None = Field(
+        default=None,
+        description="the same place in the effective edge config, e.g. 'mappings[3].stages[1].hz'",
+    )
+
+
+class ErrorView(_View):
+    status: int
+    error: str
+    problems: list[ProblemView] = []
+
+
+class MappingCountersView(_View):
+    received: int = 0
+    emitted: int = 0
+    dropped: int = 0
+    dead_lettered: int = 0
+    type_mismatch: int = 0
+
+
+class StageView(_View):
+    name: str
+    type: str
+    received: int = 0
+    passed: int = 0
+    dropped: int = 0
+    late: int = 0
+    errors: int = 0
+    emitted: int = 0
+
+
+class IssueView(_View):
+    reason: str
+    detail: str
+
+
+class MappingView(_View):
+    name: str
+    robot_type: str | None = Field(description="the robot type whose template this is; null: site-level")
+    origin: Literal["config", "admin"] = Field(
+        description="from the config file, or added/changed at runtime")
+    source: str = Field(alias="from")
+    to: str
+    key: str | None
+    type: str | None
+    delivery: str
+    stages: list[dict[str, Any]] = Field(description="the stage list as in the config file")
+    robots: list[str] = Field(description="robots this robot-type mapping is instantiated for")
+    counters: MappingCountersView
+    stage_counters: list[StageView]
+    issues: list[IssueView] = []
+
+
+class RobotView(_View):
+    robot: str
+    robot_type: str
+    registered_at: float | None = Field(description="seconds since the epoch; null when not known")
+    registered_since: str | None = Field(description="the same as ISO 8601 UTC text")
+    state: Literal["registered", "lost"]
+    explicit: bool
+
+
+class PublisherView(_View):
+    node: str
+    type: str
+    type_hash: str
+
+
+class TopicMatchView(_View):
+    mapping: str
+    robot: str | None
+    kafka_topic: str = Field(description="the Kafka topic, or its template when it reads message fields")
+    key: str
+
+
+class TopicView(_View):
+    topic: str
+    types: list[str]
+    publishers: list[PublisherView]
+    subscribers: int
+    mappings: list[TopicMatchView]
+
+
+class RobotTypeView(_View):
+    name: str
+    match: str
+    mappings: list[str]
+    robots: list[str]
+    origin: Literal["config", "admin"]
+
+
+class DryRunMatchView(_View):
+    topic: str
+    types: list[str]
+    robot: str | None
+    registered: bool = Field(description="false: the robot is in the graph but not registered (yet)")
+    kafka_topic: str
+    key: str
+    type_ok: bool = Field(
+        description="false: the topic's type differs from the mapping's 'type' (not mapped)")
+
+
+class DryRunView(_View):
+    mapping: str
+    robot_type: str | None
+    matches: list[DryRunMatchView]
+
+
+class ChangeView(_View):
+    status: Literal["created", "changed", "removed"]
+    kind: Literal["mapping", "robot_type"]
+    name: str
+    overlay: str | None = Field(description="the file the change was saved to (null: not persisted)")

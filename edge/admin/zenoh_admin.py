@@ -1,0 +1,105 @@
+"""The admin API over Zenoh: one queryable on ``fleetlink/<site>/admin/**`` (see ``edge.admin.space``).
+
+Queries are answered off the Zenoh callback thread (a small pool), each reply on a concrete
+key. With an admin token configured, a query must carry ``Bearer <token>`` as its attachment
+(401 otherwise); the WAN link's mutual TLS and per-site ACLs decide who can reach the key at all.
+"""
+
+from __future__ import annotations
+
+import logging
+from concurrent.futures import ThreadPoolExecutor
+from types import TracebackType
+from typing import Any
+
+import zenoh
+from pydantic import SecretStr
+
+from edge.admin.auth import authorized
+from edge.admin.listing import declared
+from edge.admin.service import AdminService
+from edge.admin.space import Target, envelope, execute, parse_body, targets
+from fleetlink.wan.keys import admin_key
+
+log = logging.getLogger(__name__)
+
+
+class ZenohAdmin:
+    def __init__(
+        self, session: zenoh.Session, service: AdminService, *, edge_id: str, token: SecretStr | None = None
+    ) -> None:
+        self.session = session
+        self.service = service
+        self.edge_id = edge_id
+        self.token = token
+        self.key = admin_key(service.site)
+        self._queryable: Any = None
+        self._pool: ThreadPoolExecutor | None = None
+        self.answered = 0
+
+    def start(self) -> ZenohAdmin:
+        if self._queryable is not None:
+            return self
+        self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="edge-admin-zenoh")
+        self._queryable = self.session.declare_queryable(self.key, self._on_query)
+        log.info("admin queries served on %s", self.key)
+        return self
+
+    def stop(self) -> None:
+        if self._queryable is not None:
+            self._queryable.undeclare()
+            self._queryable = None
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def __enter__(self) -> ZenohAdmin:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        pool = self._pool
+        if pool is None:
+            query.drop()
+            return
+        pool.submit(self._answer, query)
+
+    def _answer(self, query: zenoh.Query) -> None:
+        try:
+            key = str(query.key_expr)
+            payload = query.payload.to_bytes() if query.payload is not None else None
+            attachment = query.attachment.to_bytes() if query.attachment is not None else None
+            op = query.parameters.get("op")
+            names = self._names
+            found = targets(self.service.site, key, op, bool(payload), names)
+            if not found:
+                return
+            if not authorized(self.token, attachment):
+                self._reply(query, Target(found[0].key, ""), 401,
+                            {"error": "missing or wrong admin token (attachment 'Bearer <token>')",
+                             "problems": []})
+                return
+            body, problem = parse_body(payload)
+            for target in found:
+                if problem is not None:
+                    self._reply(query, target, 400, {"error": problem, "problems": []})
+                    continue
+                status, part = execute(self.service, target, body)
+                self._reply(query, target, status, part)
+        except Exception as exc:  # noqa: BLE001 - one bad query must not kill the pool worker silently
+            log.warning("admin query on %s failed: %r", query.key_expr, exc)
+        finally:
+            query.drop()
+
+    def _names(self, resource: str) -> list[str]:
+        if resource == "mappings":
+            return [m.name for m, _ in declared(self.service.config)]
+        return list(self.service.config.robot_types)
+
+    def _reply(self, query: zenoh.Query, target: Target, status: int, part: Any) -> None:
+        query.reply(target.key, envelope(status, part, site=self.service.site, edge_id=self.edge_id))
+        self.answered += 1
