@@ -17,6 +17,7 @@ from fleetlink.errors import FleetlinkError
 
 # Modules that add subcommands, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
+    "fleetlink.demo.cli",
     "fleetlink.validate_cli",
     "fleetlink.stack_cli",
     "roswire.cli",

@@ -1,0 +1,298 @@
+"""Start everything the demo needs, play the scenario, tell what happens, stop it all.
+
+Kafka and the registry (unless given), two Zenoh routers (the cloud's and the site's), the
+uplink, the edge agent and the repeater as their own processes (``fleetlink ... run``), the
+fault-detection app and the simulated robots in this process, so their events can be told as
+they happen.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import shutil
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import yaml
+
+from fleetlink.demo.configs import (
+    COMMAND_TOPIC,
+    REGISTRATIONS_TOPIC,
+    SENSOR_TOPICS,
+    DemoPlaces,
+    edge_config,
+    repeater_config,
+    uplink_config,
+)
+from fleetlink.demo.story import Story, led_colour
+from fleetlink.demo.watch import TopicWatcher
+from fleetlink.errors import FleetlinkError
+from fleetlink.localstack.process import ServerProcess, log_tail
+from fleetlink.localstack.stack import LocalStack
+from fleetlink.localstack.zenoh_router import ZenohRouter
+
+
+class DemoError(FleetlinkError):
+    """The demo could not reach a step; the message says which and where its logs are."""
+
+
+@dataclass
+class DemoOptions:
+    workdir: Path = Path("var/demo")
+    robots: int = 3
+    rate_hz: float = 10.0
+    window: str = "2s"
+    bootstrap: str | None = None
+    registry_url: str | None = None
+    keep_running: bool = False
+    duration_s: float | None = None
+    step_timeout_s: float = 90.0
+    out: TextIO = field(default=sys.stdout)
+
+
+class Demo:
+    def __init__(self, options: DemoOptions) -> None:
+        self.o = options
+        self.story = Story(started_at=time.monotonic())
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._exit = contextlib.ExitStack()
+        self._since_ms = time.time_ns() // 1_000_000 - 1_000
+
+    # -- telling ---------------------------------------------------------------------------
+
+    def say(self, text: str) -> None:
+        with self._lock:
+            print(f"{self.story.at(time.monotonic())} {text}", file=self.o.out, flush=True)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    # -- the whole run ---------------------------------------------------------------------
+
+    def run(self) -> dict[str, Any]:
+        with self._exit:
+            places = self._start_infrastructure()
+            self._start_services(places)
+            self._start_watchers(places)
+            self._start_app(places)
+            summary = self._scenario(places)
+            (self.o.workdir / "summary.json").write_text(json.dumps(summary, indent=2))
+            if self.o.keep_running and not self._stop.is_set():
+                self.say("the loop is closed; still running — Ctrl-C stops everything")
+                self._wait(self.o.duration_s)
+            self.say("stopping everything the demo started ...")
+        self.say("stopped")
+        return summary
+
+    def _start_infrastructure(self) -> DemoPlaces:
+        work = self.o.workdir
+        if work.exists():
+            shutil.rmtree(work)
+        (work / "logs").mkdir(parents=True)
+        if self.o.bootstrap and self.o.registry_url:
+            bootstrap, registry = self.o.bootstrap, self.o.registry_url
+            self.say(f"using Kafka {bootstrap} and registry {registry}")
+        else:
+            self.say("starting Apache Kafka (KRaft) and Apicurio Registry (first run fetches their jars) ...")
+            stack = LocalStack(work / "stack")
+            info = stack.start()
+            self._exit.callback(stack.stop)
+            bootstrap, registry = info.bootstrap, info.registry_url
+            self.say(f"Kafka up in {info.kafka_seconds:.1f} s at {bootstrap}; "
+                     f"registry up in {info.registry_seconds:.1f} s at {registry}")
+        cloud = self._exit.enter_context(ZenohRouter())
+        site = self._exit.enter_context(ZenohRouter(connect=(cloud.endpoint,)))
+        self.say(f"Zenoh routers: cloud {cloud.endpoint}, site warehouse-a {site.endpoint} (linked)")
+        from schemas.bundled import bundled_message_paths
+
+        return DemoPlaces(bootstrap, registry, cloud.endpoint, site.endpoint, work,
+                          tuple(bundled_message_paths()))
+
+    def _process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
+        log = self.o.workdir / "logs" / f"{name}.log"
+        proc = ServerProcess(name=name, argv=[sys.executable, "-m", "fleetlink", *argv], log_path=log,
+                             pid_path=self.o.workdir / f"{name}.pid", ready=ready)
+        took = proc.start(timeout=self.o.step_timeout_s)
+        self._exit.callback(proc.stop)
+        self.say(f"{name} running ({took:.1f} s; log: {log})")
+
+    def _start_services(self, places: DemoPlaces) -> None:
+        work = self.o.workdir
+        files = {}
+        for name, config in (("uplink", uplink_config(places)), ("edge", edge_config(places)),
+                             ("repeater", repeater_config(places))):
+            files[name] = work / f"{name}.yaml"
+            files[name].write_text(yaml.safe_dump(config, sort_keys=False))
+        logs = work / "logs"
+        self._process("uplink", ["uplink", "run", "-c", str(files["uplink"])],
+                      lambda: "uplink running" in _read(logs / "uplink.log"))
+        stats = work / "edge-stats.json"
+        self._process("edge", ["edge", "run", "-c", str(files["edge"]), "--stats-file", str(stats)],
+                      stats.exists)
+        self._process("repeater", ["repeater", "run", "-c", str(files["repeater"])],
+                      lambda: "running for site" in _read(logs / "repeater.log"))
+
+    def _start_watchers(self, places: DemoPlaces) -> None:
+        def on_registration(_topic: str, key: bytes | None, value: dict[str, Any] | None, _m: Any) -> None:
+            robot = (key or b"").decode(errors="replace")
+            event = (value or {}).get("event", "?")
+            if event == "registered" and robot not in self.story.registered:
+                self.story.registered[robot] = time.monotonic()
+                self.say(f"robot {robot} registered ({(value or {}).get('robot_type', '?')}): "
+                         "its mappings are live")
+            elif event == "deregistered":
+                self.say(f"robot {robot} deregistered ({(value or {}).get('reason', '')})")
+
+        def on_command(_topic: str, key: bytes | None, value: dict[str, Any] | None, _m: Any) -> None:
+            robot = (key or b"").decode(errors="replace")
+            colour = led_colour(value)
+            self.story.on_command(robot, colour)
+            self.say(f"command in Kafka  {COMMAND_TOPIC}  {robot} ← light ring {colour}")
+
+        for topics, decode, handler in (
+            ([REGISTRATIONS_TOPIC], True, on_registration),
+            ([COMMAND_TOPIC], True, on_command),
+        ):
+            watcher = TopicWatcher(places.bootstrap, places.registry_url, topics, decode=decode,
+                                   on_record=handler, since_ms=self._since_ms).start()
+            self._exit.callback(watcher.stop)
+        self._flow = TopicWatcher(places.bootstrap, places.registry_url, SENSOR_TOPICS, decode=False,
+                                  on_record=lambda *_: None, since_ms=self._since_ms).start()
+        self._exit.callback(self._flow.stop)
+        ticker = threading.Thread(target=self._tell_rates, name="demo-rates", daemon=True)
+        ticker.start()
+
+    def _tell_rates(self) -> None:
+        last: dict[str, int] = {}
+        every = 10.0
+        while not self._stop.wait(every):
+            counts = dict(self._flow.counts)
+            rates = {t: (counts.get(t, 0) - last.get(t, 0)) / every for t in SENSOR_TOPICS}
+            last = counts
+            if any(rates.values()):
+                self.say("records/s in Kafka: " + ", ".join(f"{t} {r:.0f}" for t, r in rates.items()))
+
+    def _start_app(self, places: DemoPlaces) -> None:
+        from examples.fault_detection.app import run as run_app
+        from examples.fault_detection.rules import LightCommand
+        from examples.fault_detection.settings import FaultDetectionSettings, parse_duration_ms
+
+        settings = FaultDetectionSettings(
+            bootstrap=places.bootstrap, registry_url=places.registry_url,
+            window_ms=parse_duration_ms(self.o.window), state_dir=places.workdir / "app-state",
+            # a fresh consumer group per run: on a shared Kafka, earlier runs' records are not replayed
+            group=f"fleetlink-demo-{uuid.uuid4().hex[:8]}", offset_reset="latest",
+            msg_paths=places.msg_paths,
+        )
+        stop = threading.Event()
+
+        def decided(command: LightCommand) -> None:
+            state = getattr(command.state, "value", command.state)
+            self.say(f"fault detection: {command.robot} is now {state} (every event in its window agreed)")
+
+        thread = threading.Thread(target=run_app, args=(settings, stop, decided), name="fault-app",
+                                  daemon=True)
+        thread.start()
+
+        def stop_app() -> None:
+            stop.set()
+            thread.join(15)
+
+        self._exit.callback(stop_app)
+        self.say(f"fault-detection app running (Quix Streams; sliding window {self.o.window} per robot)")
+
+    # -- the scenario ----------------------------------------------------------------------
+
+    def _scenario(self, places: DemoPlaces) -> dict[str, Any]:
+        from fleetlink.zenoh_options import ZenohOptions
+        from roswire.session import ros_session_config
+        from roswire.sim.fleet import Fleet
+        from schemas.typestore import load_typestore
+
+        ts = load_typestore("jazzy", list(places.msg_paths))
+
+        def on_led(robot: str, state: Any) -> None:
+            colour = str(state.name).lower()
+            if self.story.on_led(robot, colour, time.monotonic()):
+                self.say(f"robot {robot} light ring is now {colour.upper()}")
+
+        config = ros_session_config(ZenohOptions(mode="client", connect=(places.site_router,)))
+        fleet = self._exit.enter_context(
+            Fleet(config, ts, robots=self.o.robots, rate=self.o.rate_hz, on_led=on_led))
+        names = fleet.names()
+        self.say(f"simulated TurtleBot 4 fleet up: {', '.join(names)} (IR, hazards, kidnap, odom, imu, "
+                 f"battery at {self.o.rate_hz:g} Hz; each listens on cmd_lightring)")
+        self._until(lambda: set(names) <= set(self.story.registered), "every robot registered")
+        self._until(lambda: all(self._flow.counts.get(t, 0) > 0 for t in SENSOR_TOPICS),
+                    "records flowing into every sensor topic")
+        self.say("sensor data is flowing: " + ", ".join(SENSOR_TOPICS))
+
+        healthy, faulted = names[0], names[1 % len(names)]
+        self.say(f"glitch: one spurious 'picked up' reading on {healthy} (shorter than the window)")
+        fleet.inject_fault(healthy)
+        self._wait(0.15)
+        fleet.heal(healthy)
+
+        joined = fleet.add_robot()
+        self.say(f"robot {joined} joins the site")
+        self._until(lambda: joined in self.story.registered, f"{joined} registered")
+        self._wait(3.0)
+
+        self.say(f"FAULT: {faulted} is picked up (kidnap status true, IR readings saturated)")
+        self.story.faults[faulted] = time.monotonic()
+        fleet.inject_fault(faulted)
+        self._until(lambda: self.story.led_now(faulted) == "red", f"{faulted} light ring red")
+        self.say(f"loop closed: fault → red light ring in {self.story.latencies[f'{faulted}:red']:.1f} s")
+        self._wait(3.0)
+        self.say(f"HEAL: {faulted} is put down")
+        self.story.heals[faulted] = time.monotonic()
+        fleet.heal(faulted)
+        self._until(lambda: self.story.led_now(faulted) == "green", f"{faulted} light ring green")
+        took = self.story.latencies[f"{faulted}:green"]
+        self.say(f"recovered: put down → green light ring in {took:.1f} s")
+        self._wait(5.0)  # let any unexpected command show up before judging
+        others = [n for n in fleet.names() if n != faulted]
+        summary = self.story.summary(faulted, others, joined)
+        self.say("summary: " + json.dumps(summary))
+        return summary
+
+    def _until(self, predicate: Callable[[], bool], what: str) -> None:
+        deadline = time.monotonic() + self.o.step_timeout_s
+        while not predicate():
+            if self._stop.is_set():
+                raise DemoError(f"interrupted while waiting for: {what}")
+            if time.monotonic() > deadline:
+                logs = self.o.workdir / "logs"
+                tails = "\n".join(f"--- {p.name}\n{log_tail(p, 8)}" for p in sorted(logs.glob("*.log")))
+                raise DemoError(f"gave up after {self.o.step_timeout_s:.0f} s waiting for: {what}\n{tails}")
+            self._stop.wait(0.1)
+
+    def _wait(self, seconds: float | None) -> None:
+        self._stop.wait(seconds)
+
+
+def _read(path: Path) -> str:
+    try:
+        return path.read_text(errors="replace")
+    except OSError:
+        return ""
+
+
+@contextlib.contextmanager
+def interrupted_on_sigint(demo: Demo) -> Iterator[None]:
+    import signal
+
+    previous = {s: signal.signal(s, lambda *_: demo.stop()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -1,0 +1,78 @@
+"""Kafka-side observers for the demo: records per topic, robot registrations, commands."""
+
+from __future__ import annotations
+
+import threading
+import uuid
+from collections import Counter
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from confluent_kafka import Consumer, KafkaException, Message
+from confluent_kafka.schema_registry import SchemaRegistryClient
+from confluent_kafka.schema_registry.avro import AvroDeserializer
+from confluent_kafka.serialization import MessageField, SerializationContext
+
+Handler = Callable[[str, bytes | None, dict[str, Any] | None, Message], None]
+
+
+class TopicWatcher:
+    """Consumes ``topics`` in a thread, skipping records stamped before ``since_ms``;
+    decodes Avro values if asked."""
+
+    def __init__(
+        self,
+        bootstrap: str,
+        registry_url: str,
+        topics: Sequence[str],
+        *,
+        decode: bool,
+        on_record: Handler,
+        since_ms: int = 0,
+    ) -> None:
+        self._conf = {
+            "bootstrap.servers": bootstrap,
+            "group.id": f"fleetlink-demo-{uuid.uuid4().hex[:8]}",
+            "auto.offset.reset": "earliest",
+            "enable.auto.commit": False,
+            "topic.metadata.refresh.interval.ms": 1000,
+        }
+        self._topics = list(topics)
+        self._deserializer = AvroDeserializer(SchemaRegistryClient({"url": registry_url})) if decode else None
+        self._on_record = on_record
+        self._since_ms = since_ms
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.counts: Counter[str] = Counter()
+        self.assigned = threading.Event()
+
+    def start(self) -> TopicWatcher:
+        self._thread = threading.Thread(target=self._run, name="demo-watch", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(10)
+
+    def _run(self) -> None:
+        consumer = Consumer(self._conf)
+        consumer.subscribe(self._topics, on_assign=lambda _c, _p: self.assigned.set())
+        try:
+            while not self._stop.is_set():
+                msg = consumer.poll(0.2)
+                if msg is None or msg.error() or msg.timestamp()[1] < self._since_ms:
+                    continue  # records from before this run (a shared Kafka) are not ours
+                topic = msg.topic() or ""
+                self.counts[topic] += 1
+                value = None
+                if self._deserializer is not None and msg.value():
+                    try:
+                        context = SerializationContext(topic, MessageField.VALUE)
+                        value = self._deserializer(msg.value(), context)
+                    except (KafkaException, ValueError, TypeError):
+                        value = None
+                self._on_record(topic, msg.key(), value, msg)
+        finally:
+            consumer.close()

@@ -1,0 +1,31 @@
+"""The warehouse demo end to end (issue 8): fault → one red command, heal → one green, nothing else."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+from fleetlink.demo.runner import Demo, DemoOptions
+
+
+def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
+    out = io.StringIO()
+    demo = Demo(DemoOptions(workdir=tmp_path / "demo", robots=3, bootstrap=kafka_bootstrap,
+                            registry_url=schema_registry_url, out=out, step_timeout_s=60))
+    summary = demo.run()
+    told = out.getvalue()
+
+    faulted = summary["faulted_robot"]
+    # exactly one "failure" command after the fault and one "recovered" command after healing
+    assert summary["commands"] == {faulted: ["red", "green"]}, told
+    # healthy robots (one of them had a single spurious failure reading) received none
+    assert set(summary["healthy_robots_without_commands"]) == {"tb4_01", "tb4_03", "tb4_04"}
+    assert "glitch: one spurious" in told
+    # a robot joining during the run was picked up without restarting anything
+    assert summary["joined_mid_run"] == "tb4_04"
+    assert "tb4_04" in summary["registered"]
+    assert summary["loop_closed"] is True
+    assert 0 < summary["fault_to_red_led_s"] < 30
+    assert 0 < summary["heal_to_green_led_s"] < 30
+    assert (tmp_path / "demo" / "summary.json").exists()
+    assert "stopped" in told.splitlines()[-1]
