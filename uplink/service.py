@@ -23,6 +23,7 @@ from schemas.registry import SchemaRegistry
 from uplink.commands.router import CommandRouter
 from uplink.config import UplinkConfig
 from uplink.ingest import BatchJob, IngestStats
+from uplink.ordered import KeyedSerialExecutor
 from uplink.producer import KafkaSink
 from uplink.schema_ids import SchemaIds
 from uplink.topics import ensure_topics
@@ -41,6 +42,7 @@ class Uplink:
         self._registry: SchemaRegistry | None = None
         self._ids: SchemaIds | None = None
         self._pool: ThreadPoolExecutor | None = None
+        self._serial: KeyedSerialExecutor | None = None
         self._commands: CommandRouter | None = None
         self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
         self._limiter = LogLimiter(log)
@@ -57,6 +59,7 @@ class Uplink:
         self._ids = SchemaIds(self._registry, compatibility=cfg.registry.compatibility)
         self._sink = KafkaSink(cfg.kafka).start()
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uplink-batch")
+        self._serial = KeyedSerialExecutor(self._pool)
         self._session = zenoh.open(self._zenoh_options.to_config())
         for site in cfg.ingest.sites:
             key = f"fleetlink/{site}/ingest/*"
@@ -125,8 +128,8 @@ class Uplink:
             )))
             query.drop()
             return
-        sink, ids, pool = self._sink, self._ids, self._pool
-        if sink is None or ids is None or pool is None:
+        sink, ids, serial = self._sink, self._ids, self._serial
+        if sink is None or ids is None or serial is None:
             self._slots.release()
             query.reply_err(b"uplink stopping")
             query.drop()
@@ -145,4 +148,5 @@ class Uplink:
 
         job = BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
                        on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max)
-        pool.submit(job.run)
+        # one stream's batches are produced in arrival order, so a robot's records keep their order
+        serial.submit((batch.site, batch.edge_id, batch.stream), job.run)

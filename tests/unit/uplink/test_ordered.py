@@ -1,0 +1,46 @@
+"""Jobs of one key run in arrival order, one at a time; other keys are not held up."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
+
+from uplink.ordered import KeyedSerialExecutor
+
+
+def test_one_key_runs_in_order_and_never_concurrently() -> None:
+    ran: list[int] = []
+    active = 0
+    overlap = False
+    guard = threading.Lock()
+
+    def job(i: int) -> None:
+        nonlocal active, overlap
+        with guard:
+            active += 1
+            overlap = overlap or active > 1
+        ran.append(i)
+        with guard:
+            active -= 1
+
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        serial = KeyedSerialExecutor(pool)
+        for i in range(2000):
+            serial.submit("edge-1/durable", partial(job, i))
+    assert ran == list(range(2000))
+    assert not overlap
+
+
+def test_a_blocked_key_does_not_hold_up_another() -> None:
+    release = threading.Event()
+    other_done = threading.Event()
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        serial = KeyedSerialExecutor(pool)
+        def blocked() -> None:
+            release.wait(10)
+
+        serial.submit("a", blocked)
+        serial.submit("b", other_done.set)
+        assert other_done.wait(5)
+        release.set()
