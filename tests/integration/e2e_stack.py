@@ -120,6 +120,20 @@ def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float) -> No
         raise AssertionError(f"{exc}; edge: {json.dumps(brief, default=str)}") from None
 
 
+def wait_received(agent: EdgeAgent, samples: int, timeout: float) -> None:
+    """Wait until the edge's processor has taken ``samples`` samples (with the subscriptions'
+    counters in the failure message)."""
+    def done() -> bool:
+        return bool(agent.snapshot()["processor"]["samples"] >= samples)
+
+    try:
+        wait_until(done, timeout, interval=0.05, message=f"{samples} samples received")
+    except AssertionError as exc:
+        snap = agent.snapshot()
+        raise AssertionError(f"{exc}; processor {snap['processor']}, intake {snap['intake']}, "
+                             f"subscriptions {json.dumps(snap['subscriptions'])}") from None
+
+
 class TopicReader:
     """Reads Kafka topics from the beginning, decoding values with the stock AvroDeserializer."""
 
@@ -144,6 +158,24 @@ class TopicReader:
             wait_until(enough, timeout, interval=0.0, message=f"{count} records on {topic} (got {len(out)})")
             extra = [m for m in consumer.consume(1000, timeout=1.0) if m.error() is None]
             out.extend(extra)
+        finally:
+            consumer.close()
+        return out
+
+    def read_until(self, topic: str, done: Callable[[list[Message]], bool], timeout: float = 30.0,
+                   what: str = "") -> list[Message]:
+        """Records of a one-partition topic from the beginning until ``done(records)`` holds."""
+        consumer = Consumer({"bootstrap.servers": self.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}",
+                             "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 500})
+        out: list[Message] = []
+        try:
+            consumer.assign([TopicPartition(topic, 0, 0)])
+
+            def enough() -> bool:
+                out.extend(m for m in consumer.consume(1000, timeout=0.2) if m.error() is None)
+                return done(out)
+
+            wait_until(enough, timeout, interval=0.0, message=what or f"records on {topic}")
         finally:
             consumer.close()
         return out

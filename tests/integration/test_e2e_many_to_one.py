@@ -29,6 +29,7 @@ from tests.integration.e2e_stack import (
     seqs,
     site,
     unique_site,
+    wait_received,
     wait_spooled_and_acked,
 )
 from tests.unit.schemas.ros_values import avro_shaped, same
@@ -64,6 +65,7 @@ def test_three_robots_many_to_one(kafka_bootstrap: str, schema_registry_url: str
                 for run in runs:
                     run.join(60)
                 assert [r.stats.total for r in robots] == [len(expected[r]) for r in ("r1", "r2", "r3")]
+                wait_received(agent, total, timeout=20)
                 wait_spooled_and_acked(agent, total, timeout=40)
             finally:
                 for rep in robots:

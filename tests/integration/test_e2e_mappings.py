@@ -1,0 +1,162 @@
+"""One-to-one, one-to-many (a message field in the topic template) and many-to-many, end to end.
+
+robots (real bags, or a String publisher) -> site router -> edge agent -> cloud router -> uplink
+-> Kafka; every record is read back with the stock AvroDeserializer.
+"""
+
+from __future__ import annotations
+
+import threading
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from edge.agent import EdgeAgent
+from roswire import cdr
+from roswire.node import RosNode
+from schemas.typestore import load_typestore
+from tests.helpers import wait_until, zenoh_peer_config
+from tests.integration.e2e_stack import (
+    HUSKY,
+    TB3,
+    Cloud,
+    TopicReader,
+    bag_messages,
+    by_key,
+    cloud,
+    edge_config,
+    headers,
+    replayer,
+    seqs,
+    site,
+    unique_site,
+    wait_received,
+    wait_spooled_and_acked,
+)
+from tests.unit.schemas.ros_values import avro_shaped, same
+
+STRING = "std_msgs/msg/String"
+
+
+@pytest.fixture(scope="module")
+def cloud_(kafka_bootstrap: str, schema_registry_url: str) -> Iterator[Cloud]:
+    with cloud(kafka_bootstrap, schema_registry_url) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def reader(kafka_bootstrap: str, schema_registry_url: str) -> TopicReader:
+    return TopicReader(kafka_bootstrap, schema_registry_url)
+
+
+def test_one_to_one(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> None:
+    """One ROS topic of one robot -> one Kafka topic (site-level mapping, fixed key)."""
+    topic = f"fleet.gps.{uuid.uuid4().hex[:8]}"
+    expected = bag_messages(HUSKY, "/fix")
+    with site(cloud_) as router:
+        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=unique_site(), mappings=[
+            {"name": "gps", "from": "/husky_7/fix", "to": topic, "key": "husky_7",
+             "type": "sensor_msgs/msg/NavSatFix"},
+        ])
+        with EdgeAgent(config) as agent:
+            wait_until(lambda: "/husky_7/fix" in agent.subscribed_topics(), 10,
+                       message="eager subscription of a mapping with a declared type")
+            with replayer(HUSKY, "husky_7", router.endpoint, ["/fix"]) as robot:
+                assert robot.wait_for_subscribers(10)
+                assert robot.run().total == len(expected)
+                wait_received(agent, len(expected), timeout=20)  # before the robot's session closes
+            wait_spooled_and_acked(agent, len(expected), timeout=30)
+    msgs = reader.read(topic, len(expected))
+    assert len(msgs) == len(expected)
+    assert {m.key() for m in msgs} == {b"husky_7"}
+    assert seqs(msgs) == list(range(1, len(expected) + 1))
+    ts = load_typestore("jazzy")
+    kind = "sensor_msgs/msg/NavSatFix"
+    for msg, raw in zip(msgs, expected, strict=True):
+        assert same(reader.value(msg), avro_shaped(ts, ts.deserialize_cdr(raw, kind), kind))
+    assert headers(msgs[0])["fleetlink.mapping"] == "gps"
+    assert "fleetlink.robot" not in headers(msgs[0])  # the pattern captures no robot
+
+
+def test_one_to_many_by_message_field(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> None:
+    """One ROS topic -> a Kafka topic per zone, chosen by a field of each message; a zone that is
+    not a legal topic name goes to the dead-letter topic, and the next message flows."""
+    run = uuid.uuid4().hex[:8]
+    zones = ["zone_a", "zone_b", "zone_c"]
+    texts = [zones[i % 3] for i in range(300)]
+    texts[150] = "no such/zone"
+    site_name = unique_site()
+    with site(cloud_) as router:
+        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=site_name, mappings=[
+            {"name": "tasks", "from": "/{robot}/task_status", "to": f"fleet.tasks.{run}.{{msg.data}}"},
+        ])
+        robot = RosNode("tasks", "/tb4_01", config=zenoh_peer_config(router.endpoint),
+                        typestore=load_typestore("jazzy"))
+        with EdgeAgent(config) as agent, robot as node:
+            publisher = node.create_publisher("/tb4_01/task_status", STRING, congestion="block")
+            wait_until(publisher.has_subscribers, 10, message="edge subscribed to /tb4_01/task_status")
+            for text in texts:
+                publisher.publish_cdr(cdr.encode_string(text))
+            wait_spooled_and_acked(agent, len(texts), timeout=30)
+            assert agent.snapshot()["mappings"]["tasks"] == {
+                "received": 300, "emitted": 299, "dropped": 0, "dead_lettered": 1, "type_mismatch": 0}
+    for zone in zones:
+        positions = [i + 1 for i, t in enumerate(texts) if t == zone]
+        msgs = reader.read(f"fleet.tasks.{run}.{zone}", len(positions))
+        assert len(msgs) == len(positions) == (99 if zone == "zone_a" else 100)
+        assert [reader.value(m) for m in msgs] == [{"data": zone}] * len(msgs)
+        assert seqs(msgs) == positions  # each zone's records in publishing order
+        assert {m.key() for m in msgs} == {b"tb4_01"}
+    dead = reader.read_until(cloud_.dead_letter, lambda ms: any(headers(m).get("fleetlink.site") == site_name
+                                                                for m in ms))
+    mine = [m for m in dead if headers(m).get("fleetlink.site") == site_name]
+    assert len(mine) == 1
+    h = headers(mine[0])
+    assert mine[0].value() == cdr.encode_string("no such/zone")
+    assert (h["fleetlink.dlq.stage"], h["fleetlink.seq"], h["fleetlink.mapping"]) == ("map", "151", "tasks")
+    assert "no such/zone" in h["fleetlink.dlq.reason"]
+    assert h["fleetlink.dlq.topic"] == f"fleet.tasks.{run}.{{msg.data}}"
+
+
+def test_many_to_many(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> None:
+    """``/{robot}/{sensor}`` -> ``fleet.<run>.{sensor}``: two robots, three sensors, three topics."""
+    run = uuid.uuid4().hex[:8]
+    sensors = {"imu": "sensor_msgs/msg/Imu", "odom": "nav_msgs/msg/Odometry",
+               "scan": "sensor_msgs/msg/LaserScan"}
+    expected = {s: bag_messages(TB3, f"/{s}") for s in sensors}
+    robots = ("tb3_1", "tb3_2")
+    total = len(robots) * sum(len(v) for v in expected.values())
+    with site(cloud_) as router:
+        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=unique_site(), robot_types={
+            "tb3": {"match": "/tb3_*", "mappings": [
+                {"name": "sensors", "from": "/{robot}/{sensor}", "to": f"fleet.{run}.{{sensor}}"}]},
+        })
+        with EdgeAgent(config) as agent:
+            replays = [replayer(TB3, r, router.endpoint, [f"/{s}" for s in sensors]).start() for r in robots]
+            try:
+                for rep in replays:
+                    assert rep.wait_for_subscribers(15)
+                threads = [threading.Thread(target=rep.run) for rep in replays]
+                for thread in threads:
+                    thread.start()
+                for thread in threads:
+                    thread.join(60)
+                wait_received(agent, total, timeout=20)
+            finally:
+                for rep in replays:
+                    rep.stop()
+            wait_spooled_and_acked(agent, total, timeout=40)
+    ts = load_typestore("jazzy")
+    for sensor, kind in sensors.items():
+        msgs = reader.read(f"fleet.{run}.{sensor}", len(robots) * len(expected[sensor]))
+        assert len(msgs) == len(robots) * len(expected[sensor])
+        per_robot = by_key(msgs)
+        assert sorted(per_robot) == list(robots)
+        for robot in robots:
+            got = per_robot[robot]
+            assert seqs(got) == list(range(1, len(expected[sensor]) + 1))
+            assert {headers(m)["fleetlink.source_topic"] for m in got} == {f"/{robot}/{sensor}"}
+            for msg, raw in list(zip(got, expected[sensor], strict=True))[::7]:  # every 7th record
+                assert same(reader.value(msg), avro_shaped(ts, ts.deserialize_cdr(raw, kind), kind))
