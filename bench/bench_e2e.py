@@ -1,0 +1,253 @@
+"""End-to-end benchmark: robots → edge agent → WAN → uplink → Kafka, against the direct path.
+
+    .venv/bin/python bench/bench_e2e.py [--robots 8] [--records 40000] [--latency-rate 1000]
+
+Starts Kafka + Apicurio (or uses $KAFKA_BOOTSTRAP / $SCHEMA_REGISTRY_URL), then as separate
+processes: the uplink (also the cloud Zenoh router), the edge agent (also the site router,
+durable spool, at-least-once) and the robots (real Husky IMU messages over rmw_zenoh). Prints:
+
+1. throughput: records/s from the first publish to the last record read back from Kafka, with
+   the CPU seconds each process used;
+2. latency at a steady rate: source timestamp (set at publish) → record read from Kafka, p50/p99;
+3. the original design's direct path in one process, same messages: rosbags deserialize →
+   dict → fastavro → Kafka produce (no spool, no acknowledgements), and the ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+import fastavro
+import yaml
+from confluent_kafka import Consumer, Producer, TopicPartition
+from rosbags.typesys import Stores, get_typestore
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.e2e_publisher import IMU, imu_payloads  # noqa: E402
+from fleetlink.localstack.process import ServerProcess, free_port  # noqa: E402
+from fleetlink.localstack.stack import LocalStack  # noqa: E402
+from schemas.codec import get_codec  # noqa: E402
+from schemas.registry import SchemaRegistry  # noqa: E402
+from schemas.single_object import confluent_frame  # noqa: E402
+from schemas.typestore import load_typestore  # noqa: E402
+
+CLK = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK  # utime + stime
+
+
+def tree_cpu(pid: int) -> float:
+    total = 0.0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        stat = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        total += (int(stat[11]) + int(stat[12])) / CLK
+    return total
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[tuple[float, int]]:
+    """(receive time, record timestamp ms) for ``count`` records of a one-partition topic."""
+    consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"bench-{uuid.uuid4().hex}",
+                         "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 200,
+                         "fetch.wait.max.ms": 5})
+    consumer.assign([TopicPartition(topic, 0, 0)])
+    out: list[tuple[float, int]] = []
+    deadline = time.monotonic() + timeout
+    try:
+        while len(out) < count and time.monotonic() < deadline:
+            for msg in consumer.consume(5000, timeout=0.1):
+                if msg.error() is None:
+                    out.append((time.time(), msg.timestamp()[1]))
+    finally:
+        consumer.close()
+    return out
+
+
+class Pipeline:
+    """Uplink (cloud router) + edge agent (site router) as processes."""
+
+    def __init__(self, work: Path, bootstrap: str, registry: str, topic: str, stack: ExitStack) -> None:
+        self.cloud_port, self.site_port = free_port(), free_port()
+        uplink = {
+            "kafka": {"bootstrap_servers": bootstrap, "linger_ms": 5},
+            "registry": {"url": registry},
+            "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.cloud_port}"]},
+        }
+        edge = {
+            "site": "bench", "edge_id": "edge-1",
+            "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.site_port}"],
+                      "connect": [f"tcp/127.0.0.1:{self.cloud_port}"]},
+            "robot_types": {"bench": {"match": "/r*", "mappings": [
+                {"name": "imu", "from": "/{robot}/imu", "to": topic, "type": IMU}]}},
+            "spool": {"dir": str(work / "spool"), "max_bytes": "1GiB", "fsync": "interval"},
+            "wan": {"batch_max_records": 2000, "linger": os.environ.get("BENCH_LINGER", "10ms"),
+                    "max_in_flight": 4, "codec": "zstd"},
+        }
+        self.procs: dict[str, ServerProcess] = {}
+        for name, config, argv in (
+            ("uplink", uplink, ["uplink", "run"]),
+            ("edge", edge, ["edge", "run"]),
+        ):
+            path = work / f"{name}.yaml"
+            path.write_text(yaml.safe_dump(config))
+            log = work / f"{name}.log"
+            marker = work / f"{name}.ready"
+            extra = ["--stats-file", str(marker)] if name == "edge" else []
+            def uplink_up(log: Path = log) -> bool:
+                return "uplink running" in log.read_text()
+
+            proc = ServerProcess(
+                name=name, argv=[sys.executable, "-m", "fleetlink", *argv, "-c", str(path), *extra],
+                log_path=log, pid_path=work / f"{name}.pid",
+                ready=marker.exists if name == "edge" else uplink_up,
+            )
+            proc.start(60)
+            stack.callback(proc.stop)
+            self.procs[name] = proc
+
+    def cpu(self) -> dict[str, float]:
+        return {name: tree_cpu(p.pid) for name, p in self.procs.items() if p.pid}
+
+
+def run_robots(site_port: int, robots: int, count: int, rate: float) -> tuple[subprocess.Popen[str], float]:
+    pub = subprocess.Popen(
+        [sys.executable, str(ROOT / "bench" / "e2e_publisher.py"), "--connect", f"tcp/127.0.0.1:{site_port}",
+         "--robots", str(robots), "--count", str(count), "--rate", str(rate)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )
+    if pub.stdout is None or pub.stdin is None:
+        raise SystemExit("publisher has no pipes")
+    if pub.stdout.readline().strip() != "ready":
+        raise SystemExit("publisher did not start")
+    time.sleep(3.0)  # let the edge discover the robots and subscribe (discovery is asynchronous)
+    began = time.time()
+    pub.stdin.write("go\n")
+    pub.stdin.flush()
+    return pub, began
+
+
+def direct_path(bootstrap: str, registry: str, payloads: list[bytes], n: int) -> float:
+    """The original system's path: deserialize → dict → fastavro → produce, one process."""
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    schema = get_codec(load_typestore("jazzy"), IMU, "jazzy").schema
+    parsed = fastavro.parse_schema(schema)
+    topic = f"bench.direct.{uuid.uuid4().hex[:6]}"
+    with SchemaRegistry(registry) as reg:
+        schema_id = reg.register(f"{topic}-value", schema)
+
+    def to_dict(obj: Any) -> Any:
+        if hasattr(obj, "__dataclass_fields__"):
+            return {k: to_dict(getattr(obj, k)) for k in obj.__dataclass_fields__ if k != "__msgtype__"}
+        if hasattr(obj, "tolist"):
+            return obj.tolist()
+        return obj
+
+    producer = Producer({"bootstrap.servers": bootstrap, "linger.ms": 5})
+    began = time.perf_counter()
+    for i in range(n):
+        msg = ts.deserialize_cdr(payloads[i % len(payloads)], IMU)
+        buf = io.BytesIO()
+        fastavro.schemaless_writer(buf, parsed, to_dict(msg))
+        while True:
+            try:
+                value = confluent_frame(schema_id, buf.getvalue())
+                producer.produce(topic, key=b"r%02d" % (i % 8), value=value)
+                break
+            except BufferError:
+                producer.poll(0.01)
+        producer.poll(0)
+    producer.flush(60)
+    return n / (time.perf_counter() - began)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robots", type=int, default=8)
+    ap.add_argument("--records", type=int, default=40_000, help="total records for the throughput run")
+    ap.add_argument("--latency-rate", type=float, default=1000.0)
+    ap.add_argument("--latency-seconds", type=float, default=10.0)
+    args = ap.parse_args()
+
+    with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-bench-") as tmp:
+        work = Path(tmp)
+        bootstrap, registry = os.environ.get("KAFKA_BOOTSTRAP"), os.environ.get("SCHEMA_REGISTRY_URL")
+        if not (bootstrap and registry):
+            local = LocalStack(work / "stack")
+            info = local.start()
+            stack.callback(local.stop)
+            bootstrap, registry = info.bootstrap, info.registry_url
+        payloads = imu_payloads(2000)
+        print(f"Imu CDR record: {len(payloads[0])} bytes; robots: {args.robots}")
+
+        # 1. throughput
+        topic = f"bench.imu.{uuid.uuid4().hex[:6]}"
+        pipe = Pipeline(work, bootstrap, registry, topic, stack)
+        per_robot = args.records // args.robots
+        total = per_robot * args.robots
+        cpu0 = pipe.cpu()
+        pub, began = run_robots(pipe.site_port, args.robots, per_robot, 0)
+        got = read_topic(bootstrap, topic, total, timeout=300)
+        if pub.stdout is None or pub.stdin is None:
+            raise SystemExit("publisher has no pipes")
+        published = pub.stdout.readline().split()
+        pub_cpu = tree_cpu(pub.pid)
+        pub.stdin.write("bye\n")
+        pub.stdin.flush()
+        pub.wait(30)
+        cpu1 = pipe.cpu()
+        elapsed = got[-1][0] - began if got else float("nan")
+        rate = len(got) / elapsed
+        print("\n1. throughput, at-least-once (durable spool, acked WAN batches, acks=all):")
+        print(f"   {len(got)}/{total} records in Kafka in {elapsed:.2f} s"
+              f"  →  {rate:,.0f} records/s end to end")
+        print(f"   robots published {published[1]} in {float(published[2]):.2f} s")
+        print(f"   CPU seconds: robots {pub_cpu:.1f}, " +
+              ", ".join(f"{k} {cpu1[k] - cpu0[k]:.1f}" for k in cpu1))
+
+        # 2. latency at a steady rate
+        topic2 = f"bench.imu.lat.{uuid.uuid4().hex[:6]}"
+        (work / "lat").mkdir()
+        with ExitStack() as stack2:
+            pipe2 = Pipeline(work / "lat", bootstrap, registry, topic2, stack2)
+            n = int(args.latency_rate * args.latency_seconds)
+            pub2, _ = run_robots(pipe2.site_port, args.robots, n // args.robots, args.latency_rate)
+            got2 = read_topic(bootstrap, topic2, (n // args.robots) * args.robots, timeout=120)
+            assert pub2.stdin is not None
+            pub2.stdin.write("bye\n")
+            pub2.stdin.flush()
+            pub2.wait(60)
+        lat = [(recv * 1000 - stamp) for recv, stamp in got2]
+        print(f"\n2. latency at {args.latency_rate:,.0f} records/s (publish → record read from Kafka), "
+              f"{len(lat)} records:")
+        print(f"   p50 {statistics.median(lat):.1f} ms   p99 {percentile(lat, 0.99):.1f} ms   "
+              f"max {max(lat):.1f} ms")
+
+        # 3. the direct path
+        direct = direct_path(bootstrap, registry, payloads, total)
+        print("\n3. direct path (one process: rosbags → dict → fastavro → produce; no spool, no acks):")
+        print(f"   {direct:,.0f} records/s")
+        print(f"\nratio fleetlink end to end / direct path: {rate / direct:.2f}")
+
+
+if __name__ == "__main__":
+    main()
