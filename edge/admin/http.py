@@ -14,6 +14,7 @@ from fastapi import APIRouter, Depends, FastAPI, Path, Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import SecretStr
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from edge.admin.auth import authorized
 from edge.admin.bodies import DryRunBody, MappingBody, MappingChangeBody, RobotTypeBody, raw
@@ -39,8 +40,12 @@ NameParam = Annotated[str, Path(pattern=r"^[A-Za-z0-9_.-]+$", max_length=128)]
 _ERRORS: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorView, "description": text}
     for code, text in (
-        (401, "missing or wrong admin token"), (404, "not found"), (409, "name taken"),
-        (422, "invalid: each problem names its field"), (503, "could not be saved; not applied"),
+        (400, "the body cannot be read (not JSON)"),
+        (401, "missing or wrong admin token"),
+        (404, "not found"),
+        (409, "name taken"),
+        (422, "invalid: each problem names its field"),
+        (503, "could not be saved; not applied"),
     )
 }
 
@@ -76,6 +81,10 @@ def create_app(
         problems = exc.problems if isinstance(exc, InvalidChangeError) else ()
         message = exc.summary if isinstance(exc, InvalidChangeError) else str(exc)
         return error_response(exc.status, message, problems)
+
+    @app.exception_handler(StarletteHTTPException)
+    def on_http_error(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return error_response(exc.status_code, str(exc.detail))
 
     @app.exception_handler(RequestValidationError)
     def on_invalid(_request: Request, exc: RequestValidationError) -> JSONResponse:
