@@ -1,0 +1,23 @@
+"""The configuration reference in docs/ is exactly what the config models generate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fleetlink.docgen import render
+
+REFERENCE = Path(__file__).resolve().parents[2] / "docs" / "reference" / "config.md"
+
+
+def test_config_reference_is_current() -> None:
+    assert REFERENCE.read_text() == render(), (
+        "docs/reference/config.md is stale: run `python -m fleetlink.docgen > docs/reference/config.md`"
+    )
+
+
+def test_reference_covers_every_kind_and_nested_keys() -> None:
+    text = render()
+    for heading in ("## edge", "## uplink", "## repeater"):
+        assert heading in text
+    for key in ("`spool.policy`", "`robot_types.<name>.mappings[].from`", "`kafka.producer_overrides`"):
+        assert key in text
