@@ -78,7 +78,8 @@ def targets(
             if _intersects(key, item):
                 out.append(Target(item, resource, name))
     if out and ((op or "get") != "get" or has_payload):
-        return [Target(out[0].key, "", status=400, error="a change must name one concrete key (no wildcards)")]
+        error = "a change must name one concrete key (no wildcards)"
+        return [Target(out[0].key, "", status=400, error=error)]
     return out
 
 
