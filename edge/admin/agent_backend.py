@@ -1,6 +1,8 @@
 """``AgentBackend``: the admin API's view of a started ``EdgeAgent``, through its public API.
 
-Counters come from ``EdgeAgent.snapshot()`` (``snapshot_from_agent`` reads that dict, pure);
+Counters come from ``EdgeAgent.snapshot()`` (``snapshot_from_agent`` reads that dict, pure; it
+also takes ``issues`` — ``{mapping: [{"reason", "detail"}]}`` — and ``robot_details`` when the
+agent reports them);
 the ROS graph from a ``GraphWatcher`` of its own on the agent's session (started in ``start``);
 changes go through ``EdgeAgent.reload`` (the mapping table swap plus a subscription refresh).
 """
@@ -11,7 +13,15 @@ from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
-from edge.admin.backend import BufferState, EdgeSnapshot, MappingCounts, RobotStatus, WanTotals
+from edge.admin.backend import (
+    BufferState,
+    EdgeSnapshot,
+    MappingCounts,
+    MappingIssue,
+    RobotState,
+    RobotStatus,
+    WanTotals,
+)
 from edge.config import EdgeConfig
 from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
 from edge.spool import SpoolStats
@@ -61,11 +71,32 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
             healthy.append(bool(sender.get("healthy", True)))
     subscriptions = _dict(data.get("subscriptions"))
     gaps = {str(topic): _int(_dict(sub).get("missing")) for topic, sub in subscriptions.items()}
+    issues = {
+        str(name): [MappingIssue(reason=str(i.get("reason", "")), detail=str(i.get("detail", "")))
+                    for i in found if isinstance(i, Mapping)]
+        for name, found in _dict(data.get("issues")).items() if isinstance(found, list)
+    }
     running = data.get("running")
     return EdgeSnapshot(
-        mappings=mappings, buffers=tuple(buffers), wan=wan, wan_link_up=all(healthy) if healthy else None,
-        sequence_gaps=gaps, failure=None if running is not False else "the edge agent is not running",
+        mappings=mappings, issues=issues, buffers=tuple(buffers), wan=wan,
+        wan_link_up=all(healthy) if healthy else None, sequence_gaps=gaps,
+        failure=None if running is not False else "the edge agent is not running",
     )
+
+
+def robots_from_agent(data: Mapping[str, Any], robots: Mapping[str, str]) -> list[RobotStatus]:
+    """Registered robots; registration times and states from ``robot_details`` when the agent
+    reports them (``{robot: {"registered_at_ms", "state", "explicit"}}``)."""
+    details = _dict(data.get("robot_details"))
+    out = []
+    for robot, kind in sorted(robots.items()):
+        detail = _dict(details.get(robot))
+        at_ms = detail.get("registered_at_ms")
+        state: RobotState = "lost" if detail.get("state") == "lost" else "registered"
+        out.append(RobotStatus(robot=robot, robot_type=kind,
+                               registered_at=at_ms / 1000 if isinstance(at_ms, int | float) else None,
+                               state=state, explicit=bool(detail.get("explicit", False))))
+    return out
 
 
 class AgentBackend:
@@ -106,7 +137,7 @@ class AgentBackend:
         return {} if self._graph is None else self._graph.topics()
 
     def robots(self) -> Sequence[RobotStatus]:
-        return [RobotStatus(robot=r, robot_type=t) for r, t in sorted(self.agent.robots().items())]
+        return robots_from_agent(self.agent.snapshot(), self.agent.robots())
 
     def snapshot(self) -> EdgeSnapshot:
         return snapshot_from_agent(self.agent.snapshot(), self.agent.config)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from edge.admin.agent_backend import snapshot_from_agent
-from edge.admin.backend import MappingCounts, WanTotals
+from edge.admin.agent_backend import robots_from_agent, snapshot_from_agent
+from edge.admin.backend import MappingCounts, MappingIssue, RobotStatus, WanTotals
 from edge.admin.changes import change_mapping
 from edge.admin.overlay import Overlay, config_data
 from edge.admin.specs import declarations
@@ -174,3 +174,19 @@ def test_table_backend_registers_robots_a_new_type_matches() -> None:
     ]
     assert installed == ["warehouse-a"]
     assert backend.installs == 1
+
+
+def test_issues_and_robot_details_when_the_agent_reports_them() -> None:
+    data = {
+        "issues": {"odom": [{"reason": "unknown_type", "detail": "not in the store"}, "junk"], "x": "junk"},
+        "robot_details": {
+            "tb4_01": {"registered_at_ms": 1_700_000_000_500, "state": "lost", "explicit": True}
+        },
+    }
+    snap = snapshot_from_agent(data, base_config())
+    assert snap.issues == {"odom": [MappingIssue("unknown_type", "not in the store")]}
+    robots = robots_from_agent(data, {"tb4_02": "tb4", "tb4_01": "tb4"})
+    assert robots == [
+        RobotStatus("tb4_01", "tb4", registered_at=1_700_000_000.5, state="lost", explicit=True),
+        RobotStatus("tb4_02", "tb4"),
+    ]
