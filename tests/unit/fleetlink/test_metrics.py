@@ -164,11 +164,14 @@ def test_every_protocol_method_is_implemented_once() -> None:
 
 
 # -- deltas ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize(("totals", "deltas"), [
-    ([0, 5, 5, 9], [0, 5, 0, 4]),
-    ([3, 10, 2, 4], [3, 7, 2, 2]),      # 10 -> 2: the owner was rebuilt, its new total counts
-    ([7], [7]),
-])
+@pytest.mark.parametrize(
+    ("totals", "deltas"),
+    [
+        ([0, 5, 5, 9], [0, 5, 0, 4]),
+        ([3, 10, 2, 4], [3, 7, 2, 2]),  # 10 -> 2: the owner was rebuilt, its new total counts
+        ([7], [7]),
+    ],
+)
 def test_counter_deltas(totals: list[int], deltas: list[int]) -> None:
     d = CounterDeltas()
     assert [d.delta("k", t) for t in totals] == deltas
@@ -182,14 +185,17 @@ def test_counter_deltas_forget() -> None:
     assert (d.delta("a", 6), d.delta("b", 6)) == (1, 6)
 
 
-@pytest.mark.parametrize(("looks", "expected"), [
-    # (time, running total) -> increase over the last 60 s, measured from the newest look >= 60 s old
-    ([(10, 0), (20, 3)], [0, 3]),
-    ([(10, 2), (65, 2), (75, 2)], [2, 2, 0]),  # at 65 s the baseline is still (0 s, 0)
-    ([(30, 5), (100, 5)], [5, 0]),
-    ([(30, 5), (50, 8), (95, 9), (130, 9)], [5, 8, 4, 1]),
-    ([(10, 5), (20, 1)], [5, 1]),                       # reset: the new total is the increase
-])
+@pytest.mark.parametrize(
+    ("looks", "expected"),
+    [
+        # (time, running total) -> increase over the last 60 s, measured from the newest look >= 60 s old
+        ([(10, 0), (20, 3)], [0, 3]),
+        ([(10, 2), (65, 2), (75, 2)], [2, 2, 0]),  # at 65 s the baseline is still (0 s, 0)
+        ([(30, 5), (100, 5)], [5, 0]),
+        ([(30, 5), (50, 8), (95, 9), (130, 9)], [5, 8, 4, 1]),
+        ([(10, 5), (20, 1)], [5, 1]),  # reset: the new total is the increase
+    ],
+)
 def test_recent_increase(looks: list[tuple[float, int]], expected: list[int]) -> None:
     tracker = RecentIncrease(60, created_s=0)
     assert [tracker.update(t, v) for t, v in looks] == expected
@@ -201,14 +207,19 @@ def test_recent_increase_rejects_empty_window() -> None:
 
 
 # -- health ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize(("severities", "state", "status"), [
-    ([], "ok", 200),
-    (["degraded"], "degraded", 200),
-    (["degraded", "failed", "degraded"], "failed", 503),
-])
+@pytest.mark.parametrize(
+    ("severities", "state", "status"),
+    [
+        ([], "ok", 200),
+        (["degraded"], "degraded", 200),
+        (["degraded", "failed", "degraded"], "failed", 503),
+    ],
+)
 def test_health_state_is_the_worst_problem(severities: list[str], state: str, status: int) -> None:
-    problems = [Problem("mapping", f"m{i}", "dead_letters", "x", severity=s)  # type: ignore[arg-type]
-                for i, s in enumerate(severities)]
+    problems = [
+        Problem("mapping", f"m{i}", "dead_letters", "x", severity=s)  # type: ignore[arg-type]
+        for i, s in enumerate(severities)
+    ]
     health = Health.of(problems, robots=3)
     assert (health.state, health.http_status) == (state, status)
     body = health.as_dict()
@@ -235,11 +246,14 @@ def test_metrics_app_serves_metrics_and_health() -> None:
     assert len(refreshed) == 2
 
 
-@pytest.mark.parametrize(("listen", "expected"), [
-    ("127.0.0.1:8480", ("127.0.0.1", 8480)),
-    ("[::1]:0", ("::1", 0)),
-    ("localhost:9", ("localhost", 9)),
-])
+@pytest.mark.parametrize(
+    ("listen", "expected"),
+    [
+        ("127.0.0.1:8480", ("127.0.0.1", 8480)),
+        ("[::1]:0", ("::1", 0)),
+        ("localhost:9", ("localhost", 9)),
+    ],
+)
 def test_split_listen(listen: str, expected: tuple[str, int]) -> None:
     assert split_listen(listen) == expected
 
