@@ -22,7 +22,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
 
@@ -76,6 +76,8 @@ class RepeaterStats:
     publishes: int = 0
     late_joiner_publishes: int = 0
     publish_errors: int = 0
+    by_topic: Counter[str] = field(default_factory=Counter)
+    """Publishes per ROS topic."""
 
 
 def to_command(env: CommandEnvelope) -> Command:
@@ -357,6 +359,7 @@ class Repeater:
                 log.warning("publishing command %s on %s failed: %s", cmd.command_id, cmd.ros_topic, exc)
                 continue
             self.stats.publishes += 1
+            self.stats.by_topic[cmd.ros_topic] += 1
             if item.reason == "late-joiner":
                 self.stats.late_joiner_publishes += 1
             with self._graph_lock:

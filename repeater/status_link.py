@@ -3,9 +3,9 @@
 Pending events go out in batches as a Zenoh query on ``fleetlink/<site>/command-status/<id>``;
 the uplink answers once Kafka has them, and only then are they acknowledged (``on_acked``),
 so delivery is at-least-once. With nothing pending, an empty batch every ``heartbeat``
-seconds asks the uplink whether it is there. Any answer (even a refusal: Kafka may be down)
-reports the link up, a query without one reports it down (``on_link``): that is what the
-dead-man watches.
+seconds asks the uplink whether it is there. Any answer from the uplink (even "not written
+now": Kafka may be down) reports the link up; a timeout or an error reply reports it down
+(``on_link``): that is what the dead-man watches.
 """
 
 from __future__ import annotations
@@ -122,11 +122,12 @@ class StatusLink:
             replies = self._session.get(self._key, payload=payload, timeout=self._timeout,
                                         target=zenoh.QueryTarget.BEST_MATCHING)
             for reply in replies:
-                contact = True  # an uplink answered, even if it could not take the events now
                 if reply.ok is None:
+                    # zenoh reports a timeout as an error reply too: no proof of an uplink
                     err = reply.err
-                    problem = f"uplink refused: {err.payload.to_bytes()[:200]!r}" if err else "error reply"
+                    problem = f"error reply: {err.payload.to_bytes()[:200]!r}" if err else "error reply"
                     continue
+                contact = True  # an uplink answered, even if it could not take the events now
                 ack = decode_status_ack(reply.ok.payload.to_bytes())
                 if ack.accepted == len(events):
                     self.sent += len(events)

@@ -57,6 +57,11 @@ REGISTRATION_SCHEMA = {
 }
 
 
+def distinct(items: list[str]) -> list[str]:
+    """``items`` without repeats, in first-seen order (status records are at-least-once)."""
+    return list(dict.fromkeys(items))
+
+
 def irobot_store() -> Typestore:
     return load_typestore("jazzy", [IROBOT])
 
