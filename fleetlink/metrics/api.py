@@ -105,7 +105,9 @@ class FamilyMetrics:
         self._count("fleetlink_wan_sent_bytes", n=nbytes)
 
     def on_acked(self, batches: int, records: int, latency_s: float | None = None) -> None:
-        """``latency_s``: from sending to the ack (one observation); ``None`` when unknown."""
+        """``latency_s``: from sending to the ack (one observation); ``None`` when unknown. A
+        component whose totals are read from snapshots (the edge) reports only the latency:
+        ``on_acked(0, 0, latency_s)``."""
         self._count("fleetlink_wan_acked_batches", n=batches)
         self._count("fleetlink_wan_acked_records", n=records)
         if latency_s is not None:
