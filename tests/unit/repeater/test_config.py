@@ -1,0 +1,80 @@
+"""The repeater's config: the shipped example, durations, and errors named by YAML path."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fleetlink.cli import main
+from fleetlink.validate_cli import validate_file
+from repeater.config import RepeaterConfig, parse_seconds
+
+DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
+
+
+@pytest.fixture
+def no_sockets(monkeypatch: pytest.MonkeyPatch) -> None:
+    def refuse(*_args: Any, **_kwargs: Any) -> socket.socket:
+        raise AssertionError("a socket was opened while validating a config")
+
+    monkeypatch.setattr(socket, "socket", refuse)
+
+
+def test_shipped_example_is_a_valid_repeater_config(no_sockets: None) -> None:
+    kind, config = validate_file(DEPLOY / "repeater.example.yaml")
+    assert kind == "repeater"
+    assert isinstance(config, RepeaterConfig)
+    section = config.repeater
+    assert (section.site, section.dead_man, section.heartbeat) == ("warehouse-a", 30.0, 2.0)
+
+
+@pytest.mark.parametrize(("text", "seconds"), [
+    ("250ms", 0.25), ("1s", 1.0), (" 1.5 s ", 1.5), ("2m", 120.0), ("1h", 3600.0), (3, 3.0), (0.5, 0.5),
+])
+def test_durations(text: object, seconds: float) -> None:
+    assert parse_seconds(text) == seconds
+
+
+@pytest.mark.parametrize("text", ["", "1", "1d", "-1s", "0s", "s", True, None, [1], float("inf"), 0])
+def test_bad_durations(text: object) -> None:
+    with pytest.raises(ValueError, match="duration"):
+        parse_seconds(text)
+
+
+def test_defaults() -> None:
+    config = RepeaterConfig.model_validate({"repeater": {"site": "a", "state_dir": "/tmp/x"}})
+    assert config.repeater.dead_man is None
+    assert config.repeater.id  # from the host name
+    assert (config.ros.distro, config.ros.domain_id, config.zenoh.mode) == ("jazzy", 0, None)
+
+
+BAD = """\
+repeater:
+  site: "warehouse a"
+  state_dir: /tmp/x
+  dead_man: soon
+  id: a/b
+ros:
+  distro: melodic
+  domain_id: 300
+zenoh:
+  mode: client
+  colour: blue
+"""
+
+
+def test_bad_config_exits_non_zero_naming_yaml_paths(
+    tmp_path: Path, no_sockets: None, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "repeater.yaml"
+    path.write_text(BAD)
+    assert main(["repeater", "run", "-c", str(path)]) == 1
+    err = capsys.readouterr().err
+    for where in ("repeater.site (line 2)", "repeater.dead_man (line 4)", "repeater.id (line 5)",
+                  "ros.distro (line 7)", "ros.domain_id (line 8)", "zenoh.colour (line 11)"):
+        assert where in err
+    assert "must be one key chunk" in err
+    assert "invalid duration 'soon'" in err
