@@ -101,9 +101,6 @@ class AdminService:
     def health(self) -> Health:
         return self.telemetry.observe(self._snapshot(), robots=len(self.backend.mapping_table().robots()))
 
-    def refresh_metrics(self) -> None:
-        self.health()
-
     # -- changes ---------------------------------------------------------------------------------
     def add_mapping(self, body: Any) -> ChangeView:
         with self._lock:
