@@ -9,6 +9,7 @@ see each other's records.
 from __future__ import annotations
 
 import json
+import time
 import uuid
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -104,8 +105,10 @@ def bag_messages(bag: Path, topic: str) -> list[bytes]:
         return [bytes(raw) for _, _, raw in reader.messages(connections=conns)]
 
 
-def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float) -> None:
-    """Wait until the durable stream took at least ``records`` and the uplink acked them all."""
+def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float, *,
+                           uplink_dead_letters: int = 0) -> None:
+    """Wait until the durable stream took at least ``records`` and the uplink acked them all;
+    then check that the uplink dead-lettered exactly ``uplink_dead_letters`` of them."""
 
     def done() -> bool:
         stream = agent.snapshot()["streams"]["durable"]
@@ -118,6 +121,8 @@ def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float) -> No
         snap = agent.snapshot()
         brief = {k: snap.get(k) for k in ("intake", "processor", "streams", "subscriptions")}
         raise AssertionError(f"{exc}; edge: {json.dumps(brief, default=str)}") from None
+    sender = agent.snapshot()["streams"]["durable"]["sender"]
+    assert sender["records_dead_lettered"] == uplink_dead_letters, sender
 
 
 def wait_received(agent: EdgeAgent, samples: int, timeout: float) -> None:
@@ -134,6 +139,11 @@ def wait_received(agent: EdgeAgent, samples: int, timeout: float) -> None:
                              f"subscriptions {json.dumps(snap['subscriptions'])}") from None
 
 
+def counter(agent: EdgeAgent, mapping: str, name: str) -> int:
+    """One of a mapping's counters (0 before its first sample)."""
+    return int(agent.snapshot().get("mappings", {}).get(mapping, {}).get(name, 0))
+
+
 class TopicReader:
     """Reads Kafka topics from the beginning, decoding values with the stock AvroDeserializer."""
 
@@ -142,42 +152,39 @@ class TopicReader:
         self.deserializer = AvroDeserializer(SchemaRegistryClient({"url": registry_url}))
 
     def read(self, topic: str, count: int, timeout: float = 30.0) -> list[Message]:
-        """Exactly the first ``count`` records of a one-partition topic, then checks nothing follows."""
-        consumer = Consumer({"bootstrap.servers": self.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}",
-                             "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 500})
-        out: list[Message] = []
-        try:
-            consumer.assign([TopicPartition(topic, 0, 0)])
-
-            def enough() -> bool:
-                for msg in consumer.consume(1000, timeout=0.2):
-                    if msg.error() is None:
-                        out.append(msg)
-                return len(out) >= count
-
-            wait_until(enough, timeout, interval=0.0, message=f"{count} records on {topic} (got {len(out)})")
-            extra = [m for m in consumer.consume(1000, timeout=1.0) if m.error() is None]
-            out.extend(extra)
-        finally:
-            consumer.close()
-        return out
+        """The first ``count`` records of a one-partition topic, plus whatever follows within a
+        second (so a test can see duplicates)."""
+        out = self.read_until(topic, lambda ms: len(ms) >= count, timeout, what=f"{count} records on {topic}")
+        return out + self._consume(topic, len(out), lambda ms: False, 1.0)
 
     def read_until(self, topic: str, done: Callable[[list[Message]], bool], timeout: float = 30.0,
                    what: str = "") -> list[Message]:
         """Records of a one-partition topic from the beginning until ``done(records)`` holds."""
-        consumer = Consumer({"bootstrap.servers": self.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}",
-                             "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 500})
+        out = self._consume(topic, 0, done, timeout)
+        if not done(out):
+            raise AssertionError(f"timed out after {timeout:.0f}s waiting for {what or topic} "
+                                 f"(got {len(out)} records)")
+        return out
+
+    def _consume(self, topic: str, offset: int, done: Callable[[list[Message]], bool],
+                 timeout: float) -> list[Message]:
+        """Consume from ``offset`` until ``done`` or the deadline; a consumer that makes no
+        progress for a while (stale metadata of a topic created moments ago) is replaced."""
         out: list[Message] = []
-        try:
-            consumer.assign([TopicPartition(topic, 0, 0)])
-
-            def enough() -> bool:
-                out.extend(m for m in consumer.consume(1000, timeout=0.2) if m.error() is None)
-                return done(out)
-
-            wait_until(enough, timeout, interval=0.0, message=what or f"records on {topic}")
-        finally:
-            consumer.close()
+        deadline = time.monotonic() + timeout
+        while not done(out) and time.monotonic() < deadline:
+            consumer = Consumer({"bootstrap.servers": self.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}",
+                                 "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 500})
+            try:
+                consumer.assign([TopicPartition(topic, 0, offset + len(out))])
+                progress = time.monotonic()
+                while not done(out) and time.monotonic() < deadline and time.monotonic() - progress < 8:
+                    batch = [m for m in consumer.consume(1000, timeout=0.2) if m.error() is None]
+                    if batch:
+                        out.extend(batch)
+                        progress = time.monotonic()
+            finally:
+                consumer.close()
         return out
 
     def value(self, msg: Message) -> Any:
