@@ -155,18 +155,18 @@ class TopicReader:
         """The first ``count`` records of a one-partition topic, plus whatever follows within a
         second (so a test can see duplicates)."""
         out = self.read_until(topic, lambda ms: len(ms) >= count, timeout, what=f"{count} records on {topic}")
-        return out + self._consume(topic, len(out), lambda ms: False, 1.0)
+        return out + self.consume(topic, len(out), lambda ms: False, 1.0)
 
     def read_until(self, topic: str, done: Callable[[list[Message]], bool], timeout: float = 30.0,
                    what: str = "") -> list[Message]:
         """Records of a one-partition topic from the beginning until ``done(records)`` holds."""
-        out = self._consume(topic, 0, done, timeout)
+        out = self.consume(topic, 0, done, timeout)
         if not done(out):
             raise AssertionError(f"timed out after {timeout:.0f}s waiting for {what or topic} "
                                  f"(got {len(out)} records)")
         return out
 
-    def _consume(self, topic: str, offset: int, done: Callable[[list[Message]], bool],
+    def consume(self, topic: str, offset: int, done: Callable[[list[Message]], bool],
                  timeout: float) -> list[Message]:
         """Consume from ``offset`` until ``done`` or the deadline; a consumer that makes no
         progress for a while (stale metadata of a topic created moments ago) is replaced."""

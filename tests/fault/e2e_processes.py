@@ -1,0 +1,299 @@
+"""The fault-test bed: edge and uplink as real processes, a WAN relay, a counting generator.
+
+::
+
+    generator (robot tb4_01, std_msgs/String "0", "1", ...) -> site router -> edge process
+      -> site router -> TcpRelay (the WAN: pass / blackhole) -> cloud router -> uplink process -> Kafka
+
+Processes are ``python -m fleetlink edge run`` / ``uplink run`` started and stopped by PID
+(SIGTERM, or SIGKILL for crashes). The edge writes its counters to a JSON stats file the test
+polls. After the fault the test reads the Kafka topic from the beginning and counts, Jepsen
+style: ``lost``, ``duplicated``, ``unexpected`` and per-key order of first occurrences.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+from confluent_kafka import Message
+
+from fleetlink.localstack.relay import TcpRelay
+from fleetlink.localstack.zenoh_router import ZenohRouter
+from roswire import cdr
+from roswire.node import RosNode
+from roswire.publisher import RosPublisher
+from schemas.typestore import load_typestore
+from tests.helpers import wait_until, zenoh_peer_config
+from tests.integration.e2e_stack import TopicReader
+
+ROOT = Path(__file__).resolve().parents[2]
+STRING = "std_msgs/msg/String"
+BATCH = 100
+"""wan.batch_max_records of the edges under test: with one batch in flight, the in-flight
+window is this many records."""
+
+
+class Process:
+    """One fleetlink process; its output goes to a log file shown when a test fails."""
+
+    def __init__(self, name: str, argv: list[str], log: Path) -> None:
+        self.name = name
+        self.argv = argv
+        self.log = log
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> Process:
+        with self.log.open("ab") as out:
+            self.proc = subprocess.Popen([sys.executable, "-m", "fleetlink", "-v", *self.argv], cwd=ROOT,
+                                         stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        return self
+
+    def kill(self) -> None:
+        """SIGKILL: no clean shutdown, nothing flushed."""
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait(10)
+            self.proc = None
+
+    def terminate(self, timeout: float) -> tuple[int | None, float]:
+        """SIGTERM; returns (exit code, seconds it took), code None if it did not exit in time."""
+        proc = self.proc
+        if proc is None:
+            return None, 0.0
+        began = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        try:
+            code = proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
+            self.proc = None
+            return None, time.monotonic() - began
+        self.proc = None
+        return code, time.monotonic() - began
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def tail(self, lines: int = 40) -> str:
+        try:
+            return "\n".join(self.log.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return ""
+
+    def log_lines(self, needle: str) -> int:
+        try:
+            return sum(needle in line for line in self.log.read_text(errors="replace").splitlines())
+        except OSError:
+            return 0
+
+
+@dataclass
+class Bed:
+    """Everything one fault test runs; built by ``bed()``."""
+
+    tmp: Path
+    bootstrap: str
+    registry_url: str
+    cloud: ZenohRouter
+    relay: TcpRelay
+    site: ZenohRouter
+    site_name: str
+    topic: str
+    dead_letter: str
+    edge_yaml: Path
+    uplink_yaml: Path
+    stats_file: Path
+    edge: Process | None = None
+    uplink: Process | None = None
+    processes: list[Process] = field(default_factory=list)
+
+    def start_edge(self) -> Process:
+        n = sum(p.name == "edge" for p in self.processes)
+        self.edge = Process("edge", ["edge", "run", "-c", str(self.edge_yaml), "--stats-file",
+                                     str(self.stats_file), "--stats-interval", "0.2", "--stop-timeout", "5"],
+                            self.tmp / f"edge-{n}.log").start()
+        self.processes.append(self.edge)
+        return self.edge
+
+    def start_uplink(self) -> Process:
+        n = sum(p.name == "uplink" for p in self.processes)
+        self.uplink = Process("uplink", ["uplink", "run", "-c", str(self.uplink_yaml)],
+                              self.tmp / f"uplink-{n}.log").start()
+        self.processes.append(self.uplink)
+        return self.uplink
+
+    def stats(self) -> dict[str, Any]:
+        try:
+            data: dict[str, Any] = json.loads(self.stats_file.read_text())
+        except (OSError, ValueError):
+            return {}
+        return data
+
+    def durable(self) -> dict[str, Any]:
+        stream: dict[str, Any] = self.stats().get("streams", {}).get("durable", {})
+        return stream
+
+    def wait_drained(self, records: int, timeout: float) -> None:
+        """Every one of ``records`` samples spooled, and the spool empty (all acknowledged)."""
+        def drained() -> bool:
+            stats = self.stats()
+            buffer = self.durable().get("buffer", {})
+            return bool(stats.get("processor", {}).get("samples", 0) >= records and buffer.get("depth") == 0
+                        and stats.get("running"))
+        self.wait(drained, timeout, f"{records} records spooled and acknowledged")
+
+    def wait(self, condition: Any, timeout: float, what: str) -> None:
+        try:
+            wait_until(condition, timeout, interval=0.1, message=what)
+        except AssertionError as exc:
+            logs = "\n".join(f"--- {p.log.name}\n{p.tail()}" for p in self.processes)
+            raise AssertionError(f"{exc}\nedge stats: {json.dumps(self.stats())[:3000]}\n{logs}") from None
+
+    def stop_all(self) -> None:
+        for process in self.processes:
+            if process.alive():
+                process.terminate(10)
+
+
+def _write_yaml(path: Path, data: dict[str, Any]) -> Path:
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@contextmanager
+def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s") -> Iterator[Bed]:
+    """Routers and the relay in this process; config files for the edge and uplink processes."""
+    run = uuid.uuid4().hex[:8]
+    with ExitStack() as stack:
+        cloud = stack.enter_context(ZenohRouter())
+        relay = stack.enter_context(TcpRelay(cloud.port))
+        site = stack.enter_context(ZenohRouter(connect=(relay.endpoint,)))
+        site_name, topic, dead_letter = f"fault-{run}", f"fault.chat.{run}", f"fault.dead-letter.{run}"
+        edge_yaml = _write_yaml(tmp / "edge.yaml", {
+            "site": site_name, "edge_id": "edge-1",
+            "zenoh": {"mode": "client", "connect": [site.endpoint]},
+            "robot_types": {"tb4": {"match": "/tb4_*", "mappings": [
+                {"name": "chat", "from": "/{robot}/chatter", "to": topic, "type": STRING}]}},
+            "spool": {"dir": str(tmp / "spool"), "segment_bytes": "1MiB", "max_bytes": "64MiB",
+                      "fsync": "interval", "fsync_interval": "50ms"},
+            "registration": {"grace_period": "30s"},
+            "wan": {"batch_max_records": BATCH, "linger": "10ms", "ack_timeout": ack_timeout,
+                    "max_in_flight": 1, "retry_backoff_min": "100ms", "retry_backoff_max": "1s"},
+            "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
+        })
+        uplink_yaml = _write_yaml(tmp / "uplink.yaml", {
+            "kafka": {"bootstrap_servers": bootstrap},
+            "registry": {"url": registry_url},
+            "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
+            "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
+        })
+        test_bed = Bed(tmp, bootstrap, registry_url, cloud, relay, site, site_name, topic, dead_letter,
+                       edge_yaml, uplink_yaml, tmp / "edge-stats.json")
+        try:
+            yield test_bed
+        finally:
+            test_bed.stop_all()
+
+
+class Generator:
+    """Robot ``tb4_01`` publishing ``"0"``, ``"1"``, ... on ``/tb4_01/chatter`` at ``rate`` Hz."""
+
+    def __init__(self, router: str, rate: float = 400.0) -> None:
+        self.rate = rate
+        self.node = RosNode("gen", "/tb4_01", config=zenoh_peer_config(router),
+                            typestore=load_typestore("jazzy")).start()
+        self.publisher: RosPublisher = self.node.create_publisher("/tb4_01/chatter", STRING,
+                                                                  congestion="block")
+        self.sent = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def wait_subscribed(self, timeout: float = 30.0) -> None:
+        wait_until(self.publisher.has_subscribers, timeout, message="the edge subscribed to the generator")
+
+    def start(self) -> Generator:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        period = 1.0 / self.rate
+        next_at = time.monotonic()
+        while not self._stop.is_set():
+            self.publisher.publish_cdr(cdr.encode_string(str(self.sent)))
+            self.sent += 1
+            next_at += period
+            delay = next_at - time.monotonic()
+            if delay > 0 and self._stop.wait(delay):
+                return
+
+    def pause(self) -> int:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5)
+            self._thread = None
+        return self.sent
+
+    def close(self) -> None:
+        self.pause()
+        self.node.stop()
+
+
+@dataclass(frozen=True)
+class Count:
+    """Jepsen-style accounting of what reached Kafka."""
+
+    lost: list[int]
+    duplicated: int
+    unexpected: int
+    out_of_order: int
+
+    def __str__(self) -> str:
+        head = self.lost[:10]
+        return (f"lost {len(self.lost)} {head}, duplicated {self.duplicated}, unexpected {self.unexpected}, "
+                f"out of order {self.out_of_order}")
+
+
+def count(reader: TopicReader, msgs: list[Message], sent: int) -> Count:
+    values: list[int] = []
+    unexpected = 0
+    for msg in msgs:
+        try:
+            values.append(int(reader.value(msg)["data"]))
+        except (ValueError, KeyError, TypeError):
+            unexpected += 1
+    seen: set[int] = set()
+    firsts: list[int] = []
+    for v in values:
+        if v not in seen:
+            seen.add(v)
+            firsts.append(v)
+    out_of_order = sum(1 for a, b in itertools.pairwise(firsts) if b < a)
+    unexpected += sum(1 for v in seen if not 0 <= v < sent)
+    return Count(lost=sorted(set(range(sent)) - seen), duplicated=len(values) - len(seen),
+                 unexpected=unexpected, out_of_order=out_of_order)
+
+
+def read_all(reader: TopicReader, topic: str, sent: int, timeout: float = 30.0) -> list[Message]:
+    """Everything on the topic once at least ``sent`` distinct values arrived (or the deadline)."""
+    def complete(msgs: list[Message]) -> bool:
+        return len({m.value() for m in msgs}) >= sent
+    try:
+        return reader.read_until(topic, complete, timeout, what=f"{sent} distinct records on {topic}")
+    except AssertionError:
+        return reader.consume(topic, 0, lambda ms: False, 2.0)
