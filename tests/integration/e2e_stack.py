@@ -106,12 +106,13 @@ def bag_messages(bag: Path, topic: str) -> list[bytes]:
 
 
 def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float, *,
-                           uplink_dead_letters: int = 0) -> None:
-    """Wait until the durable stream took at least ``records`` and the uplink acked them all;
-    then check that the uplink dead-lettered exactly ``uplink_dead_letters`` of them."""
+                           uplink_dead_letters: int = 0, stream_name: str = "durable") -> None:
+    """Wait until the stream (``durable``: the spool, ``memory``: best effort) took at least
+    ``records`` and the uplink acked them all; then check that the uplink dead-lettered exactly
+    ``uplink_dead_letters`` of them."""
 
     def done() -> bool:
-        stream = agent.snapshot()["streams"]["durable"]
+        stream = agent.snapshot()["streams"][stream_name]
         buffer = stream["buffer"]
         return bool(buffer["appended"] >= records and buffer["depth"] == 0)
 
@@ -121,7 +122,7 @@ def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float, *,
         snap = agent.snapshot()
         brief = {k: snap.get(k) for k in ("intake", "processor", "streams", "subscriptions")}
         raise AssertionError(f"{exc}; edge: {json.dumps(brief, default=str)}") from None
-    sender = agent.snapshot()["streams"]["durable"]["sender"]
+    sender = agent.snapshot()["streams"][stream_name]["sender"]
     assert sender["records_dead_lettered"] == uplink_dead_letters, sender
 
 

@@ -51,14 +51,16 @@ def reader(kafka_bootstrap: str, schema_registry_url: str) -> TopicReader:
     return TopicReader(kafka_bootstrap, schema_registry_url)
 
 
-def test_one_to_one(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> None:
-    """One ROS topic of one robot -> one Kafka topic (site-level mapping, fixed key)."""
+@pytest.mark.parametrize(("delivery", "stream"), [("at_least_once", "durable"), ("best_effort", "memory")])
+def test_one_to_one(cloud_: Cloud, reader: TopicReader, tmp_path: Path, delivery: str, stream: str) -> None:
+    """One ROS topic of one robot -> one Kafka topic (site-level mapping, fixed key), through the
+    durable spool or, for a ``best_effort`` mapping, the memory buffer."""
     topic = f"fleet.gps.{uuid.uuid4().hex[:8]}"
     expected = bag_messages(HUSKY, "/fix")
     with site(cloud_) as router:
         config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=unique_site(), mappings=[
             {"name": "gps", "from": "/husky_7/fix", "to": topic, "key": "husky_7",
-             "type": "sensor_msgs/msg/NavSatFix"},
+             "type": "sensor_msgs/msg/NavSatFix", "delivery": delivery},
         ])
         with EdgeAgent(config) as agent:
             wait_until(lambda: "/husky_7/fix" in agent.subscribed_topics(), 10,
@@ -67,7 +69,9 @@ def test_one_to_one(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> None:
                 assert robot.wait_for_subscribers(10)
                 assert robot.run().total == len(expected)
                 wait_received(agent, len(expected), timeout=20)  # before the robot's session closes
-            wait_spooled_and_acked(agent, len(expected), timeout=30)
+            wait_spooled_and_acked(agent, len(expected), timeout=30, stream_name=stream)
+            other = "memory" if stream == "durable" else "durable"
+            assert agent.snapshot()["streams"][other]["sender"]["records_sent"] == 0
     msgs = reader.read(topic, len(expected))
     assert len(msgs) == len(expected)
     assert {m.key() for m in msgs} == {b"husky_7"}
