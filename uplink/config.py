@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from fleetlink.console.settings import ConsoleSettings
 from fleetlink.zenoh_options import ZenohSection
 from uplink.commands.mapping import CommandMapping, unique_names
 from uplink.kafka_settings import KafkaSettings
@@ -48,6 +49,8 @@ class UplinkConfig(BaseModel):
     ingest: IngestSettings = IngestSettings()
     commands: list[CommandMapping] = []
     """Command mappings: Kafka topic -> ROS topic per robot (docs/commands.md)."""
+    console: ConsoleSettings | None = None
+    """The fleet web console (every site through the Zenoh admin space); off when absent (docs/console.md)."""
 
     @field_validator("commands")
     @classmethod

@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from fleetlink.console import DeliveryLatency
 from fleetlink.ratelimit import LogLimiter
 from fleetlink.wan import Ack, WireError, decode_batch, encode_ack
 from fleetlink.zenoh_options import ZenohOptions
@@ -27,6 +29,9 @@ from uplink.ordered import KeyedSerialExecutor
 from uplink.producer import KafkaSink
 from uplink.schema_ids import SchemaIds
 from uplink.topics import ensure_topics
+
+if TYPE_CHECKING:
+    from fleetlink.console.uplink import UplinkConsole
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +49,9 @@ class Uplink:
         self._pool: ThreadPoolExecutor | None = None
         self._serial: KeyedSerialExecutor | None = None
         self._commands: CommandRouter | None = None
+        self.delivery_latency = DeliveryLatency()
+        """Per site: from a batch's arrival to Kafka's last delivery report (shown by the console)."""
+        self.console: UplinkConsole | None = None
         self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
@@ -68,9 +76,17 @@ class Uplink:
         if cfg.commands:
             self._commands = CommandRouter(cfg, session=self._session, sink=self._sink,
                                            registry=self._registry).start()
+        if cfg.console is not None:
+            from fleetlink.console.uplink import UplinkConsole
+
+            self.console = UplinkConsole(cfg.console, session=self._session, router=lambda: self._commands,
+                                         latency=self.delivery_latency).start()
         return self
 
     def stop(self) -> None:
+        if self.console is not None:
+            self.console.stop()
+            self.console = None
         for queryable in self._queryables:
             queryable.undeclare()
         self._queryables.clear()
@@ -135,8 +151,12 @@ class Uplink:
             query.drop()
             return
 
+        arrived = time.monotonic()
+
         def done(ack: Ack) -> None:
             self._slots.release()
+            if ack.status == "ok":
+                self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
             if ack.status == "error":
                 self._limiter.log(logging.WARNING, "batch-error",
                                   "batch %s/%s %d..%d not fully delivered: %s",

@@ -30,6 +30,7 @@ from edge.admin.store import OverlayStore, default_overlay_path
 from edge.admin.telemetry import EdgeTelemetry
 from edge.admin.zenoh_admin import ZenohAdmin
 from edge.config import EdgeConfig
+from fleetlink.console.edge import EdgeConsole
 from fleetlink.metrics import HttpServer, PrometheusMetrics
 
 if TYPE_CHECKING:
@@ -55,6 +56,7 @@ class EdgeAdmin:
         self.service: AdminService | None = None
         self.http: HttpServer | None = None
         self.zenoh: ZenohAdmin | None = None
+        self.console: EdgeConsole | None = None
         self._overlay: Overlay | None = None
         self._agent_backend: AgentBackend | None = None
 
@@ -69,12 +71,17 @@ class EdgeAdmin:
         overlay = self._overlay if self._overlay is not None else self.store.load()
         service = AdminService(self.base, backend, overlay=overlay, store=self.store,
                                telemetry=EdgeTelemetry(self.metrics))
+        raw = self._agent_backend.agent.snapshot if self._agent_backend is not None else None
+        self.console = EdgeConsole(service, edge_id=self.base.edge_id, token=self.token,
+                                   snapshot=backend.snapshot, raw_snapshot=raw)
         try:
             if self.listen:
                 app = create_app(service, token=self.token, metrics=self.metrics)
+                self.console.mount(app)  # the web console under /console/
                 self.http = HttpServer(app, self.listen, name="edge-admin").start()
             if session is not None:
                 self.zenoh = ZenohAdmin(session, service, edge_id=self.base.edge_id, token=self.token).start()
+                self.console.start(session)  # fleetlink/<site>/console/status for the fleet console
         except BaseException:
             self.stop()
             raise
@@ -92,6 +99,9 @@ class EdgeAdmin:
             raise
 
     def stop(self) -> None:
+        if self.console is not None:
+            self.console.stop()
+            self.console = None
         if self.zenoh is not None:
             self.zenoh.stop()
             self.zenoh = None

@@ -1,0 +1,22 @@
+"""The fleetlink web console: a live view of the fleet and its mappings, and the place to change them.
+
+Served by each edge agent (its own site, under ``/console/`` of its admin HTTP server) and by
+the uplink (every site, through the Zenoh admin space ``fleetlink/<site>/admin/**``, on the
+port of its ``console`` section). Server-rendered pages (Jinja2) with one small script that
+polls JSON; every asset ships in the package (no network at run time).
+
+- pure core: ``forms`` (form <-> request body, errors -> fields), ``rates`` (counter deltas ->
+  rates), ``graph`` (robots -> topics -> mappings -> Kafka), ``views`` (a site's page data),
+  ``status`` (an edge's spool/WAN/topic counters), ``latency`` (Kafka delivery latency),
+  ``envelope`` (the admin space's answers), ``auth`` (token, session cookie);
+- sources: ``local.LocalSite`` (in process), ``remote.ZenohSites`` (over Zenoh);
+- adapters: ``app.create_console_app`` (FastAPI), ``edge.EdgeConsole``, ``uplink.UplinkConsole``.
+
+The package itself imports only the light parts (settings, latency), so config models can use
+``ConsoleSettings`` without loading the web stack. See docs/console.md.
+"""
+
+from fleetlink.console.latency import DeliveryLatency
+from fleetlink.console.settings import ConsoleSettings
+
+__all__ = ["ConsoleSettings", "DeliveryLatency"]

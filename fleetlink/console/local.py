@@ -1,0 +1,61 @@
+"""``LocalSite``: the edge's own site, answered in process by its ``AdminService``.
+
+Requests go through the Zenoh admin space's own dispatch (``edge.admin.space.targets`` and
+``execute``), so the console gets exactly the answers (statuses, error lists) a remote
+console gets over Zenoh, without a network hop.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from edge.admin.service import AdminService
+from edge.admin.space import execute, targets
+from fleetlink.console.envelope import Envelope, failure, from_parts
+from fleetlink.console.sources import Process
+from fleetlink.console.views import site_summary
+
+NOT_HERE = "not available on this process: command status is kept by the uplink (see its console)"
+_READS = ("robots", "topics", "mappings", "robot_types", "health")
+
+
+class LocalSite:
+    def __init__(self, service: AdminService, *, edge_id: str, status: Callable[[], dict[str, Any]]) -> None:
+        self.service = service
+        self.edge_id = edge_id
+        self._status = status
+
+    @property
+    def process(self) -> Process:
+        return "edge"
+
+    @property
+    def site(self) -> str:
+        return self.service.site
+
+    def sites(self) -> list[dict[str, Any]]:
+        return [site_summary(self.site, self.ask(self.site, "health"))]
+
+    def read(self, site: str) -> dict[str, Envelope]:
+        out = {name: self.ask(site, name) for name in _READS}
+        if site == self.site:
+            out["status"] = Envelope(status=200, site=site, edge_id=self.edge_id, body=self._status())
+        return out
+
+    def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:
+        if site != self.site:
+            return failure(404, f"this edge serves site {self.site!r}, not {site!r}", site=site)
+        key = f"fleetlink/{site}/admin/{path}"
+        found = targets(site, key, op, body is not None, lambda _resource: ())
+        if len(found) != 1:
+            return failure(404, f"no admin resource at {key!r}", site=site)
+        status, part = execute(self.service, found[0], body)
+        return from_parts(status, part, site=site, edge_id=self.edge_id)
+
+    def latency(self, site: str) -> dict[str, Any] | None:
+        del site
+        return None
+
+    def commands(self) -> dict[str, Any]:
+        return {"available": False, "reason": NOT_HERE}

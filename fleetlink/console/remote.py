@@ -1,0 +1,124 @@
+"""``ZenohSites``: every site of the fleet, through the Zenoh admin space (the uplink's console).
+
+- sites: a query on ``fleetlink/*/admin/health``; each edge answers on its concrete key, so the
+  key names the site;
+- a site's view: one query on ``fleetlink/<site>/admin/*`` (every collection answers on its own
+  key) and one on ``fleetlink/<site>/console/status`` (the edge console's counters), in parallel;
+- a change: one query on the concrete key with ``?op=`` and a JSON payload.
+
+Every query carries the console's token as its attachment (``Bearer <token>``), as the admin
+space expects. Queries wait at most ``timeout_s``; a site that does not answer in time is shown
+as such, never waited on forever.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+from pydantic import SecretStr
+
+from fleetlink.console.envelope import Envelope, failure, parse
+from fleetlink.console.latency import DeliveryLatency
+from fleetlink.console.sources import Process
+from fleetlink.console.views import site_summary
+
+SITE = re.compile(r"[A-Za-z0-9_.-]+")
+_PATH = re.compile(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)?")
+
+
+def status_key(site: str) -> str:
+    """Where an edge console answers with its site's counters."""
+    return f"fleetlink/{site}/console/status"
+
+
+def _site_of(key: str) -> str | None:
+    parts = key.split("/")
+    return parts[1] if len(parts) > 2 and parts[0] == "fleetlink" else None
+
+
+class ZenohSites:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        *,
+        token: SecretStr | None,
+        timeout_s: float = 3.0,
+        latency: DeliveryLatency | None = None,
+        commands: Callable[[], dict[str, Any]] | None = None,
+    ) -> None:
+        self.session = session
+        self.timeout_s = timeout_s
+        self._attachment = None if token is None else f"Bearer {token.get_secret_value()}".encode()
+        self._latency = latency
+        self._commands = commands
+
+    @property
+    def process(self) -> Process:
+        return "uplink"
+
+    def _get(self, selector: str, payload: Any = None) -> Any:
+        body = None if payload is None else json.dumps(payload).encode()
+        return self.session.get(selector, payload=body, attachment=self._attachment, timeout=self.timeout_s)
+
+    @staticmethod
+    def _replies(handler: Any) -> list[tuple[str, Envelope]]:
+        out = []
+        for reply in handler:
+            if reply.ok is not None:
+                key = str(reply.ok.key_expr)
+                out.append((key, parse(reply.ok.payload.to_bytes(), key=key)))
+            else:
+                text = reply.err.payload.to_bytes().decode("utf-8", "replace")
+                out.append(("", failure(502, f"error reply: {text}")))
+        return out
+
+    def sites(self) -> list[dict[str, Any]]:
+        found: dict[str, dict[str, Any]] = {}
+        for key, env in self._replies(self._get("fleetlink/*/admin/health")):
+            site = _site_of(key) or env.site
+            if site and site not in found:
+                found[site] = site_summary(site, env)
+        return [found[s] for s in sorted(found)]
+
+    def read(self, site: str) -> dict[str, Envelope]:
+        if SITE.fullmatch(site) is None:
+            return {"health": failure(400, f"not a site name: {site!r}", site=site)}
+        admin = self._get(f"fleetlink/{site}/admin/*")
+        status = self._get(status_key(site))
+        prefix = f"fleetlink/{site}/admin/"
+        out: dict[str, Envelope] = {}
+        for key, env in self._replies(admin):
+            if key.startswith(prefix):
+                out.setdefault(key[len(prefix):], env)
+        for key, env in self._replies(status):
+            if key == status_key(site):
+                out.setdefault("status", env)
+        if not out:
+            message = f"no edge of site {site!r} answered within {self.timeout_s:g} s"
+            return {"health": failure(504, message, site=site)}
+        return out
+
+    def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:
+        if SITE.fullmatch(site) is None or _PATH.fullmatch(path) is None:
+            return failure(400, f"not an admin resource: {site!r} {path!r}", site=site)
+        key = f"fleetlink/{site}/admin/{path}"
+        selector = key if op is None else f"{key}?op={op}"
+        replies = self._replies(self._get(selector, body))
+        for reply_key, env in replies:
+            if reply_key == key:
+                return env
+        if replies:
+            return replies[0][1]
+        return failure(504, f"no edge of site {site!r} answered within {self.timeout_s:g} s", site=site)
+
+    def latency(self, site: str) -> dict[str, Any] | None:
+        return None if self._latency is None else self._latency.summary(site)
+
+    def commands(self) -> dict[str, Any]:
+        if self._commands is None:
+            return {"available": False, "reason": "not available on this process"}
+        return self._commands()

@@ -1,0 +1,28 @@
+"""The fleet console's settings (the ``console`` section of the uplink's config)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class ConsoleSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    listen: str = Field(
+        examples=["127.0.0.1:8490"],
+        description="host:port the fleet web console listens on (HTTP; put TLS in front when exposed)",
+    )
+    token_env: str | None = Field(
+        default="FLEETLINK_ADMIN_TOKEN",
+        description="environment variable holding the access token: operators sign in with it, and it "
+        "is sent to the sites' admin spaces (the same token as the edges' admin API)",
+    )
+    token_file: Path | None = Field(
+        default=None, description="file holding the access token (wins over token_env)")
+    query_timeout_s: float = Field(
+        default=3.0, gt=0, le=60, description="how long to wait for the sites' answers over Zenoh")
+    poll_interval_s: float = Field(
+        default=1.0, ge=0.2, le=60,
+        description="how often the pages refresh (rates are computed between polls)")

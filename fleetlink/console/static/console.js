@@ -1,0 +1,484 @@
+/* fleetlink console: polls the console's JSON and renders it with DOM calls (no inline HTML from
+ * data, no external libraries). Pages: "fleet" (site list), "site" (health, graph, robots,
+ * mappings, editor, commands), "login" (server-rendered form only). */
+"use strict";
+
+(() => {
+  const body = document.body;
+  const BASE = body.dataset.base || "/";
+  const POLL_MS = Math.max(200, Number(body.dataset.pollMs) || 1000);
+  const SVG = "http://www.w3.org/2000/svg";
+
+  // -- small helpers -------------------------------------------------------------------------
+  function el(tag, attrs, ...children) {
+    const node = document.createElement(tag);
+    for (const [key, value] of Object.entries(attrs || {})) {
+      if (value === null || value === undefined || value === false) continue;
+      if (key === "class") node.className = value;
+      else if (key === "text") node.textContent = value;
+      else if (key === "dataset") Object.assign(node.dataset, value);
+      else if (key.startsWith("on")) node.addEventListener(key.slice(2), value);
+      else node.setAttribute(key, value === true ? "" : String(value));
+    }
+    for (const child of children.flat()) {
+      if (child === null || child === undefined || child === false) continue;
+      node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+    }
+    return node;
+  }
+
+  function fmtRate(value) {
+    if (value === null || value === undefined) return "…";
+    if (value === 0) return "0";
+    if (Math.abs(value) < 10) return value.toFixed(1);
+    return Math.round(value).toLocaleString("en");
+  }
+
+  function fmtBytes(n) {
+    if (n === null || n === undefined) return "?";
+    const units = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let i = 0;
+    while (n >= 1024 && i < units.length - 1) { n /= 1024; i += 1; }
+    return `${i === 0 ? n : n.toFixed(1)} ${units[i]}`;
+  }
+
+  function fmtSeconds(s) {
+    if (s === null || s === undefined) return "?";
+    if (s < 1) return `${Math.round(s * 1000)} ms`;
+    if (s < 120) return `${s.toFixed(1)} s`;
+    return `${Math.round(s / 60)} min`;
+  }
+
+  function fmtInt(n) { return (n || 0).toLocaleString("en"); }
+
+  function replaceChildren(node, ...children) {
+    node.replaceChildren(...children.flat().filter((c) => c !== null && c !== undefined));
+  }
+
+  function setUpdated(text, bad) {
+    const node = document.getElementById("updated");
+    if (!node) return;
+    node.textContent = text;
+    node.classList.toggle("bad", Boolean(bad));
+  }
+
+  async function api(method, path, data) {
+    const headers = { Accept: "application/json" };
+    const init = { method, headers, credentials: "same-origin" };
+    if (method !== "GET") headers["X-Fleetlink-Console"] = "1";
+    if (data !== undefined) {
+      headers["Content-Type"] = "application/json";
+      init.body = JSON.stringify(data);
+    }
+    const abort = new AbortController();
+    const timer = setTimeout(() => abort.abort(), 20000);
+    init.signal = abort.signal;
+    let response;
+    try {
+      response = await fetch(BASE + path, init);
+    } finally {
+      clearTimeout(timer);
+    }
+    if (response.status === 401) {
+      location.assign(`${BASE}login?next=${encodeURIComponent(location.pathname)}`);
+      throw new Error("signed out");
+    }
+    let payload;
+    try {
+      payload = await response.json();
+    } catch (err) {
+      payload = { ok: false, error: `HTTP ${response.status}`, fields: {} };
+    }
+    return { status: response.status, data: payload };
+  }
+
+  /* run `task` now and again `every` ms after each run ends (never two at once) */
+  function loop(task, every) {
+    const run = async () => {
+      try {
+        await task();
+      } catch (err) {
+        setUpdated(`connection problem: ${err.message || err}; retrying`, true);
+      }
+      setTimeout(run, every);
+    };
+    run();
+  }
+
+  function badge(state) {
+    return el("span", { class: `badge ${state || "unknown"}`, text: state || "unknown" });
+  }
+
+  // -- commands panel (fleet and site pages) -------------------------------------------------
+  async function refreshCommands() {
+    const box = document.getElementById("commands");
+    if (!box) return;
+    const { status, data } = await api("GET", "api/commands");
+    if (status !== 200) {
+      replaceChildren(box, el("span", { class: "bad", text: data.error || `error ${status}` }));
+      return;
+    }
+    if (!data.available) {
+      box.className = "muted";
+      replaceChildren(box, el("span", { id: "commands-unavailable", text: data.reason }));
+      return;
+    }
+    box.className = "";
+    const rows = [
+      ["command records read", data.records], ["forwarded to robots", data.forwards],
+      ["settled by a repeater", data.settled], ["expired before forwarding", data.expired_before_forward],
+      ["expired unacknowledged", data.expired_unacknowledged], ["dead-lettered", data.dead_lettered],
+      ["in flight", data.in_flight], ["status records written", data.status_records_written],
+      ["repeater status batches", data.status_batches], ["repeater heartbeats", data.heartbeats],
+      ["robots known (registrations)", data.robots_known],
+    ];
+    for (const [result, count] of Object.entries(data.results || {})) rows.push([`repeater result: ${result}`, count]);
+    const mappings = (data.mappings || []).map((m) => el("li", {}, el("code", { text: m.name }), ` ${m.from} → ${m.to}`));
+    replaceChildren(box,
+      el("table", { class: "table compact", id: "commands-table" },
+        el("tbody", {}, rows.map(([label, value]) => el("tr", {}, el("th", { text: label }),
+          el("td", { class: "num", text: fmtInt(value) }))))),
+      mappings.length ? el("ul", { class: "plain" }, mappings) : null);
+  }
+
+  // -- fleet page ------------------------------------------------------------------------------
+  function fleetPage() {
+    const tbody = document.querySelector("#sites tbody");
+    loop(async () => {
+      const { status, data } = await api("GET", "api/sites");
+      if (status !== 200) throw new Error(data.error || `HTTP ${status}`);
+      const rows = data.sites.map((s) => el("tr", { dataset: { site: s.site } },
+        el("td", {}, el("a", { href: `${BASE}sites/${encodeURIComponent(s.site)}`, text: s.site })),
+        el("td", { text: s.edge_id || "" }),
+        el("td", {}, s.error ? el("span", { class: "bad", text: s.error }) : badge(s.state)),
+        el("td", { class: "num", text: s.robots ?? "?" }),
+        el("td", { text: s.wan_link_up === true ? "up" : s.wan_link_up === false ? "down" : "not known yet" }),
+        el("td", { class: "num", text: s.problems ?? "?" })));
+      if (!rows.length) rows.push(el("tr", {}, el("td", { colspan: 6, class: "muted", text: "no site answered" })));
+      replaceChildren(tbody, rows);
+      setUpdated(`updated ${new Date().toLocaleTimeString()}`);
+    }, Math.max(POLL_MS, 2000));
+    loop(refreshCommands, Math.max(POLL_MS, 3000));
+  }
+
+  // -- site page: health -----------------------------------------------------------------------
+  function card(title, id, ...lines) {
+    return el("div", { class: "card", id }, el("h3", { text: title }), lines.map((l) => el("div", {}, l)));
+  }
+
+  function renderHealth(view) {
+    const health = view.health || {};
+    const status = view.status;
+    const cards = [];
+    const degraded = Object.keys(health.degraded_mappings || {});
+    cards.push(card("State", "health-state", badge(health.state),
+      degraded.length ? `degraded mappings: ${degraded.join(", ")}` : null));
+    const link = status && status.wan_link_up !== undefined ? status.wan_link_up : health.wan_link_up;
+    const wanLines = [el("strong", { class: link === false ? "bad" : "", text:
+      link === true ? "up" : link === false ? "down: records are held in the spool" : "not known yet (nothing sent)" })];
+    if (status) {
+      for (const [stream, w] of Object.entries(status.wan || {})) {
+        wanLines.push(`${stream}: ${fmtInt(w.batches_acked)} batches acked, ${fmtInt(w.batches_retried)} retried, ` +
+          `${fmtInt(w.in_flight)} in flight`);
+        if (w.outage_s) wanLines.push(el("span", { class: "bad", text: `outage for ${fmtSeconds(w.outage_s)}` }));
+        if (w.last_error && w.healthy === false) wanLines.push(el("span", { class: "bad", text: w.last_error }));
+      }
+    }
+    cards.push(card("WAN link", "health-wan", ...wanLines));
+    const spool = [];
+    if (status) {
+      for (const s of status.streams || []) {
+        const fill = s.fill === null ? "" : ` (${(s.fill * 100).toFixed(1)} %)`;
+        spool.push(el("span", { class: "spool-line", dataset: { stream: s.stream, depth: s.depth } },
+          `${s.stream}: ${fmtInt(s.depth)} records, ${fmtBytes(s.bytes)}${fill}, oldest ${fmtSeconds(s.oldest_age_s)}`));
+      }
+      if (!spool.length) spool.push("no buffer open");
+    } else {
+      for (const [stream, fill] of Object.entries(health.spool_fill || {})) {
+        spool.push(`${stream}: ${(fill * 100).toFixed(1)} % full`);
+      }
+      spool.push(el("span", { class: "muted", text: "depth and age: not reported by this site" }));
+    }
+    cards.push(card("Spool", "health-spool", ...spool));
+    let latency;
+    if (view.latency) {
+      const l = view.latency;
+      latency = [`median ${l.p50_ms} ms · p95 ${l.p95_ms} ms · max ${l.max_ms} ms`,
+        el("span", { class: "muted", text: `${fmtInt(l.batches)} batches, last ${l.window_s} s` })];
+    } else if (view.process === "edge") {
+      latency = [el("span", { class: "muted", text: "measured by the uplink: see the fleet console" })];
+    } else {
+      latency = [el("span", { class: "muted", text: "no batch of this site delivered in the last minute" })];
+    }
+    cards.push(card("Kafka delivery", "health-latency", ...latency));
+    const registered = (view.robots || []).filter((r) => r.state === "registered").length;
+    cards.push(card("Robots", "health-robots", `${registered} registered`,
+      (view.robots || []).length > registered ? `${view.robots.length - registered} lost` : null));
+    replaceChildren(document.getElementById("health"), cards);
+    const problems = (health.problems || []).map((p) => el("li", { class: p.severity },
+      el("strong", { text: `${p.component} ${p.subject}` }), `: ${p.reason} — ${p.detail}`));
+    replaceChildren(document.getElementById("problems"), problems);
+    const state = document.getElementById("site-state");
+    state.className = `badge ${health.state || "unknown"}`;
+    state.textContent = health.state || "unknown";
+    document.getElementById("site-edge").textContent = view.edge_id ? `edge ${view.edge_id}` : "";
+    const errors = Object.entries(view.errors || {});
+    const box = document.getElementById("read-errors");
+    box.hidden = errors.length === 0;
+    replaceChildren(box, errors.map(([part, message]) => el("div", {}, `${part}: ${message}`)));
+  }
+
+  // -- site page: graph ------------------------------------------------------------------------
+  function node(n, lines, rate) {
+    return el("div", { class: `node ${n.state || ""} ${n.degraded ? "degraded" : ""} ${n.mapped === false ? "unmapped" : ""}`,
+      id: `node-${n.id}`, dataset: { nodeId: n.id, rate: rate === null || rate === undefined ? "" : String(rate) },
+      title: n.detail || n.label },
+    el("div", { class: "label", text: n.label }), lines.map((l) => el("div", { class: "line" }, l)));
+  }
+
+  function renderGraph(graph) {
+    const cols = {};
+    for (const col of document.querySelectorAll("#graph .col")) cols[col.dataset.col] = col.querySelector(".nodes");
+    replaceChildren(cols.robots, graph.robots.map((n) => node(n, [n.detail], null)));
+    replaceChildren(cols.topics, graph.topics.map((n) => node(n,
+      [el("span", { class: "rate", text: n.mapped ? `${fmtRate(n.rate)} msg/s` : "not mapped" })], n.rate)));
+    replaceChildren(cols.mappings, graph.mappings.map((n) => node(n, [
+      el("span", { class: "rate", text: `in ${fmtRate(n.in)}/s · out ${fmtRate(n.out)}/s` }),
+      el("span", { class: n.drop ? "rate drop" : "rate", text: `dropped ${fmtRate(n.drop)}/s` +
+        (n.dead ? ` · dead-lettered ${fmtRate(n.dead)}/s` : "") })], n.out)));
+    replaceChildren(cols.kafka, graph.kafka.map((n) => node(n,
+      [el("span", { class: "rate", text: `${n.approx ? "≈ " : ""}${fmtRate(n.rate)} rec/s` })], n.rate)));
+    requestAnimationFrame(() => drawEdges(graph));
+  }
+
+  function drawEdges(graph) {
+    const box = document.getElementById("graph");
+    const svg = document.getElementById("graph-lines");
+    const origin = box.getBoundingClientRect();
+    svg.setAttribute("width", String(box.scrollWidth));
+    svg.setAttribute("height", String(box.scrollHeight));
+    const paths = [];
+    for (const edge of graph.edges) {
+      const a = document.getElementById(`node-${edge.from}`);
+      const b = document.getElementById(`node-${edge.to}`);
+      if (!a || !b) continue;
+      const ra = a.getBoundingClientRect();
+      const rb = b.getBoundingClientRect();
+      const x1 = ra.right - origin.left;
+      const y1 = ra.top + ra.height / 2 - origin.top;
+      const x2 = rb.left - origin.left;
+      const y2 = rb.top + rb.height / 2 - origin.top;
+      const mid = (x1 + x2) / 2;
+      const path = document.createElementNS(SVG, "path");
+      path.setAttribute("d", `M${x1},${y1} C${mid},${y1} ${mid},${y2} ${x2},${y2}`);
+      const rate = edge.rate;
+      path.setAttribute("class", rate ? "edge live" : "edge idle");
+      path.setAttribute("stroke-width", String(rate ? 1.5 + Math.min(4, Math.log10(1 + rate) * 1.5) : 1));
+      paths.push(path);
+    }
+    svg.replaceChildren(...paths);
+  }
+
+  // -- site page: robots and mappings ----------------------------------------------------------
+  function renderRobots(robots) {
+    const tbody = document.querySelector("#robots tbody");
+    const rows = robots.map((r) => el("tr", { dataset: { robot: r.robot } },
+      el("td", { text: r.robot }), el("td", { text: r.robot_type }), el("td", {}, badge(r.state)),
+      el("td", { text: r.registered_since || "not known" }),
+      el("td", { text: r.explicit ? "registered explicitly" : "discovered" })));
+    if (!rows.length) rows.push(el("tr", {}, el("td", { colspan: 5, class: "muted", text: "no robot registered" })));
+    replaceChildren(tbody, rows);
+  }
+
+  function stageText(stage) {
+    const args = Object.entries(stage).filter(([k]) => k !== "type" && k !== "name")
+      .map(([k, v]) => `${k}=${typeof v === "object" ? JSON.stringify(v) : v}`);
+    return `${stage.type}(${args.join(", ")})`;
+  }
+
+  const removal = { name: null, until: 0 };
+
+  function renderMappings(view, editor) {
+    const tbody = document.querySelector("#mappings tbody");
+    const rows = view.mappings.map((m) => {
+      const r = m.rates || {};
+      const c = m.counters || {};
+      const confirming = removal.name === m.name && Date.now() < removal.until;
+      const stageCounts = (m.stage_counters || []).map((s) =>
+        el("div", { class: "muted small", text: `${s.name}: ${fmtInt(s.received)} in, ${fmtInt(s.dropped)} dropped` }));
+      return el("tr", { dataset: { mapping: m.name } },
+        el("td", {}, el("strong", { text: m.name }), el("div", { class: "muted small",
+          text: `${m.robot_type ? `${m.robot_type} template` : "site"} · ${m.origin}` }),
+          (m.issues || []).map((i) => el("div", { class: "bad small", text: `${i.reason}: ${i.detail}` }))),
+        el("td", {}, el("code", { text: m.from }), " → ", el("code", { text: m.to }),
+          el("div", { class: "muted small", text: `key ${m.key || "{robot}"}${m.type ? ` · ${m.type}` : ""}` })),
+        el("td", {}, (m.stages || []).map((s) => el("div", {}, el("code", { text: stageText(s) }))), stageCounts),
+        el("td", { class: "num", text: fmtRate(r.received) }),
+        el("td", { class: "num", text: fmtRate(r.emitted) }),
+        el("td", { class: r.dropped ? "num drop" : "num", text: fmtRate(r.dropped) }),
+        el("td", { class: "small totals" }, `${fmtInt(c.received)} in · ${fmtInt(c.emitted)} out`,
+          el("br"), `${fmtInt(c.dropped)} dropped · ${fmtInt(c.dead_lettered)} dead-lettered`),
+        el("td", { class: "actions" },
+          el("button", { type: "button", class: "edit", onclick: () => editor.edit(m), text: "Edit" }),
+          el("button", { type: "button", class: confirming ? "remove danger" : "remove",
+            text: confirming ? "Confirm remove" : "Remove", onclick: () => editor.remove(m.name) })));
+    });
+    if (!rows.length) rows.push(el("tr", {}, el("td", { colspan: 8, class: "muted", text: "no mapping" })));
+    replaceChildren(tbody, rows);
+  }
+
+  // -- site page: the mapping editor -----------------------------------------------------------
+  function mappingEditor(site, refresh) {
+    const form = document.getElementById("mapping-form");
+    const fields = ["name", "robot_type", "from", "to", "key", "type", "delivery", "stages"];
+    const title = document.getElementById("form-title");
+    const submit = document.getElementById("submit-mapping");
+    const cancel = document.getElementById("cancel-edit");
+    const result = document.getElementById("form-result");
+    const dry = document.getElementById("dry-run");
+    const enc = encodeURIComponent(site);
+    let editing = null;
+
+    const values = () => Object.fromEntries(fields.map((f) => [f, form.elements[f].value]));
+    const say = (text, bad) => { result.textContent = text; result.classList.toggle("bad", Boolean(bad)); };
+
+    function clearErrors() {
+      for (const box of form.querySelectorAll(".field-error")) { box.textContent = ""; box.hidden = true; }
+      for (const input of form.querySelectorAll("[aria-invalid]")) {
+        input.removeAttribute("aria-invalid");
+        input.classList.remove("invalid");
+      }
+    }
+
+    function showErrors(errors) {
+      for (const [field, messages] of Object.entries(errors || {})) {
+        const box = document.getElementById(`error-${field}`) || document.getElementById("error-_form");
+        box.textContent = [box.textContent, ...messages].filter(Boolean).join(" ");
+        box.hidden = false;
+        const input = form.elements[field];
+        if (input) {
+          input.classList.add("invalid");
+          input.setAttribute("aria-invalid", "true");
+        }
+      }
+    }
+
+    function reset() {
+      editing = null;
+      form.reset();
+      form.elements.name.readOnly = false;
+      title.textContent = "Add a mapping";
+      submit.textContent = "Add mapping";
+      cancel.hidden = true;
+      clearErrors();
+    }
+
+    function refused(data) {
+      showErrors(data.fields && Object.keys(data.fields).length ? data.fields : { _form: [data.error || "refused"] });
+      say(data.error || "refused", true);
+    }
+
+    form.addEventListener("submit", async (event) => {
+      event.preventDefault();
+      clearErrors();
+      say("sending …");
+      const path = editing ? `api/sites/${enc}/mappings/${encodeURIComponent(editing)}` : `api/sites/${enc}/mappings`;
+      const { data } = await api(editing ? "PUT" : "POST", path, values());
+      if (!data.ok) { refused(data); return; }
+      say(`mapping ${data.result.name} ${data.result.status}`);
+      reset();
+      refresh();
+    });
+
+    document.getElementById("dry-run-button").addEventListener("click", async () => {
+      clearErrors();
+      say("trying …");
+      const { data } = await api("POST", `api/sites/${enc}/dry-run`, values());
+      if (!data.ok) { refused(data); dry.hidden = true; return; }
+      const matches = data.result.matches || [];
+      say(`dry run: ${matches.length} topic(s) would be mapped now`);
+      dry.hidden = false;
+      replaceChildren(dry, el("h3", { text: `Dry run of ${data.result.mapping}` }),
+        el("table", { class: "table compact", id: "dry-run-table" },
+          el("thead", {}, el("tr", {}, ["ROS topic", "Robot", "Registered", "Kafka topic", "Key", "Type fits"]
+            .map((h) => el("th", { text: h })))),
+          el("tbody", {}, matches.length ? matches.map((m) => el("tr", {},
+            el("td", {}, el("code", { text: m.topic })), el("td", { text: m.robot || "—" }),
+            el("td", { text: m.registered ? "yes" : "no" }), el("td", {}, el("code", { text: m.kafka_topic })),
+            el("td", { text: m.key }), el("td", { class: m.type_ok ? "" : "bad", text: m.type_ok ? "yes" : "no" })))
+            : el("tr", {}, el("td", { colspan: 6, class: "muted", text: "no discovered topic matches" })))));
+    });
+
+    cancel.addEventListener("click", () => { reset(); say(""); });
+
+    return {
+      edit(mapping) {
+        reset();
+        editing = mapping.name;
+        const set = (f, v) => { form.elements[f].value = v === null || v === undefined ? "" : v; };
+        set("name", mapping.name);
+        form.elements.name.readOnly = true;
+        set("robot_type", mapping.robot_type);
+        set("from", mapping.from);
+        set("to", mapping.to);
+        set("key", mapping.key);
+        set("type", mapping.type);
+        set("delivery", mapping.delivery);
+        set("stages", (mapping.stages || []).length ? mapping.stages.map((s) => `- ${JSON.stringify(s)}`).join("\n") : "");
+        title.textContent = `Change mapping ${mapping.name}`;
+        submit.textContent = "Save changes";
+        cancel.hidden = false;
+        say("");
+        document.getElementById("editor").scrollIntoView({ behavior: "smooth" });
+      },
+      async remove(name) {
+        if (removal.name !== name || Date.now() >= removal.until) {
+          removal.name = name;
+          removal.until = Date.now() + 5000;
+          refresh();
+          return;
+        }
+        removal.name = null;
+        const { data } = await api("DELETE", `api/sites/${enc}/mappings/${encodeURIComponent(name)}`);
+        if (!data.ok) { say(data.error || "refused", true); return; }
+        say(`mapping ${name} removed`);
+        refresh();
+      },
+      robotTypes(names) {
+        const select = form.elements.robot_type;
+        const have = [...select.options].map((o) => o.value).slice(1).join("\n");
+        if (have === names.join("\n")) return;
+        const chosen = select.value;
+        replaceChildren(select, el("option", { value: "", text: "— site-level mapping —" }),
+          names.map((n) => el("option", { value: n, text: n })));
+        select.value = names.includes(chosen) ? chosen : "";
+      },
+    };
+  }
+
+  // -- site page -------------------------------------------------------------------------------
+  function sitePage() {
+    const site = body.dataset.site;
+    let last = null;
+    let editor = null;
+    const refresh = async () => {
+      const { status, data } = await api("GET", `api/sites/${encodeURIComponent(site)}`);
+      if (status !== 200) throw new Error(data.error || `HTTP ${status}`);
+      last = data;
+      editor.robotTypes(data.robot_types || []);
+      renderHealth(data);
+      renderGraph(data.graph);
+      renderRobots(data.robots || []);
+      renderMappings(data, editor);
+      setUpdated(`updated ${new Date().toLocaleTimeString()}`);
+    };
+    editor = mappingEditor(site, () => refresh().catch((err) => setUpdated(String(err), true)));
+    loop(refresh, POLL_MS);
+    loop(refreshCommands, Math.max(POLL_MS, 3000));
+    window.addEventListener("resize", () => { if (last) drawEdges(last.graph); });
+  }
+
+  const pages = { fleet: fleetPage, site: sitePage };
+  const start = pages[body.dataset.page];
+  if (start) start();
+})();

@@ -1,0 +1,117 @@
+"""``UplinkConsole``: the fleet-wide console the uplink serves (every site, over Zenoh).
+
+    console = UplinkConsole(settings, session=session, router=lambda: uplink.commands,
+                            latency=uplink.delivery_latency).start()
+    console.url            # http://127.0.0.1:8490 ; pages under /console/
+    console.stop()
+
+Sites are found and changed through their Zenoh admin space (``ZenohSites``); Kafka delivery
+latency per site comes from the uplink's own measurements; command status from its command
+router (``command_view``).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+import zenoh
+from fastapi import FastAPI
+from fastapi.responses import RedirectResponse
+from pydantic import SecretStr
+
+from fleetlink.console.app import create_console_app
+from fleetlink.console.auth import load_console_token
+from fleetlink.console.errors import ConsoleError
+from fleetlink.console.latency import DeliveryLatency
+from fleetlink.console.remote import ZenohSites
+from fleetlink.console.settings import ConsoleSettings
+from fleetlink.metrics import HttpServer
+
+if TYPE_CHECKING:
+    from uplink.commands.router import CommandRouter
+
+log = logging.getLogger(__name__)
+
+NO_COMMANDS = "not available on this process: this uplink routes no commands (no command mappings configured)"
+
+
+def command_view(router: CommandRouter | None) -> dict[str, Any]:
+    """The command router's counters for the console (``available: false`` without one)."""
+    if router is None:
+        return {"available": False, "reason": NO_COMMANDS}
+    stats = router.stats
+    with stats.lock:
+        counts = {
+            "records": stats.records, "forwards": stats.forwards, "settled": stats.settled,
+            "dead_lettered": stats.dead_lettered, "expired_before_forward": stats.expired_before_forward,
+            "expired_unacknowledged": stats.expired_unacknowledged, "results": dict(stats.results),
+        }
+    mappings = [{"name": m.name, "from": m.from_, "to": m.to}
+                for m in router.config.commands]
+    return {
+        "available": True, **counts, "in_flight": router.in_flight(),
+        "status_records_written": router.status_writer.written, "status_batches": router.intake.batches,
+        "heartbeats": router.intake.heartbeats, "robots_known": len(router.directory),
+        "sites": router.directory.sites(), "mappings": mappings,
+    }
+
+
+class UplinkConsole:
+    def __init__(
+        self,
+        settings: ConsoleSettings,
+        *,
+        session: zenoh.Session,
+        router: Callable[[], CommandRouter | None] = lambda: None,
+        latency: DeliveryLatency | None = None,
+        token: SecretStr | None = None,
+    ) -> None:
+        self.settings = settings
+        self.session = session
+        self._router = router
+        self.latency = latency
+        self._token = token
+        self.http: HttpServer | None = None
+
+    def start(self) -> UplinkConsole:
+        if self.http is not None:
+            return self
+        s = self.settings
+        token = self._token if self._token is not None else load_console_token(s.token_env, s.token_file)
+        if token is None:
+            log.warning("the fleet console has no access token (%s is not set): anyone who reaches %s can "
+                        "change mappings; keep it on loopback", s.token_env or "token_env", s.listen)
+        sites = ZenohSites(self.session, token=token, timeout_s=s.query_timeout_s, latency=self.latency,
+                           commands=lambda: command_view(self._router()))
+        app = FastAPI(title="fleetlink fleet console", docs_url=None, redoc_url=None, openapi_url=None)
+        app.mount("/console", create_console_app(sites, token=token, poll_interval_s=s.poll_interval_s))
+
+        @app.get("/", include_in_schema=False)
+        def front() -> RedirectResponse:
+            return RedirectResponse("/console/", status_code=303)
+
+        self.http = HttpServer(app, s.listen, name="uplink-console").start()
+        log.info("fleet console on %s/console/", self.http.url)
+        return self
+
+    def stop(self) -> None:
+        if self.http is not None:
+            self.http.stop()
+            self.http = None
+
+    @property
+    def url(self) -> str:
+        if self.http is None:
+            raise ConsoleError("the fleet console is not running")
+        return self.http.url
+
+    def __enter__(self) -> UplinkConsole:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()

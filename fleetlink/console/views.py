@@ -1,0 +1,94 @@
+"""What a console page polls: one site's view, assembled from the admin answers (pure apart
+from the ``RateBoard``'s memory; ``now`` is passed in).
+
+``site_view`` takes the envelopes of one read (``robots``, ``topics``, ``mappings``,
+``robot_types``, ``health``, ``status``), turns counters into rates, builds the graph, and says
+which parts could not be read (``errors``), so a page shows what it has and names what it lacks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from fleetlink.console.envelope import Envelope
+from fleetlink.console.graph import build_graph
+from fleetlink.console.rates import RateBoard
+
+PARTS = ("robots", "topics", "mappings", "robot_types", "health", "status")
+MAPPING_RATES = ("received", "emitted", "dropped", "dead_lettered")
+
+
+def _body(parts: Mapping[str, Envelope], name: str, errors: dict[str, str]) -> Any:
+    env = parts.get(name)
+    if env is None:
+        errors[name] = "not reported by this site"
+        return None
+    if env.ok or env.body is not None:  # a failed site's health: status 503 with its report
+        return env.body
+    errors[name] = f"{env.status}: {env.error or 'refused'}"
+    return None
+
+
+def _list(value: Any) -> list[dict[str, Any]]:
+    return [v for v in value if isinstance(v, dict)] if isinstance(value, list) else []
+
+
+def mapping_rates(
+    board: RateBoard, site: str, mappings: list[dict[str, Any]], now: float
+) -> dict[str, dict[str, float | None]]:
+    out = {}
+    for mapping in mappings:
+        counters = mapping.get("counters") or {}
+        name = str(mapping.get("name"))
+        values = {
+            "received": counters.get("received", 0),
+            "emitted": counters.get("emitted", 0),
+            "dropped": counters.get("dropped", 0) + counters.get("type_mismatch", 0),
+            "dead_lettered": counters.get("dead_lettered", 0),
+        }
+        out[name] = {k: board.rate((site, "mapping", name, k), float(v), now) for k, v in values.items()}
+    return out
+
+
+def topic_rates(board: RateBoard, site: str, status: Any, now: float) -> dict[str, float | None]:
+    topics = status.get("topics") if isinstance(status, dict) else None
+    if not isinstance(topics, dict):
+        return {}
+    return {str(topic): board.rate((site, "topic", str(topic)), float(counts.get("received", 0)), now)
+            for topic, counts in topics.items() if isinstance(counts, dict)}
+
+
+def site_view(site: str, parts: Mapping[str, Envelope], board: RateBoard, *, now: float) -> dict[str, Any]:
+    errors: dict[str, str] = {}
+    robots = _list(_body(parts, "robots", errors))
+    topics = _list(_body(parts, "topics", errors))
+    mappings = _list(_body(parts, "mappings", errors))
+    robot_types = [str(t["name"]) for t in _list(_body(parts, "robot_types", errors)) if "name" in t]
+    health = _body(parts, "health", errors)
+    status = _body(parts, "status", errors)
+    rates = mapping_rates(board, site, mappings, now)
+    per_topic = topic_rates(board, site, status, now)
+    board.forget_idle(now)
+    for mapping in mappings:
+        mapping["rates"] = rates.get(str(mapping.get("name")), {})
+    edge_ids = sorted({e.edge_id for e in parts.values() if e.edge_id})
+    return {
+        "site": site, "edge_id": ", ".join(edge_ids), "at": now, "errors": errors,
+        "health": health if isinstance(health, dict) else None,
+        "status": status if isinstance(status, dict) else None,
+        "robots": robots, "robot_types": robot_types, "mappings": mappings,
+        "topic_rates": per_topic,
+        "graph": build_graph(robots, topics, mappings, topic_rates=per_topic, mapping_rates=rates),
+    }
+
+
+def site_summary(site: str, health: Envelope) -> dict[str, Any]:
+    """One line of the fleet page from a site's health answer."""
+    body = health.body if isinstance(health.body, dict) else {}
+    return {
+        "site": site, "edge_id": health.edge_id, "status": health.status,
+        "state": body.get("state"), "robots": body.get("robots"), "wan_link_up": body.get("wan_link_up"),
+        "problems": len(body.get("problems", ())) if isinstance(body.get("problems"), list) else None,
+        "error": None if health.body is not None else (health.error or f"status {health.status}"),
+    }
