@@ -144,6 +144,7 @@ class RecordMaker:
         self.max_dead_letter_bytes = max_dead_letter_bytes
         self._on_schema = on_schema or _ignore_schema
         self._site_header = (H_SITE, site.encode())
+        self._edge_header = (H_EDGE, edge_id.encode())
         self._routes: dict[tuple[str, str], _Route] = {}
         self._unknown_types: set[str] = set()
         self.counters: dict[str, MappingCounters] = {}
@@ -372,6 +373,7 @@ class RecordMaker:
         if origin.type_hash:
             headers.append((H_TYPE_HASH, origin.type_hash.encode()))
         headers.append(self._site_header)
+        headers.append(self._edge_header)
         if bound is not None and bound.robot:
             headers.append((H_ROBOT, bound.robot.encode()))
         if origin.seq is not None:
@@ -392,7 +394,6 @@ class RecordMaker:
             (H_DLQ_TOPIC, (intended or "").encode()),
             (H_DLQ_SIZE, str(len(raw)).encode()),
             (H_ROS_KEY, origin.key_expr.encode("utf-8", "replace")),
-            (H_EDGE, self.edge_id.encode()),
         ]
         value = raw
         if len(raw) > self.max_dead_letter_bytes:

@@ -103,7 +103,8 @@ def test_fast_path_record_shape() -> None:
     assert record.timestamp_ms == STAMP_NS // 1_000_000
     assert headers(record) == {
         "fleetlink.source_topic": "/husky_1/imu/data", "fleetlink.ros_type": IMU,
-        "fleetlink.type_hash": IMU_HASH, "fleetlink.site": "warehouse-a", "fleetlink.robot": "husky_1",
+        "fleetlink.type_hash": IMU_HASH, "fleetlink.site": "warehouse-a", "fleetlink.edge": "edge-1",
+        "fleetlink.robot": "husky_1",
         "fleetlink.seq": "7", "fleetlink.mapping": "imu",
     }
     assert seen[fingerprint(codec.schema)] is not None
