@@ -38,6 +38,8 @@ class Ack:
             raise WireError(f"ack status must be 'ok' or 'error', got {self.status!r}")
         if self.last_seq < self.first_seq:
             raise WireError(f"ack range {self.first_seq}..{self.last_seq} is empty")
+        if self.first_seq < 0 or self.last_seq >= 2**64:
+            raise WireError(f"ack range {self.first_seq}..{self.last_seq} is not within 0..2^64-1")
         if self.status == "ok" and not all(f.dead_lettered for f in self.failures):
             raise WireError("an 'ok' ack may list only dead-lettered failures")
 
