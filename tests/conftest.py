@@ -18,5 +18,5 @@ TESTS = Path(__file__).parent
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         rel = Path(str(item.fspath)).relative_to(TESTS).parts
-        if rel and rel[0] in ("unit", "integration", "fault"):
+        if rel and rel[0] in ("unit", "integration", "fault", "browser"):
             item.add_marker(getattr(pytest.mark, rel[0]))

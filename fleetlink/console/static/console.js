@@ -248,15 +248,16 @@
         (n.dead ? ` · dead-lettered ${fmtRate(n.dead)}/s` : "") })], n.out)));
     replaceChildren(cols.kafka, graph.kafka.map((n) => node(n,
       [el("span", { class: "rate", text: `${n.approx ? "≈ " : ""}${fmtRate(n.rate)} rec/s` })], n.rate)));
-    requestAnimationFrame(() => drawEdges(graph));
   }
 
+  /* curves between the nodes, in the graph box's own coordinates (measured now: layout is
+   * computed on demand, so the lines always match the boxes as they are) */
   function drawEdges(graph) {
     const box = document.getElementById("graph");
     const svg = document.getElementById("graph-lines");
     const origin = box.getBoundingClientRect();
-    svg.setAttribute("width", String(box.scrollWidth));
-    svg.setAttribute("height", String(box.scrollHeight));
+    svg.setAttribute("width", String(box.offsetWidth));
+    svg.setAttribute("height", String(box.offsetHeight));
     const paths = [];
     for (const edge of graph.edges) {
       const a = document.getElementById(`node-${edge.from}`);
@@ -470,12 +471,13 @@
       renderGraph(data.graph);
       renderRobots(data.robots || []);
       renderMappings(data, editor);
+      drawEdges(data.graph);
       setUpdated(`updated ${new Date().toLocaleTimeString()}`);
     };
     editor = mappingEditor(site, () => refresh().catch((err) => setUpdated(String(err), true)));
     loop(refresh, POLL_MS);
     loop(refreshCommands, Math.max(POLL_MS, 3000));
-    window.addEventListener("resize", () => { if (last) drawEdges(last.graph); });
+    new ResizeObserver(() => { if (last) drawEdges(last.graph); }).observe(document.getElementById("graph"));
   }
 
   const pages = { fleet: fleetPage, site: sitePage };
