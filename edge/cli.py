@@ -52,11 +52,15 @@ def write_stats(path: Path, snapshot: dict[str, Any]) -> None:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from edge.admin import EdgeAdmin, load_token
     from edge.agent import EdgeAgent
     from edge.config import EdgeConfig
 
     config = load_config(EdgeConfig, args.config)
-    agent = EdgeAgent(config, options_from_args(args), stop_timeout_s=args.stop_timeout)
+    # the admin API (HTTP when admin.listen is set, and the Zenoh admin space) with the changes
+    # operators made at runtime, saved beside the spool and applied on top of the file
+    admin = EdgeAdmin(config, token=load_token())
+    agent = EdgeAgent(admin.load(), options_from_args(args), stop_timeout_s=args.stop_timeout)
     done = threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
@@ -66,10 +70,14 @@ def run_command(args: argparse.Namespace) -> int:
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
         agent.start()
+        admin.attach(agent)
+        if admin.http is not None:
+            log.info("admin API and console on %s", admin.url)
         while not done.wait(args.stats_interval):
             if args.stats_file is not None:
                 write_stats(args.stats_file, agent.snapshot())
     finally:
+        admin.stop()
         agent.stop()
         if args.stats_file is not None:
             write_stats(args.stats_file, agent.snapshot())
