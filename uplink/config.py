@@ -39,6 +39,12 @@ class IngestSettings(BaseModel):
     )
 
 
+class MetricsSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    listen: str = Field(default="127.0.0.1:9464", description="host:port serving /metrics and /health")
+
+
 class UplinkConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -49,6 +55,8 @@ class UplinkConfig(BaseModel):
     ingest: IngestSettings = IngestSettings()
     commands: list[CommandMapping] = []
     """Command mappings: Kafka topic -> ROS topic per robot (docs/commands.md)."""
+    metrics: MetricsSettings | None = None
+    """Prometheus ``/metrics`` and ``/health`` over HTTP; off when absent (docs/metrics.md)."""
     console: ConsoleSettings | None = None
     """The fleet web console (every site through the Zenoh admin space); off when absent (docs/console.md)."""
 

@@ -70,12 +70,14 @@ class BatchJob:
         on_done: Callable[[Ack], None],
         stats: IngestStats,
         dead_letter_max_bytes: int = 900_000,
+        on_delivery: Callable[[str, bool, float], None] | None = None,
     ) -> None:
         self._batch = batch
         self._sink = sink
         self._ids = schema_ids
         self._dlq = dead_letter_topic
         self._dlq_max = dead_letter_max_bytes
+        self._on_delivery = on_delivery
         self._on_done = on_done
         self._stats = stats
         self._pending = _Pending(remaining=len(batch.records))
@@ -119,6 +121,8 @@ class BatchJob:
 
     def _delivered(self, record: Record, delivery: Delivery) -> None:
         error = delivery.error
+        if self._on_delivery is not None:
+            self._on_delivery(delivery.topic, error is None, delivery.latency_s)
         if error is None:
             self._settle(record)
         elif error.retriable or error.code.startswith("_"):

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 
 from fleetlink.console import DeliveryLatency
+from fleetlink.metrics import PrometheusMetrics, serve_metrics, split_listen
+from fleetlink.metrics.server import HttpServer
 from fleetlink.ratelimit import LogLimiter
 from fleetlink.wan import Ack, WireError, decode_batch, encode_ack
 from fleetlink.zenoh_options import ZenohOptions
@@ -37,8 +39,16 @@ log = logging.getLogger(__name__)
 
 
 class Uplink:
-    def __init__(self, config: UplinkConfig, zenoh_options: ZenohOptions | None = None) -> None:
+    def __init__(
+        self,
+        config: UplinkConfig,
+        zenoh_options: ZenohOptions | None = None,
+        *,
+        metrics: PrometheusMetrics | None = None,
+    ) -> None:
         self.config = config
+        self.metrics = metrics if metrics is not None else PrometheusMetrics("uplink")
+        self._metrics_server: HttpServer | None = None
         self._zenoh_options = zenoh_options or config.zenoh.options()
         self.stats = IngestStats()
         self._session: zenoh.Session | None = None
@@ -76,6 +86,9 @@ class Uplink:
         if cfg.commands:
             self._commands = CommandRouter(cfg, session=self._session, sink=self._sink,
                                            registry=self._registry).start()
+        if cfg.metrics is not None:
+            host, port = split_listen(cfg.metrics.listen)
+            self._metrics_server = serve_metrics(host, port, self.metrics)
         if cfg.console is not None:
             from fleetlink.console.uplink import UplinkConsole
 
@@ -84,6 +97,9 @@ class Uplink:
         return self
 
     def stop(self) -> None:
+        if self._metrics_server is not None:
+            self._metrics_server.stop()
+            self._metrics_server = None
         if self.console is not None:
             self.console.stop()
             self.console = None
@@ -117,6 +133,11 @@ class Uplink:
         self.stop()
 
     @property
+    def metrics_url(self) -> str | None:
+        """Where ``/metrics`` and ``/health`` are served, when configured."""
+        return self._metrics_server.url if self._metrics_server is not None else None
+
+    @property
     def commands(self) -> CommandRouter | None:
         """The command router (None when no command mappings are configured or not started)."""
         return self._commands
@@ -143,6 +164,7 @@ class Uplink:
                 last_seq=batch.last_seq, status="error", detail="uplink busy: retry later",
             )))
             query.drop()
+            self.metrics.on_ingested(batch.site, "refused", 0)
             return
         sink, ids, serial = self._sink, self._ids, self._serial
         if sink is None or ids is None or serial is None:
@@ -155,6 +177,8 @@ class Uplink:
 
         def done(ack: Ack) -> None:
             self._slots.release()
+            self.metrics.on_ingested(batch.site, ack.status, len(batch.records),
+                                     sum(f.dead_lettered for f in ack.failures))
             if ack.status == "ok":
                 self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
             if ack.status == "error":
@@ -167,6 +191,7 @@ class Uplink:
                 query.drop()
 
         job = BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
-                       on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max)
+                       on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max,
+                       on_delivery=self.metrics.on_delivered)
         # one stream's batches are produced in arrival order, so a robot's records keep their order
         serial.submit((batch.site, batch.edge_id, batch.stream), job.run)

@@ -8,12 +8,14 @@ import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
+import httpx
 import pytest
 import zenoh
 from confluent_kafka import Consumer, Message
 from confluent_kafka.schema_registry import SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer
 from confluent_kafka.serialization import MessageField, SerializationContext
+from prometheus_client.parser import text_string_to_metric_families
 from rosbags.rosbag2 import Reader
 
 from fleetlink.wan import Ack, Record, decode_ack, encode_batch, ingest_key, single_object
@@ -35,6 +37,7 @@ def uplink_config(kafka_bootstrap: str, schema_registry_url: str, zenoh_router: 
         "registry": {"url": schema_registry_url},
         "zenoh": {"mode": "client", "connect": [zenoh_router]},
         "topics": {"dead_letter": f"dlq.{uuid.uuid4().hex[:6]}"},
+        "metrics": {"listen": "127.0.0.1:0"},
     })
 
 
@@ -123,6 +126,17 @@ def test_batch_lands_as_avro_readable_by_stock_deserializer(
         key, robot, value = by_seq[stamp // 1_000_000]
         assert key == robot
         assert value == codec.decode(raw)
+
+    assert uplink.metrics_url is not None
+    exposition = httpx.get(f"{uplink.metrics_url}/metrics").text
+    families = {f.name: f for f in text_string_to_metric_families(exposition)}
+    ok_batches = [s.value for s in families["fleetlink_ingest_batches"].samples
+                  if s.labels.get("site") == "site-a" and s.labels.get("status") == "ok"]
+    assert ok_batches
+    assert ok_batches[0] >= 1
+    delivered = sum(s.value for s in families["fleetlink_kafka_delivered"].samples
+                    if s.labels.get("topic") == topic and s.labels.get("result") == "ok")
+    assert delivered == 200
 
 
 def test_unknown_schema_and_oversized_record_are_dead_lettered(
