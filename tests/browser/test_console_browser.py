@@ -166,6 +166,21 @@ def test_an_invalid_mapping_shows_its_error_next_to_the_field(page: Page, stack:
     print(f"screenshot: {shoot(page, 'edge-console-invalid-from')}")
     assert [m.name for m in stack.agent.table.list()] == before
 
+    # changing a mapping: the form loads it, a bad change is refused on its field, a good one applies
+    page.locator('#mappings tr[data-mapping="ir"] button.edit').click()
+    expect(page.locator("#form-title")).to_have_text("Change mapping ir")
+    expect(page.locator("#f-name")).to_have_value("ir")
+    expect(page.locator("#f-name")).to_have_attribute("readonly", "")
+    expect(page.locator("#f-stages")).to_have_value(re.compile(r'"hz":\s*2'))
+    page.fill("#f-stages", "- {type: throttle, hz: 3, keep: sometimes}")
+    page.click("#submit-mapping")
+    expect(page.locator("#error-stages")).to_contain_text("stages[0].keep")
+    page.fill("#f-stages", "- {type: throttle, hz: 3}")
+    page.click("#submit-mapping")
+    expect(page.locator("#form-result")).to_have_text("mapping ir changed")
+    expect(page.locator('#mappings tr[data-mapping="ir"]')).to_contain_text("throttle(hz=3")
+    assert [m.name for m in stack.agent.table.list()] == before
+
 
 def test_nothing_is_shown_without_the_token(page: Page, stack: Stack) -> None:
     page.goto(f"{stack.edge_console}sites/{stack.site}")
