@@ -117,7 +117,8 @@ class KafkaBroker:
         cluster_id = base64.urlsafe_b64encode(uuid.uuid4().bytes).rstrip(b"=").decode()
         proc = subprocess.run(
             [self._java, f"-Dlog4j2.configurationFile={self._log4j}", "-cp", self._classpath,
-             "kafka.tools.StorageTool", "format", "--standalone", "-t", cluster_id,
+             # "=": a generated id may start with "-", which would read as an option
+             "kafka.tools.StorageTool", "format", "--standalone", f"--cluster-id={cluster_id}",
              "-c", str(self._props)],
             capture_output=True, text=True, check=False,
         )
