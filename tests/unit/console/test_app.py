@@ -50,7 +50,7 @@ def edge_client(w: World, *, token: str | None = TOKEN, clock: Clock | None = No
     app = create_app(w.service, token=secret)
     console.mount(app)
     client = TestClient(app, raise_server_exceptions=False)
-    client.raw = raw  # type: ignore[attr-defined]
+    client.raw = raw  # type: ignore[attr-defined,unused-ignore]  # TestClient typing differs by httpx flavour
     return client
 
 
@@ -195,7 +195,7 @@ def test_the_site_view_with_rates_between_polls(w: World) -> None:
     assert first["mappings"][1]["rates"]["received"] is None
     clock.now += 2.0
     w.snapshot[0] = EdgeSnapshot(mappings={"ir": MappingCounts(received=140, emitted=28, dropped=112)})
-    client.raw["subscriptions"]["/tb4_01/ir_intensity"]["received"] = 44  # type: ignore[attr-defined]
+    client.raw["subscriptions"]["/tb4_01/ir_intensity"]["received"] = 44  # type: ignore[attr-defined,unused-ignore]  # TestClient typing differs by httpx flavour
     view = client.get(f"/console/api/sites/{SITE}", headers=BEARER).json()
     assert view["mappings"][1]["rates"] == {
         "received": 20.0,
