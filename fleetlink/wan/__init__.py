@@ -4,15 +4,23 @@ Pure: bytes in, bytes out. Both sides import this one package, so the format has
 
 Batch (edge -> uplink, one Zenoh payload; little-endian throughout)::
 
-    "FLB" | version u8 (=1) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
+    "FLB" | version u8 (=2) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
     body:  site str16 | edge_id str16 | stream str16 | first_seq u64
            | n_schemas u16 | { fingerprint 8 bytes | schema JSON str32 } * n_schemas
            | n_records u32 | { seq u64 | payload_len u32 | payload } * n_records
 
 Record payload (what the edge spool stores, so a batch is built without re-encoding)::
 
-    flags u8 (bit 0: raw value, bit 1: null key) | timestamp_ms i64 | value bytes32 | topic str16
-    | key bytes32 | n_headers u16 | { name str16 | value bytes32 } * n_headers
+    flags u8 (bit 0: raw value, bit 1: null key, bit 2: source seq) | timestamp_ms i64 | value bytes32
+    | [source_seq u64, with bit 2] | topic str16 | key bytes32 | n_headers u16
+    | { name str16 | value bytes32 } * n_headers
+
+With bit 2 the record has one more header, ``fleetlink.seq`` = the decimal source seq (the ROS
+publication sequence number), after the others. It keeps the rest of the payload (the *tail*:
+topic, key, headers) the same for every record of one robot and mapping, so the edge encodes it
+once and the uplink parses it once per batch. Version 1 batches are version 2 without bit 2; the
+uplink reads both, the edge writes version 2 (an uplink that only knows version 1 refuses such
+a batch with "unsupported batch version 2", and the edge keeps it until the uplink is upgraded).
 
 A value is Avro single-object encoded (``C3 01`` + 8-byte CRC-64-AVRO fingerprint, little-endian,
 + Avro body) unless the raw flag is set (dead letters are produced exactly as given). Every batch
@@ -34,6 +42,7 @@ Decoding anything malformed raises ``WireError`` with the reason and the offset.
 from fleetlink.wan.ack import ACK_MAGIC, Ack, RecordFailure, decode_ack, encode_ack
 from fleetlink.wan.batch import (
     BATCH_MAGIC,
+    BATCH_VERSION,
     MAX_BATCH_BYTES,
     Batch,
     Codec,
@@ -55,8 +64,11 @@ from fleetlink.wan.keys import (
     site_prefix,
 )
 from fleetlink.wan.records import (
+    FLAG_SOURCE_SEQ,
     SINGLE_OBJECT_MAGIC,
+    SOURCE_SEQ_HEADER,
     VALUE_OFFSET,
+    PayloadTemplate,
     Record,
     decode_payload,
     encode_payload,
@@ -68,14 +80,18 @@ from fleetlink.wan.records import (
 __all__ = [
     "ACK_MAGIC",
     "BATCH_MAGIC",
+    "BATCH_VERSION",
+    "FLAG_SOURCE_SEQ",
     "MAX_BATCH_BYTES",
     "ROOT",
     "SINGLE_OBJECT_MAGIC",
+    "SOURCE_SEQ_HEADER",
     "VALUE_OFFSET",
     "VERSION",
     "Ack",
     "Batch",
     "Codec",
+    "PayloadTemplate",
     "Record",
     "RecordFailure",
     "WireError",

@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from fleetlink.wan.errors import WireError
-from fleetlink.wan.framing import U16, U32, U64, VERSION, Reader, str16
-from fleetlink.wan.records import Record, decode_payload_from, encode_payload
+from fleetlink.wan.framing import U16, U32, U64, Reader, str16
+from fleetlink.wan.records import FLAGS_V1, FLAGS_V2, Record, Tails, decode_record, encode_payload
 
 try:  # zstd is in the standard library from Python 3.14; the backport is a rosbags dependency
     from compression import zstd as _zstd  # type: ignore[import-not-found,unused-ignore]
@@ -29,6 +29,10 @@ _CODECS: dict[str, int] = {"none": 0, "zlib": 1, "zstd": 2}
 _CODEC_NAMES = {v: k for k, v in _CODECS.items()}
 
 BATCH_MAGIC = b"FLB"
+BATCH_VERSION = 2
+"""What ``encode_batch_payloads`` writes. Version 2 adds the record flag ``FLAG_SOURCE_SEQ``;
+version 1 batches (from edges not yet upgraded) are still read."""
+_RECORD_FLAGS = {1: FLAGS_V1, 2: FLAGS_V2}
 MAX_BATCH_BYTES = 64 * 1024 * 1024
 """Default cap on a batch's uncompressed body (a decompression-bomb guard)."""
 _HEAD = struct.Struct("<3sBBI")
@@ -95,7 +99,7 @@ def encode_batch_payloads(
         previous = seq
         parts += (_SEQ_LEN.pack(seq, len(payload)), payload)
     body = b"".join(parts)
-    return _HEAD.pack(BATCH_MAGIC, VERSION, _CODECS[codec], len(body)) + _compress(body, codec, level)
+    return _HEAD.pack(BATCH_MAGIC, BATCH_VERSION, _CODECS[codec], len(body)) + _compress(body, codec, level)
 
 
 def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = None) -> bytes:
@@ -134,7 +138,8 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     magic, version, codec, size = _HEAD.unpack_from(view, 0)
     if magic != BATCH_MAGIC:
         raise WireError(f"not a fleetlink batch (magic {bytes(magic).hex()})", offset=0)
-    if version != VERSION:
+    allowed_flags = _RECORD_FLAGS.get(version)
+    if allowed_flags is None:
         raise WireError(f"unsupported batch version {version}", offset=3)
     if size > max_bytes:
         raise WireError(f"batch body of {size} bytes exceeds the {max_bytes}-byte limit", offset=5)
@@ -153,16 +158,24 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     if n_records == 0:
         raise WireError("a batch needs at least one record", offset=r.pos - 4)
     records: list[Record] = []
+    append = records.append
+    unpack = _SEQ_LEN.unpack_from
+    tails: Tails = {}
+    pos, end = r.pos, r.end
     previous = -1
     for _ in range(n_records):
-        seq, length = r.unpack(_SEQ_LEN, "record seq/length")
+        if end - pos < _SEQ_LEN.size:
+            raise WireError("truncated record seq/length", offset=pos)
+        seq, length = unpack(body, pos)
         if seq <= previous:
-            raise WireError(f"record seqs must increase: {seq} after {previous}", offset=r.pos - 12)
+            raise WireError(f"record seqs must increase: {seq} after {previous}", offset=pos)
         previous = seq
-        if length > r.end - r.pos:
-            raise WireError(f"truncated record {seq}", offset=r.pos)
-        records.append(decode_payload_from(Reader(body, r.pos, r.pos + length), seq))
-        r.pos += length
+        pos += _SEQ_LEN.size
+        if length > end - pos:
+            raise WireError(f"truncated record {seq}", offset=pos)
+        append(decode_record(body, pos, pos + length, seq, tails=tails, allowed_flags=allowed_flags))
+        pos += length
+    r.pos = pos
     r.done("the batch")
     if records[0].seq != first_seq:
         raise WireError(f"first_seq {first_seq} is not the first record's seq {records[0].seq}")

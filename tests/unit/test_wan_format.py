@@ -12,9 +12,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fleetlink.wan import (
+    BATCH_VERSION,
+    FLAG_SOURCE_SEQ,
+    SOURCE_SEQ_HEADER,
     Ack,
     Batch,
     Codec,
+    PayloadTemplate,
     Record,
     RecordFailure,
     WireError,
@@ -103,6 +107,61 @@ def test_payload_fast_path_matches_record_encoding() -> None:
     assert slow == fast
 
 
+TEMPLATED: list[tuple[Record, int | None]] = [
+    (rec(1), 42),
+    (rec(2), None),
+    (rec(3, key=None), 0),
+    (rec(4, key=b"", headers=()), 2**64 - 1),
+    (rec(5, kafka_topic="ü" * 10, headers=(("ñ", b"\x00\xff"),)), 7),
+    (rec(6, timestamp_ms=-1, value=b""), 1),
+]
+
+
+@pytest.mark.parametrize(("record", "source_seq"), TEMPLATED)
+def test_template_payload_is_the_record_with_its_seq_header(record: Record, source_seq: int | None) -> None:
+    template = PayloadTemplate(record.kafka_topic, record.key, record.headers)
+    payload = template.payload(record.value, record.timestamp_ms, source_seq)
+    if source_seq is None:
+        assert payload == encode_payload(record)
+        expected = record
+    else:
+        assert payload[0] & FLAG_SOURCE_SEQ
+        expected = record._replace(headers=(*record.headers, (SOURCE_SEQ_HEADER, str(source_seq).encode())))
+    assert decode_payload(payload, record.seq) == expected
+    assert payload_fingerprint(payload) == record.fingerprint
+    data = encode_batch_payloads(site="s", edge_id="e", stream="d", items=[(record.seq, payload)], schemas={})
+    assert decode_batch(data).records == (expected,)
+
+
+@pytest.mark.parametrize("source_seq", [-1, 2**64])
+def test_template_refuses_a_source_seq_beyond_u64(source_seq: int) -> None:
+    with pytest.raises(WireError, match="does not fit a u64"):
+        PayloadTemplate("t", b"k").payload(b"v", 0, source_seq)
+
+
+def test_version_2_is_written_and_version_1_still_read() -> None:
+    record = rec(1)
+    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 2
+    v1 = _raw(_body([(1, encode_payload(record))]), version=1)
+    assert decode_batch(v1).records == (record,)
+    seq_payload = PayloadTemplate("t", b"k").payload(b"v", 0, 5)
+    with pytest.raises(WireError, match="unknown record flags 0x04"):
+        decode_batch(_raw(_body([(1, seq_payload)]), version=1))
+    assert decode_batch(_raw(_body([(1, seq_payload)]), version=2)).records[0].headers == (
+        (SOURCE_SEQ_HEADER, b"5"),)
+
+
+def test_records_sharing_a_tail_keep_their_own_key_value_and_seq() -> None:
+    # key=None and key=b"" have the same tail bytes; only the null-key flag tells them apart
+    template = PayloadTemplate("fleet.imu", b"", (("a", b"1"),))
+    null_key = encode_payload(rec(2, key=None, headers=(("a", b"1"),)))
+    items = [(1, template.payload(b"x", 1, 10)), (2, null_key), (3, template.payload(b"yy", 3, 11))]
+    got = decode_batch(encode_batch_payloads(site="s", edge_id="e", stream="d", items=items, schemas={}))
+    assert [(r.key, r.value, r.headers[-1]) for r in got.records] == [
+        (b"", b"x", (SOURCE_SEQ_HEADER, b"10")), (None, rec(2).value, ("a", b"1")),
+        (b"", b"yy", (SOURCE_SEQ_HEADER, b"11"))]
+
+
 def test_compression_pays_on_repetitive_records() -> None:
     records = tuple(rec(i) for i in range(1, 501))
     none = len(encode_batch(batch(records), codec="none"))
@@ -143,7 +202,8 @@ BAD_BATCHES: list[tuple[bytes, str]] = [
     (b"", "at least 9 bytes"),
     (b"FLB\x01\x00", "at least 9 bytes"),
     (_raw(_body([(1, GOOD)]), magic=b"XYZ"), "not a fleetlink batch"),
-    (_raw(_body([(1, GOOD)]), version=2), "unsupported batch version 2"),
+    (_raw(_body([(1, GOOD)]), version=3), "unsupported batch version 3"),
+    (_raw(_body([(1, GOOD)]), version=0), "unsupported batch version 0"),
     (_raw(_body([(1, GOOD)]), codec=7), "unknown codec 7"),
     (_raw(_body([(1, GOOD)]), size=10), "header says 10"),
     (_raw(_body([(1, GOOD)]), size=2**31), "exceeds the"),
@@ -312,3 +372,30 @@ def test_any_ack_round_trips(failures: list[RecordFailure], a: int, n: int, deta
     ack = Ack(edge_id="e", stream="s", first_seq=a, last_seq=a + n, status=status,
               failures=tuple(failures), detail=detail)
     assert decode_ack(encode_ack(ack)) == ack
+
+
+@settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])
+@given(batches(), st.lists(st.none() | st.integers(0, 2**64 - 1), min_size=8, max_size=8), st.data())
+def test_templated_batches_round_trip_or_raise_wire_error_when_mutated(
+    original: Batch, source_seqs: list[int | None], data: st.DataObject
+) -> None:
+    items = []
+    expected = []
+    for record, source_seq in zip(original.records, source_seqs, strict=False):
+        if record.raw_value:
+            items.append((record.seq, encode_payload(record)))
+            expected.append(record)
+            continue
+        template = PayloadTemplate(record.kafka_topic, record.key, record.headers)
+        items.append((record.seq, template.payload(record.value, record.timestamp_ms, source_seq)))
+        extra = () if source_seq is None else ((SOURCE_SEQ_HEADER, str(source_seq).encode()),)
+        expected.append(record._replace(headers=record.headers + extra))
+    codec = data.draw(st.sampled_from(CODECS))
+    encoded = encode_batch_payloads(site=original.site, edge_id=original.edge_id, stream=original.stream,
+                                    items=items, schemas=original.schemas, codec=codec)
+    assert decode_batch(encoded).records == tuple(expected)
+    mutated = bytearray(encoded)
+    i = data.draw(st.integers(0, len(mutated) - 1))
+    mutated[i] = data.draw(st.integers(0, 255))
+    with contextlib.suppress(WireError):
+        assert len(decode_batch(bytes(mutated)).records) >= 1
