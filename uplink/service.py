@@ -12,6 +12,7 @@ import logging
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
@@ -145,35 +146,45 @@ class Uplink:
     # -- batches ---------------------------------------------------------------------------
 
     def _on_query(self, query: zenoh.Query) -> None:
+        """On a Zenoh thread: take the bytes and return. Decoding and producing run on a worker,
+        the batches of one edge in arrival order (a robot's records keep their order with
+        several batches in flight); the Zenoh thread never waits for the GIL-heavy part."""
         payload = query.payload
         if payload is None:
             query.reply_err(b"empty query: a batch is expected as the payload")
             query.drop()
             return
-        try:
-            batch = decode_batch(payload.to_bytes())
-        except WireError as exc:
-            self._limiter.log(logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s",
-                              str(query.key_expr), exc)
-            query.reply_err(f"malformed batch: {exc}".encode())
+        serial = self._serial
+        if serial is None:
+            query.reply_err(b"uplink stopping")
             query.drop()
             return
         if not self._slots.acquire(blocking=False):
-            query.reply(query.key_expr, encode_ack(Ack(
-                edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
-                last_seq=batch.last_seq, status="error", detail="uplink busy: retry later",
-            )))
+            self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
+            query.reply_err(b"uplink busy: retry later")
             query.drop()
-            self.metrics.on_ingested(batch.site, "refused", 0)
             return
-        sink, ids, serial = self._sink, self._ids, self._serial
-        if sink is None or ids is None or serial is None:
+        key = str(query.key_expr)
+        serial.submit(key, partial(self._ingest, query, payload.to_bytes(), time.monotonic()))
+
+    def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> None:
+        """On a worker: decode the batch and produce it; the reply comes with the last delivery report."""
+        try:
+            batch = decode_batch(data)
+        except WireError as exc:
+            self._slots.release()
+            self._limiter.log(logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s",
+                              str(query.key_expr), exc)
+            self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
+            query.reply_err(f"malformed batch: {exc}".encode())
+            query.drop()
+            return
+        sink, ids = self._sink, self._ids
+        if sink is None or ids is None:
             self._slots.release()
             query.reply_err(b"uplink stopping")
             query.drop()
             return
-
-        arrived = time.monotonic()
 
         def done(ack: Ack) -> None:
             self._slots.release()
@@ -190,8 +201,12 @@ class Uplink:
             finally:
                 query.drop()
 
-        job = BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
-                       on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max,
-                       on_delivery=self.metrics.on_delivered)
-        # one stream's batches are produced in arrival order, so a robot's records keep their order
-        serial.submit((batch.site, batch.edge_id, batch.stream), job.run)
+        BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
+                 on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max,
+                 on_delivery=self.metrics.on_delivered).run()
+
+
+def site_of(key: str) -> str:
+    """The site of an ingest key ``fleetlink/<site>/ingest/<edge_id>`` (``?`` if it is not one)."""
+    parts = key.split("/")
+    return parts[1] if len(parts) == 4 and parts[0] == "fleetlink" and parts[2] == "ingest" else "?"
