@@ -11,8 +11,7 @@ Both are the zenoh-ext serialization of a tuple; this module builds and reads th
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from roswire.errors import AttachmentError
 from roswire.gid import GID_SIZE
@@ -28,8 +27,9 @@ _LABEL_GID = b"\x0asource_gid"
 _V1 = struct.Struct(f"<{len(_LABEL_SEQ)}sq{len(_LABEL_TS)}sq{len(_LABEL_GID)}sB16s")
 
 
-@dataclass(frozen=True)
-class Attachment:
+class Attachment(NamedTuple):
+    """One sample's attachment (a named tuple: one is made per received sample)."""
+
     seq: int
     source_ts_ns: int
     gid: bytes

@@ -50,12 +50,19 @@ class TokenError(RoswireError):
 
 
 class AttachmentError(RoswireError):
-    """A per-sample attachment is neither the 33-byte (v2) nor the 77-byte (v1) layout."""
+    """A per-sample attachment is neither the 33-byte (v2) nor the 77-byte (v1) layout.
 
-    def __init__(self, raw: bytes, reason: str) -> None:
-        super().__init__(f"broken rmw_zenoh attachment ({len(raw)} bytes {raw[:40].hex()}): {reason}")
+    ``raw`` is the attachment; a subscriber also sets ``key`` and ``payload`` (the sample's data
+    key and bytes), so the whole sample can be dead-lettered.
+    """
+
+    def __init__(self, raw: bytes, reason: str, *, key: str = "", payload: bytes = b"") -> None:
+        where = f" on {key!r}" if key else ""
+        super().__init__(f"broken rmw_zenoh attachment{where} ({len(raw)} bytes {raw[:40].hex()}): {reason}")
         self.raw = raw
         self.reason = reason
+        self.key = key
+        self.payload = payload
 
 
 class PayloadError(RoswireError):

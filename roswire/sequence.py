@@ -25,6 +25,11 @@ class SeqResult:
     missing: int = 0
 
 
+_FIRST = SeqResult(SeqStatus.FIRST)
+_NEXT = SeqResult(SeqStatus.NEXT)
+_DUPLICATE = SeqResult(SeqStatus.DUPLICATE)
+
+
 class SequenceTracker:
     """Remembers the last sequence number of up to ``max_sources`` publishers (least recent evicted)."""
 
@@ -38,9 +43,9 @@ class SequenceTracker:
     def observe(self, gid: bytes, seq: int) -> SeqResult:
         last = self._last.get(gid)
         if last is None:
-            result = SeqResult(SeqStatus.FIRST)
+            result = _FIRST
         elif seq == last + 1:
-            result = SeqResult(SeqStatus.NEXT)
+            result = _NEXT
         elif seq > last + 1:
             result = SeqResult(SeqStatus.GAP, seq - last - 1)
             self.gaps += 1
@@ -48,7 +53,7 @@ class SequenceTracker:
         else:
             self.duplicates += 1
             self._last.move_to_end(gid)
-            return SeqResult(SeqStatus.DUPLICATE)
+            return _DUPLICATE
         self._last[gid] = seq
         self._last.move_to_end(gid)
         while len(self._last) > self.max_sources:

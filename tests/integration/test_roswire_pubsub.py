@@ -119,12 +119,14 @@ def test_sequence_gaps_and_duplicates_counted_per_publisher(
     assert [s.seq for s in samples if s.gid == gid_b] == [10, 11]
 
 
+@pytest.mark.parametrize("ring", [None, 16], ids=["callback", "ring"])
 def test_bad_traffic_is_counted_reported_and_never_stops_the_subscription(
-    node: RosNode, raw: zenoh.Session, domain: int
+    node: RosNode, raw: zenoh.Session, domain: int, ring: int | None
 ) -> None:
     samples: list[RosSample] = []
     errors: list[RoswireError] = []
-    sub = node.create_subscriber("/noisy", None, samples.append, decode=True, on_error=errors.append)
+    sub = node.create_subscriber("/noisy", None, samples.append, decode=True, on_error=errors.append,
+                                 ring=ring)
     key = data_key(domain, "/noisy", STRING, STRING_HASH)
     good_payload = b"\x00\x01\x00\x00\x03\x00\x00\x00ok\x00"
     good_att = encode(1, time.time_ns(), b"\x01" * 16)
@@ -154,6 +156,35 @@ def test_bad_traffic_is_counted_reported_and_never_stops_the_subscription(
     undecodable = [e for e in errors if isinstance(e, PayloadError) and "does not decode" in e.reason]
     assert undecodable[0].key == key
     assert undecodable[0].typename == STRING
+    broken = [e for e in errors if isinstance(e, AttachmentError)]
+    assert {(e.key, e.payload) for e in broken} == {(key, good_payload)}  # the whole sample, for dead letters
+
+
+def test_ring_subscriber_drains_a_burst_on_its_own_thread_in_order(
+    node: RosNode, raw: zenoh.Session, domain: int
+) -> None:
+    threads: set[str] = set()
+    seqs: list[int] = []
+
+    def on_sample(sample: RosSample) -> None:
+        threads.add(threading.current_thread().name)
+        seqs.append(sample.seq or 0)
+
+    sub = node.create_subscriber("/burst", STRING, on_sample, type_hash=STRING_HASH, ring=10_000)
+    pub = node.create_publisher("/burst", STRING, type_hash=STRING_HASH)
+    wait_until(lambda: pub.matching, timeout=5, message="matched")
+    for _ in range(2000):
+        pub.publish_cdr(b"\x00\x01\x00\x00\x01\x00\x00\x00\x00")
+    wait_until(lambda: sub.stats.received == 2000, timeout=10, message="2000 samples")
+    sub.stop()
+    assert seqs == list(range(1, 2001))
+    assert threads == {"recv/burst"}
+    assert (sub.stats.gaps, sub.stats.delivered) == (0, 2000)
+
+
+def test_ring_of_no_samples_is_refused(node: RosNode) -> None:
+    with pytest.raises(RoswireError, match="at least one sample"):
+        node.create_subscriber("/x", STRING, print, ring=0)
 
 
 def test_callback_failure_does_not_stop_the_subscription(node: RosNode) -> None:
