@@ -29,8 +29,9 @@ from edge.errors import MappingError
 from edge.mapping import Delivery, MappingSpec, MappingTable
 from edge.runtime.errors import RuntimeSetupError
 from edge.runtime.intake import Intake
+from edge.runtime.outgoing import Outgoing
 from edge.runtime.processor import Emit, Item, Processor
-from edge.runtime.records import Outgoing, RecordMaker
+from edge.runtime.records import RecordMaker
 from edge.runtime.registration import (
     EVENT_FINGERPRINT,
     EVENT_SCHEMA_JSON,
@@ -246,7 +247,7 @@ class EdgeAgent:
             self._subscriptions.refresh()
         record = event_record(change, site=self.config.site, edge_id=self.config.edge_id,
                               topic=self.config.topics.registrations)
-        self.intake.offer(Emit((Outgoing("at_least_once", record),)), force=True)
+        self.intake.offer(Emit((Outgoing.of("at_least_once", record),)), force=True)
 
     def register_robot(self, robot_type: str, name: str) -> None:
         """Register a robot explicitly (as a message on the register topic would)."""

@@ -18,10 +18,10 @@ from dataclasses import dataclass, fields
 from edge.errors import SpoolError, SpoolFullError
 from edge.mapping import Delivery
 from edge.runtime.intake import Intake
-from edge.runtime.records import Outgoing, RecordMaker
+from edge.runtime.outgoing import Outgoing
+from edge.runtime.records import RecordMaker
 from edge.spool import RecordBuffer
 from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan import encode_payload
 from roswire.errors import RoswireError
 from roswire.subscriber import RosSample
 
@@ -156,8 +156,11 @@ class Processor:
             return
         self.stats.records += len(out)
         groups: dict[Delivery, list[bytes]] = {}
-        for outgoing in out:
-            groups.setdefault(outgoing.delivery, []).append(encode_payload(outgoing.record))
+        for delivery, payload in out:
+            group = groups.get(delivery)
+            if group is None:
+                group = groups[delivery] = []
+            group.append(payload)
         for delivery, payloads in groups.items():
             self._append_to(delivery, self.buffers[delivery], payloads)
             self._on_appended(delivery)

@@ -17,15 +17,17 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from edge.errors import RenderError
 from edge.mapping import BoundMapping, Delivery
 from edge.runtime.encoding import AvroWriter, SchemaIdentity, identity_of
 from edge.runtime.errors import EncodingError
+from edge.runtime.fastpath import FastPlan, Lane, run_plan
+from edge.runtime.outgoing import MappingCounters, Outgoing
 from edge.stages import Pipeline, Sample, StageConfigError, build_pipeline
-from fleetlink.wan import Record, single_object
+from fleetlink.wan import SINGLE_OBJECT_MAGIC, PayloadTemplate, Record, single_object
 from roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
 from roswire.subscriber import RosSample
 from schemas.codec import Codec
@@ -49,6 +51,7 @@ H_DLQ_TRUNCATED = "fleetlink.dlq.truncated"
 H_ROS_KEY = "fleetlink.ros_key"
 
 Matcher = Callable[[str], Sequence[BoundMapping]]
+_PLAN_CACHE_SIZE = 4096
 
 
 class TypeSource(Protocol):
@@ -78,30 +81,6 @@ class Origin:
     key_expr: str
     stamp_ns: int
     raw: bytes | None
-
-
-@dataclass(frozen=True, slots=True)
-class Outgoing:
-    """One record for the buffer of its delivery class."""
-
-    delivery: Delivery
-    record: Record
-
-
-@dataclass(slots=True)
-class MappingCounters:
-    """Per mapping, in samples (``emitted`` in records)."""
-
-    received: int = 0
-    emitted: int = 0
-    dropped: int = 0
-    """Dropped on purpose by stages (filtered, throttled, unchanged, late) or by a stage error."""
-    dead_lettered: int = 0
-    type_mismatch: int = 0
-    """Samples of another type than the mapping declares (not mapped, not dead-lettered)."""
-
-    def as_dict(self) -> dict[str, int]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 @dataclass(slots=True)
@@ -146,6 +125,7 @@ class RecordMaker:
         self._site_header = (H_SITE, site.encode())
         self._edge_header = (H_EDGE, edge_id.encode())
         self._routes: dict[tuple[str, str], _Route] = {}
+        self._plans: dict[tuple[str, str, str], FastPlan] = {}
         self._unknown_types: set[str] = set()
         self.counters: dict[str, MappingCounters] = {}
         self.unknown_type_samples = 0
@@ -155,8 +135,15 @@ class RecordMaker:
     # -- entry points ----------------------------------------------------------------------------
     def make(self, sample: RosSample, now_ns: int) -> list[Outgoing]:
         """Every record one received sample produces (possibly none, possibly dead letters)."""
+        bounds = self._match(sample.topic)
+        plan = self._plans.get((sample.topic, sample.typename, sample.type_hash))
+        if plan is None or plan.bounds is not bounds:
+            plan = self._plan(sample, bounds)
+        if plan.lanes is not None:
+            return run_plan(plan, sample, self.max_value_bytes,
+                            lambda bound, s, out: self._one(bound, s, now_ns, out))
         out: list[Outgoing] = []
-        for bound in self._match(sample.topic):
+        for bound in bounds:
             counters = self._counters(bound.name)
             counters.received += 1
             if bound.ros_type is not None and bound.ros_type != sample.typename:
@@ -164,6 +151,32 @@ class RecordMaker:
                 continue
             self._one(bound, sample, now_ns, out)
         return out
+
+    def _plan(self, sample: RosSample, bounds: Sequence[BoundMapping]) -> FastPlan:
+        """The fast lanes of ``sample``'s (topic, type, hash), when every mapping allows them."""
+        lanes: list[Lane] = []
+        mismatched: list[MappingCounters] = []
+        plan: FastPlan | None = None
+        for bound in bounds:
+            if bound.ros_type is not None and bound.ros_type != sample.typename:
+                mismatched.append(self._counters(bound.name))
+                continue
+            route = self._route(bound, sample.typename)
+            if (route is None or route.problem is not None or not route.fast or bound.topic_error is not None
+                    or bound.kafka_topic is None or bound.key is None):
+                plan = FastPlan(bounds, None)
+                break
+            origin = Origin(sample.topic, sample.typename, sample.type_hash, None, sample.key, 0, None)
+            headers = self._headers(bound, origin)  # all but fleetlink.seq: it comes with each sample
+            template = PayloadTemplate(bound.kafka_topic, bound.key.encode("utf-8"), headers)
+            lanes.append(Lane(bound, self._counters(bound.name), route.codec.cdr_to_avro,
+                              SINGLE_OBJECT_MAGIC + route.source.fingerprint, template, bound.delivery))
+        if plan is None:
+            plan = FastPlan(bounds, tuple(lanes), tuple(mismatched))
+        if len(self._plans) >= _PLAN_CACHE_SIZE:
+            self._plans.clear()
+        self._plans[sample.topic, sample.typename, sample.type_hash] = plan
+        return plan
 
     def tick(self, now_ns: int) -> list[Outgoing]:
         """Time-driven stage output (held samples, heartbeats, closed windows)."""
@@ -188,8 +201,8 @@ class RecordMaker:
         key_expr = topic
         if isinstance(error, PayloadError):
             raw, key_expr = error.raw, error.key
-        elif isinstance(error, AttachmentError):
-            raw = error.raw
+        elif isinstance(error, AttachmentError):  # the sample's bytes when the subscriber knew them
+            raw, key_expr = error.payload or error.raw, error.key or topic
         elif isinstance(error, KeyParseError):
             key_expr = error.key
         bound = bounds[0] if bounds else None
@@ -300,7 +313,7 @@ class RecordMaker:
             out.append(self._dead_letter("size", reason, origin, bound, bound.delivery, intended=topic))
             return
         self._counters(bound.name).emitted += 1
-        out.append(Outgoing(bound.delivery, Record(
+        out.append(Outgoing.of(bound.delivery, Record(
             kafka_topic=topic, key=key.encode("utf-8"), value=value, headers=self._headers(bound, origin),
             timestamp_ms=origin.stamp_ns // 1_000_000,
         )))
@@ -400,7 +413,7 @@ class RecordMaker:
             headers += [(H_DLQ_SHA256, hashlib.sha256(raw).hexdigest().encode()), (H_DLQ_TRUNCATED, b"true")]
             value = b""
         robot = bound.robot if bound is not None else None
-        return Outgoing(delivery, Record(
+        return Outgoing.of(delivery, Record(
             kafka_topic=self.dead_letter_topic, key=robot.encode() if robot else None, value=value,
             headers=tuple(headers), timestamp_ms=origin.stamp_ns // 1_000_000, raw_value=True,
         ))

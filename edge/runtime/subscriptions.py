@@ -1,4 +1,4 @@
-"""Discovered publishers -> one ``TopicReceiver`` per topic that feeds at least one mapping.
+"""Discovered publishers -> one ``RosSubscriber`` per topic that feeds at least one mapping.
 
 A ``GraphWatcher`` reports every publisher (``MP`` token) with its topic and type. Whenever the
 graph or the mapping table changes, the wanted subscriptions are recomputed (``plan``, pure)
@@ -10,8 +10,10 @@ different definition is still received, and the hash each sample really carried 
 record's headers. A mapping that declares its type subscribes as soon as its topic is known
 (a robot registered), before any publisher shows up.
 
-Each receiver hands its samples to the ``Intake``; refused samples (no attachment, broken CDR
-header) are handed over as ``Rejected`` so they become dead letters.
+Each subscriber receives through a Rust-side ring channel drained by a thread of its own
+(``RosSubscriber(ring=...)``: a Python callback on a Zenoh thread loses samples on a busy edge)
+and hands its samples to the ``Intake``; refused samples (no attachment, broken CDR header) are
+handed over as ``Rejected`` so they become dead letters.
 """
 
 from __future__ import annotations
@@ -27,12 +29,11 @@ from edge.errors import MappingError
 from edge.mapping import MappingTable, TopicPattern
 from edge.runtime.intake import Intake
 from edge.runtime.processor import Item, Rejected
-from edge.runtime.receiver import TopicReceiver
 from roswire.discovery import GraphWatcher
 from roswire.errors import RoswireError
 from roswire.graph import EventKind, GraphEvent
 from roswire.node import RosNode
-from roswire.subscriber import RosSample
+from roswire.subscriber import RosSample, RosSubscriber
 from roswire.tokens import EndpointInfo, EntityKind
 from schemas.errors import SchemaError
 
@@ -83,7 +84,7 @@ def plan(
 @dataclass
 class _Active:
     typename: str | None
-    subscriber: TopicReceiver
+    subscriber: RosSubscriber
 
 
 class SubscriptionManager:
@@ -226,7 +227,7 @@ class SubscriptionManager:
             log.info("subscribed %s (type %s)", topic, typename or "any")
         self.generation += 1
 
-    def _open(self, topic: str, typename: str | None) -> TopicReceiver:
+    def _open(self, topic: str, typename: str | None) -> RosSubscriber:
         intake = self.intake
 
         def on_sample(sample: RosSample) -> None:
@@ -236,11 +237,12 @@ class SubscriptionManager:
             intake.offer(Rejected(topic, error, time.time_ns()), len(getattr(error, "raw", b"")))
 
         token = typename is not None and self._known_type(typename)
-        return TopicReceiver(self.node, topic, typename, on_sample, on_error, capacity=self.capacity,
+        # any type hash: a robot built against another revision of the type is still received
+        return RosSubscriber(self.node, topic, typename, on_sample, on_error=on_error, ring=self.capacity,
                              declare_token=token).start()
 
     @staticmethod
-    def _close(subscriber: TopicReceiver) -> None:
+    def _close(subscriber: RosSubscriber) -> None:
         try:
             subscriber.stop()
         except Exception as exc:  # noqa: BLE001 - a closed session must not stop the rest of the cleanup

@@ -8,8 +8,9 @@ from functools import cache
 from edge.errors import SpoolFullError
 from edge.mapping import MappingSpec, MappingTable
 from edge.runtime.intake import Intake
+from edge.runtime.outgoing import Outgoing
 from edge.runtime.processor import Emit, Item, Processor, Rejected
-from edge.runtime.records import Outgoing, RecordMaker
+from edge.runtime.records import RecordMaker
 from edge.runtime.types import TypeStoreCodecs
 from edge.spool import MemoryBuffer, RecordBuffer, SpoolBatch, SpoolStats
 from fleetlink.wan import Record, decode_payload
@@ -71,8 +72,8 @@ def test_order_and_delivery_classes() -> None:
     woken: list[str] = []
     processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": memory},
                           on_appended=woken.append)
-    event = Outgoing("at_least_once", Record(kafka_topic="fleetlink.robots", key=b"r9", value=b"ev",
-                                             raw_value=True))
+    event = Outgoing.of("at_least_once", Record(kafka_topic="fleetlink.robots", key=b"r9", value=b"ev",
+                                                raw_value=True))
     items: list[Item] = [
         string_sample("/r1/chat", "a", 1),
         string_sample("/r2/fast", "b", 1),

@@ -14,7 +14,8 @@ import pytest
 from rosbags.rosbag2 import Reader
 
 from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
-from edge.runtime.records import Outgoing, RecordMaker
+from edge.runtime.outgoing import Outgoing
+from edge.runtime.records import RecordMaker
 from edge.runtime.types import TypeStoreCodecs
 from edge.stages import AggregateSpec, FilterSpec, ProjectSpec, ThrottleSpec
 from fleetlink.wan import Record, split_single_object
@@ -239,6 +240,8 @@ def test_declared_type_mismatch_is_counted_not_mapped() -> None:
         (PayloadError("0/r1/imu/x/y", IMU, b"garbage!", "sample has no rmw_zenoh attachment"),
          b"garbage!", "0/r1/imu/x/y"),
         (AttachmentError(b"\x01\x02", "length 2 is neither 33 (v2) nor 77 (v1)"), b"\x01\x02", "/r1/imu"),
+        (AttachmentError(b"\x01\x02", "length 2 is neither 33 (v2) nor 77 (v1)", key="0/r1/imu/x/y",
+                         payload=b"the sample"), b"the sample", "0/r1/imu/x/y"),
         (KeyParseError("0/r1/imu/bad", "needs at least 4 chunks"), b"", "0/r1/imu/bad"),
     ],
 )

@@ -1,0 +1,80 @@
+"""The per-sample fast path: a topic whose mappings all take CDR straight to Avro (pure).
+
+For a mapping without stages whose Kafka topic and key read no message field, everything about
+a record but its value, timestamp and ROS sequence number is fixed by (topic, ROS type, type
+hash, mapping). ``FastPlan`` holds that fixed part once per such combination: the converter,
+the single-object header of the schema and the encoded payload tail (``PayloadTemplate``), so
+each sample costs one conversion and one ``struct.pack`` per mapping. Anything unusual (a value
+that does not convert, one too large, a sequence number below zero) is handed back to the
+general path, which makes the same record or dead letter it always did.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from edge.mapping import BoundMapping, Delivery
+from edge.runtime.outgoing import MappingCounters, Outgoing
+from fleetlink.wan import PayloadTemplate
+from roswire.subscriber import RosSample
+from schemas.errors import SchemaError
+
+
+@dataclass(frozen=True, slots=True)
+class Lane:
+    """One mapping of a fast plan."""
+
+    bound: BoundMapping
+    counters: MappingCounters
+    convert: Callable[[bytes], bytes]
+    head: bytes
+    """``C3 01`` + the schema fingerprint: the single-object header."""
+    template: PayloadTemplate
+    delivery: Delivery
+
+
+@dataclass(frozen=True, slots=True)
+class FastPlan:
+    """The lanes of one (topic, type, hash) for one mapping-table snapshot (``bounds``).
+
+    ``lanes`` is None when some mapping of the topic needs the general path (then the whole
+    sample takes it); ``mismatched`` are mappings declaring another type (counted only).
+    """
+
+    bounds: Sequence[BoundMapping]
+    lanes: tuple[Lane, ...] | None
+    mismatched: tuple[MappingCounters, ...] = ()
+
+
+Slow = Callable[[BoundMapping, RosSample, list[Outgoing]], None]
+"""The general path for one mapping and one sample (``RecordMaker._one``)."""
+
+
+def run_plan(plan: FastPlan, sample: RosSample, max_value_bytes: int, slow: Slow) -> list[Outgoing]:
+    """The records of ``sample`` through the fast lanes of ``plan`` (``plan.lanes`` is set)."""
+    out: list[Outgoing] = []
+    for counters in plan.mismatched:
+        counters.received += 1
+        counters.type_mismatch += 1
+    lanes = plan.lanes or ()
+    payload = sample.payload
+    seq = sample.seq
+    stamp_ns = sample.source_ts_ns if sample.source_ts_ns else sample.received_ns
+    timestamp_ms = stamp_ns // 1_000_000
+    for lane in lanes:
+        lane.counters.received += 1
+        if seq is not None and seq < 0:
+            slow(lane.bound, sample, out)
+            continue
+        try:
+            value = lane.head + lane.convert(payload)
+        except SchemaError:
+            slow(lane.bound, sample, out)  # makes the dead letter, with the reason
+            continue
+        if len(value) > max_value_bytes:
+            slow(lane.bound, sample, out)
+            continue
+        out.append(Outgoing(lane.delivery, lane.template.payload(value, timestamp_ms, seq)))
+        lane.counters.emitted += 1
+    return out

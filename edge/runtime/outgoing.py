@@ -1,0 +1,41 @@
+"""What record making produces: records encoded for their buffer, and the per-mapping counters."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import NamedTuple
+
+from edge.mapping import Delivery
+from fleetlink.wan import Record, decode_payload, encode_payload
+
+
+class Outgoing(NamedTuple):
+    """One record for the buffer of its delivery class, already encoded as its spool payload."""
+
+    delivery: Delivery
+    payload: bytes
+
+    @classmethod
+    def of(cls, delivery: Delivery, record: Record) -> Outgoing:
+        return cls(delivery, encode_payload(record))
+
+    @property
+    def record(self) -> Record:
+        """The record the payload encodes (decoded on demand: for tests and inspection)."""
+        return decode_payload(self.payload)
+
+
+@dataclass(slots=True)
+class MappingCounters:
+    """Per mapping, in samples (``emitted`` in records)."""
+
+    received: int = 0
+    emitted: int = 0
+    dropped: int = 0
+    """Dropped on purpose by stages (filtered, throttled, unchanged, late) or by a stage error."""
+    dead_lettered: int = 0
+    type_mismatch: int = 0
+    """Samples of another type than the mapping declares (not mapped, not dead-lettered)."""
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
