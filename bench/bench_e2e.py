@@ -66,7 +66,11 @@ def percentile(values: list[float], q: float) -> float:
 
 
 def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[tuple[float, int]]:
-    """(receive time, record timestamp ms) for ``count`` records of a one-partition topic."""
+    """(receive time, record timestamp ms) for ``count`` records of a one-partition topic.
+
+    One ``poll`` per record: ``consume(n, timeout)`` returns only when ``n`` records are there
+    or the timeout is over, which would add up to ``timeout`` to every receive time.
+    """
     consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"bench-{uuid.uuid4().hex}",
                          "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 200,
                          "fetch.wait.max.ms": 5})
@@ -75,9 +79,9 @@ def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[t
     deadline = time.monotonic() + timeout
     try:
         while len(out) < count and time.monotonic() < deadline:
-            for msg in consumer.consume(5000, timeout=0.1):
-                if msg.error() is None:
-                    out.append((time.time(), msg.timestamp()[1]))
+            msg = consumer.poll(0.1)
+            if msg is not None and msg.error() is None:
+                out.append((time.time(), msg.timestamp()[1]))
     finally:
         consumer.close()
     return out
@@ -180,73 +184,96 @@ def direct_path(bootstrap: str, registry: str, payloads: list[bytes], n: int) ->
     return n / (time.perf_counter() - began)
 
 
+def latency_line(lat: list[float]) -> str:
+    return (f"p50 {statistics.median(lat):.1f} ms   p99 {percentile(lat, 0.99):.1f} ms   "
+            f"max {max(lat):.1f} ms")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robots", type=int, default=8)
     ap.add_argument("--records", type=int, default=40_000, help="total records for the throughput run")
     ap.add_argument("--latency-rate", type=float, default=1000.0)
     ap.add_argument("--latency-seconds", type=float, default=10.0)
+    ap.add_argument("--warmup", type=float, default=1.0,
+                    help="seconds at the start of the latency run also reported apart (schema registration, "
+                         "first batches)")
+    ap.add_argument("--only", choices=("throughput", "latency", "direct"), action="append",
+                    help="run only these parts (repeatable; default: all three)")
     args = ap.parse_args()
+    parts = set(args.only or ("throughput", "latency", "direct"))
 
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-bench-") as tmp:
         work = Path(tmp)
         bootstrap, registry = os.environ.get("KAFKA_BOOTSTRAP"), os.environ.get("SCHEMA_REGISTRY_URL")
+        broker_pid: int | None = None
         if not (bootstrap and registry):
             local = LocalStack(work / "stack")
             info = local.start()
             stack.callback(local.stop)
-            bootstrap, registry = info.bootstrap, info.registry_url
+            bootstrap, registry, broker_pid = info.bootstrap, info.registry_url, info.kafka_pid
         payloads = imu_payloads(2000)
-        print(f"Imu CDR record: {len(payloads[0])} bytes; robots: {args.robots}")
-
-        # 1. throughput
-        topic = f"bench.imu.{uuid.uuid4().hex[:6]}"
-        pipe = Pipeline(work, bootstrap, registry, topic, stack)
+        print(f"Imu CDR record: {len(payloads[0])} bytes; robots: {args.robots}; {os.cpu_count()} CPUs")
         per_robot = args.records // args.robots
         total = per_robot * args.robots
-        cpu0 = pipe.cpu()
-        pub, began = run_robots(pipe.site_port, args.robots, per_robot, 0)
-        got = read_topic(bootstrap, topic, total, timeout=300)
-        if pub.stdout is None or pub.stdin is None:
-            raise SystemExit("publisher has no pipes")
-        published = pub.stdout.readline().split()
-        pub_cpu = tree_cpu(pub.pid)
-        pub.stdin.write("bye\n")
-        pub.stdin.flush()
-        pub.wait(30)
-        cpu1 = pipe.cpu()
-        elapsed = got[-1][0] - began if got else float("nan")
-        rate = len(got) / elapsed
-        print("\n1. throughput, at-least-once (durable spool, acked WAN batches, acks=all):")
-        print(f"   {len(got)}/{total} records in Kafka in {elapsed:.2f} s"
-              f"  →  {rate:,.0f} records/s end to end")
-        print(f"   robots published {published[1]} in {float(published[2]):.2f} s")
-        print(f"   CPU seconds: robots {pub_cpu:.1f}, " +
-              ", ".join(f"{k} {cpu1[k] - cpu0[k]:.1f}" for k in cpu1))
+        rate = float("nan")
 
-        # 2. latency at a steady rate
-        topic2 = f"bench.imu.lat.{uuid.uuid4().hex[:6]}"
-        (work / "lat").mkdir()
-        with ExitStack() as stack2:
-            pipe2 = Pipeline(work / "lat", bootstrap, registry, topic2, stack2)
-            n = int(args.latency_rate * args.latency_seconds)
-            pub2, _ = run_robots(pipe2.site_port, args.robots, n // args.robots, args.latency_rate)
-            got2 = read_topic(bootstrap, topic2, (n // args.robots) * args.robots, timeout=120)
-            assert pub2.stdin is not None
-            pub2.stdin.write("bye\n")
-            pub2.stdin.flush()
-            pub2.wait(60)
-        lat = [(recv * 1000 - stamp) for recv, stamp in got2]
-        print(f"\n2. latency at {args.latency_rate:,.0f} records/s (publish → record read from Kafka), "
-              f"{len(lat)} records:")
-        print(f"   p50 {statistics.median(lat):.1f} ms   p99 {percentile(lat, 0.99):.1f} ms   "
-              f"max {max(lat):.1f} ms")
+        if "throughput" in parts:
+            topic = f"bench.imu.{uuid.uuid4().hex[:6]}"
+            (work / "tp").mkdir()
+            with ExitStack() as stack1:
+                pipe = Pipeline(work / "tp", bootstrap, registry, topic, stack1)
+                cpu0 = pipe.cpu()
+                broker0 = tree_cpu(broker_pid) if broker_pid else 0.0
+                pub, began = run_robots(pipe.site_port, args.robots, per_robot, 0)
+                got = read_topic(bootstrap, topic, total, timeout=300)
+                if pub.stdout is None or pub.stdin is None:
+                    raise SystemExit("publisher has no pipes")
+                published = pub.stdout.readline().split()
+                pub_cpu = tree_cpu(pub.pid)
+                pub.stdin.write("bye\n")
+                pub.stdin.flush()
+                pub.wait(30)
+                cpu1 = pipe.cpu()
+                broker1 = tree_cpu(broker_pid) if broker_pid else 0.0
+            elapsed = got[-1][0] - began if got else float("nan")
+            rate = len(got) / elapsed
+            print("\n1. throughput, at-least-once (durable spool, acked WAN batches, acks=all):")
+            print(f"   {len(got)}/{total} records in Kafka in {elapsed:.2f} s"
+                  f"  →  {rate:,.0f} records/s end to end")
+            print(f"   robots published {published[1]} in {float(published[2]):.2f} s")
+            broker = f", Kafka broker {broker1 - broker0:.1f}" if broker_pid else ""
+            print(f"   CPU seconds: robots {pub_cpu:.1f}, " +
+                  ", ".join(f"{k} {cpu1[k] - cpu0[k]:.1f}" for k in cpu1) + broker)
 
-        # 3. the direct path
-        direct = direct_path(bootstrap, registry, payloads, total)
-        print("\n3. direct path (one process: rosbags → dict → fastavro → produce; no spool, no acks):")
-        print(f"   {direct:,.0f} records/s")
-        print(f"\nratio fleetlink end to end / direct path: {rate / direct:.2f}")
+        if "latency" in parts:
+            topic2 = f"bench.imu.lat.{uuid.uuid4().hex[:6]}"
+            (work / "lat").mkdir()
+            with ExitStack() as stack2:
+                pipe2 = Pipeline(work / "lat", bootstrap, registry, topic2, stack2)
+                n = int(args.latency_rate * args.latency_seconds)
+                pub2, _ = run_robots(pipe2.site_port, args.robots, n // args.robots, args.latency_rate)
+                got2 = read_topic(bootstrap, topic2, (n // args.robots) * args.robots, timeout=120)
+                if pub2.stdin is None:
+                    raise SystemExit("publisher has no pipes")
+                pub2.stdin.write("bye\n")
+                pub2.stdin.flush()
+                pub2.wait(60)
+            lat = [(recv * 1000 - stamp) for recv, stamp in got2]
+            first = min(stamp for _recv, stamp in got2)
+            steady = [(recv * 1000 - stamp) for recv, stamp in got2 if stamp - first >= args.warmup * 1000]
+            print(f"\n2. latency at {args.latency_rate:,.0f} records/s (publish → record read from Kafka), "
+                  f"{len(lat)} records:")
+            print(f"   all records:            {latency_line(lat)}")
+            if steady:
+                print(f"   after the first {args.warmup:g} s ({len(steady)} records): {latency_line(steady)}")
+
+        if "direct" in parts:
+            direct = direct_path(bootstrap, registry, payloads, total)
+            print("\n3. direct path (one process: rosbags → dict → fastavro → produce; no spool, no acks):")
+            print(f"   {direct:,.0f} records/s")
+            if "throughput" in parts:
+                print(f"\nratio fleetlink end to end / direct path: {rate / direct:.2f}")
 
 
 if __name__ == "__main__":
