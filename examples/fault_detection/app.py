@@ -23,7 +23,7 @@ from collections.abc import Callable
 from typing import Any
 
 from quixstreams import Application, State
-from quixstreams.dataframe.windows.aggregations import Count, Sum
+from quixstreams.dataframe.windows.aggregations import Count, Max, Sum
 from quixstreams.models import Row, SchemaRegistryClientConfig
 from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
 from quixstreams.models.serializers.exceptions import SerializationError
@@ -37,6 +37,7 @@ from examples.fault_detection.rules import (
     Sensor,
     event_failure,
     step,
+    window_complete,
     window_verdict,
 )
 from examples.fault_detection.settings import FaultDetectionSettings, check_copartitioned
@@ -96,9 +97,10 @@ def lightring_schema(settings: FaultDetectionSettings) -> dict[str, Any]:
         raise SettingsError(f"cannot derive the {LIGHTRING_TYPE} schema from {paths}: {exc}") from exc
 
 
-def _classifier(sensor: Sensor, config: RuleConfig) -> Callable[[Any], dict[str, Any]]:
-    def classify(record: Any) -> dict[str, Any]:
-        return {"sensor": sensor.value, "failure": event_failure(sensor, record, config)}
+def _classifier(sensor: Sensor, config: RuleConfig) -> Callable[[Any, Any, int, Any], dict[str, Any]]:
+    def classify(record: Any, _key: Any, timestamp_ms: int, _headers: Any) -> dict[str, Any]:
+        return {"sensor": sensor.value, "failure": event_failure(sensor, record, config),
+                "ts": timestamp_ms}
 
     return classify
 
@@ -109,6 +111,8 @@ def _decider(
     def decide(
         window: dict[str, Any], key: Any, _ts: int, _headers: Any, state: State[str, Any]
     ) -> LightCommand | None:
+        if not window_complete(window["end"], window["newest"]):
+            return None
         stored = state.get(MEMORY_KEY)
         memory = INITIAL_MEMORY if stored is None else RobotMemory.from_json(stored)
         verdict = window_verdict(window["events"], window["failures"], min_events)
@@ -204,14 +208,14 @@ def build_app(settings: FaultDetectionSettings, on_command: CommandCallback | No
     )
     frames = [
         app.dataframe(app.topic(name, key_deserializer="str", value_deserializer=deserializer)).apply(
-            _classifier(sensor, rules)
+            _classifier(sensor, rules), metadata=True
         )
         for sensor, name in sources
     ]
     events = frames[0].concat(frames[1]).concat(frames[2])
     windows = (
         events.sliding_window(duration_ms=settings.window_ms, grace_ms=settings.grace_ms, on_late=on_late)
-        .agg(events=Count(), failures=Sum("failure"))
+        .agg(events=Count(), failures=Sum("failure"), newest=Max("ts"))
         .current()
     )
     commands = windows.apply(_decider(settings.min_events, on_command), stateful=True, metadata=True)

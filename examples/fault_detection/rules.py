@@ -52,6 +52,7 @@ __all__ = [
     "ir_failure",
     "kidnap_failure",
     "step",
+    "window_complete",
     "window_verdict",
 ]
 
@@ -143,6 +144,17 @@ def event_failure(sensor: Sensor, record: Any, config: RuleConfig) -> bool:
 
 
 # --- 2. window -> verdict ---------------------------------------------------------------
+
+
+def window_complete(end_ms: int, newest_event_ms: int | None) -> bool:
+    """Whether a sliding window covers its whole duration of events.
+
+    A sliding window is emitted as it changes, including the windows that *start* at an event
+    and end in the future: those hold only the newest events (a fault 0.3 s old would fill one
+    with failures alone). Only a window whose end has been reached by an event is judged, so
+    "every event in the window" always means a full window's worth.
+    """
+    return newest_event_ms is not None and newest_event_ms >= end_ms
 
 
 def window_verdict(events: int, failures: int, min_events: int) -> RobotState | None:

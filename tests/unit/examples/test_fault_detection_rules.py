@@ -18,6 +18,7 @@ from examples.fault_detection.rules import (
     Sensor,
     event_failure,
     step,
+    window_complete,
     window_verdict,
 )
 
@@ -225,3 +226,18 @@ def test_corrupt_memory_is_an_error(value: Any, reason: str) -> None:
         RobotMemory.from_json(value)
     assert info.value.reason == reason
     assert info.value.value is value
+
+
+@pytest.mark.parametrize(
+    ("end_ms", "newest_ms", "complete"),
+    [
+        (10_000, 10_000, True),  # the window that ends at the newest event
+        (10_000, 12_000, True),
+        (12_000, 10_300, False),  # a window that starts at an event and ends in the future
+        (10_000, None, False),
+    ],
+)
+def test_only_windows_whose_end_an_event_reached_are_judged(
+    end_ms: int, newest_ms: int | None, complete: bool
+) -> None:
+    assert window_complete(end_ms, newest_ms) is complete
