@@ -6,7 +6,6 @@ list of ``StageSpec`` and built with ``build_pipeline``. See docs/stages.md.
 
 from edge.stages.aggregate import AggregateStage
 from edge.stages.base import Sample, Stage, StageCounters
-from edge.stages.durations import DurationNs, format_duration, parse_duration
 from edge.stages.errors import EvaluationError, ExpressionError, FieldPathError, StageConfigError
 from edge.stages.filter import FilterStage
 from edge.stages.on_change import OnChangeStage
@@ -21,6 +20,7 @@ from edge.stages.spec import (
     ThrottleSpec,
 )
 from edge.stages.throttle import ThrottleStage
+from fleetlink.durations import DurationNs, format_duration, parse_duration
 
 __all__ = [
     "AggregateSpec",

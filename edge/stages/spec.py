@@ -11,10 +11,10 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from edge.stages.durations import DurationNs
 from edge.stages.errors import StageConfigError
 from edge.stages.expr import check_predicate, parse_expression
 from edge.stages.paths import parse_path
+from fleetlink.durations import DurationNs
 
 Op = Literal["count", "mean", "min", "max", "last", "stddev"]
 StageName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]

@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, PositiveFloat
 
 from examples.fault_detection.errors import SettingsError
 from examples.fault_detection.rules import HAZARD_CLIFF, HAZARD_WHEEL_DROP, RuleConfig
+from fleetlink import durations
 
 __all__ = [
     "DEFAULT_STATE_DIR",
@@ -25,8 +26,7 @@ __all__ = [
 
 DEFAULT_STATE_DIR = Path.home() / ".cache" / "fleetlink" / "fault-detection"
 
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m)?\s*$")
-_UNIT_MS = {"ms": 1, "s": 1000, "m": 60_000}
+_BARE_NUMBER = re.compile(r"^\s*\d+(?:\.\d+)?\s*$")
 
 
 def parse_duration_ms(text: str) -> int:
@@ -34,14 +34,13 @@ def parse_duration_ms(text: str) -> int:
 
     The result must be a positive whole number of milliseconds.
     """
-    match = _DURATION.match(text)
-    if match is None:
-        raise SettingsError(f"invalid duration {text!r}: expected e.g. 2s, 500ms, 1.5s or 1m")
-    number, unit = match.group(1), match.group(2) or "s"
-    millis = float(number) * _UNIT_MS[unit]
-    if millis != int(millis) or millis < 1:
-        raise SettingsError(f"invalid duration {text!r}: must be a whole, positive number of milliseconds")
-    return int(millis)
+    value: object = text
+    if _BARE_NUMBER.match(text):
+        value = float(text)  # the shared parser reads numbers, not numeric text, as seconds
+    try:
+        return durations.parse_duration_ms(value)
+    except ValueError as exc:
+        raise SettingsError(f"invalid duration {text!r}: {exc}; e.g. 2s, 500ms, 1.5s or 1m") from None
 
 
 class Topics(BaseModel):

@@ -1,7 +1,8 @@
-"""Durations in stage configs: ``"250ms"``, ``"1s"``, ``"2m"``, ``"1.5h"`` or a number of seconds.
+"""Durations in every config: ``"250ms"``, ``"1s"``, ``"2m"``, ``"1.5h"`` or a number of seconds.
 
 Parsed once into integer nanoseconds; ``format_duration`` writes the shortest exact text back,
-so a config that is validated and saved again reads the same.
+so a config that is validated and saved again reads the same. ``DurationNs`` holds
+nanoseconds, ``Seconds`` a float number of seconds, ``parse_duration_ms`` whole milliseconds.
 """
 
 from __future__ import annotations
@@ -85,3 +86,20 @@ DurationNs = Annotated[
     WithJsonSchema(_JSON_SCHEMA),
 ]
 """A pydantic field type: accepts duration text or seconds, holds nanoseconds, dumps text."""
+
+
+def parse_duration_ms(value: object) -> int:
+    """Duration text or seconds -> a positive whole number of milliseconds. Raises ``ValueError``."""
+    ns = parse_duration(value)
+    if ns < UNITS_NS["ms"] or ns % UNITS_NS["ms"]:
+        raise ValueError(f"duration {value!r} must be a whole, positive number of milliseconds")
+    return ns // UNITS_NS["ms"]
+
+
+Seconds = Annotated[
+    float,
+    BeforeValidator(lambda value: parse_duration(value) / UNITS_NS["s"]),
+    PlainSerializer(lambda seconds: format_duration(round(seconds * UNITS_NS["s"])), return_type=str),
+    WithJsonSchema(_JSON_SCHEMA),
+]
+"""A pydantic field type: accepts duration text or seconds, holds float seconds, dumps text."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from pydantic import BaseModel, ValidationError
 
-from edge.stages.durations import DurationNs, format_duration, parse_duration
+from fleetlink.durations import DurationNs, format_duration, parse_duration
 
 
 @pytest.mark.parametrize(
