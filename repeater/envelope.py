@@ -38,8 +38,9 @@ from schemas.single_object import FramingError, frame, unframe
 MAGIC = b"FLC"
 VERSION = 1
 FLAG_ZLIB = 0x01
-COMPRESS_ABOVE = 512
-"""Envelopes larger than this many bytes are sent zlib-compressed (when that makes them smaller)."""
+COMPRESS_ABOVE = 160
+"""Envelopes and status batches larger than this many bytes are sent zlib-compressed (when that
+makes them smaller): the WAN is the scarce resource, and the CPU cost is microseconds."""
 MAX_ENVELOPE = 8 << 20
 _HEADER_LEN = struct.Struct(">I")
 _ROS_TYPE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*/msg/[A-Za-z_][A-Za-z0-9_]*")
@@ -135,8 +136,10 @@ def encode_envelope(env: CommandEnvelope, *, compress_above: int = COMPRESS_ABOV
     header: dict[str, Any] = {
         "id": env.command_id, "robot": env.robot, "topic": env.ros_topic, "type": env.ros_type,
         "mapping": env.mapping, "issued": env.issued_at_ms, "until": env.lease_until_ms,
-        "period": env.period_ms, "order": env.order, "source": env.source,
+        "period": env.period_ms, "order": env.order,
     }
+    if env.source != env.command_id:
+        header["source"] = env.source
     if env.schema is not None:
         header["schema"] = env.schema
     if env.qos is not None:
@@ -160,13 +163,7 @@ def decode_envelope(data: bytes) -> CommandEnvelope:
     if flags & ~FLAG_ZLIB:
         raise EnvelopeError("command envelope", f"unknown flags 0x{flags:02x}", data)
     if flags & FLAG_ZLIB:
-        try:
-            inflater = zlib.decompressobj()
-            rest = inflater.decompress(rest, MAX_ENVELOPE)
-            if inflater.unconsumed_tail:
-                raise EnvelopeError("command envelope", f"inflates beyond {MAX_ENVELOPE} bytes", data)
-        except zlib.error as exc:
-            raise EnvelopeError("command envelope", f"bad zlib data: {exc}", data) from None
+        rest = _inflate(rest, "command envelope", data)
     if len(rest) < _HEADER_LEN.size:
         raise EnvelopeError("command envelope", "truncated before the header length", data)
     (size,) = _HEADER_LEN.unpack_from(rest)
@@ -184,7 +181,7 @@ def decode_envelope(data: bytes) -> CommandEnvelope:
         ros_type=get.text("type"), mapping=get.text("mapping"), issued_at_ms=get.integer("issued"),
         lease_until_ms=get.integer("until"), period_ms=get.integer("period"), schema_fp=fp, body=body,
         schema=get.optional_text("schema"), qos=get.optional_text("qos"), order=get.integer("order"),
-        source=get.text("source", allow_empty=True),
+        source=get.text("source", allow_empty=True) if "source" in header else get.text("id"),
     )
     try:
         check_envelope(env)
@@ -230,10 +227,9 @@ def check_envelope(env: CommandEnvelope) -> None:
 def encode_reply(reply: CommandReply) -> bytes:
     if reply.result not in RESULTS:
         raise EnvelopeError("command reply", f"result {reply.result!r} is not one of {sorted(RESULTS)}")
-    return json.dumps({
-        "id": reply.command_id, "robot": reply.robot, "result": reply.result, "detail": reply.detail,
-        "site": reply.site, "repeater": reply.repeater,
-    }, separators=(",", ":")).encode()
+    obj = {"id": reply.command_id, "robot": reply.robot, "result": reply.result, "detail": reply.detail,
+           "site": reply.site, "repeater": reply.repeater}
+    return json.dumps({k: v for k, v in obj.items() if v}, separators=(",", ":")).encode()
 
 
 def decode_reply(data: bytes) -> CommandReply:
@@ -249,14 +245,20 @@ def decode_reply(data: bytes) -> CommandReply:
 # -- status ---------------------------------------------------------------------------------
 
 
-def encode_status_batch(batch: StatusBatch) -> bytes:
+def encode_status_batch(batch: StatusBatch, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    """JSON, zlib-compressed when larger than ``compress_above`` bytes (JSON starts with ``{``)."""
     for event in batch.events:
         if event.status not in STATUSES:
             raise EnvelopeError("status batch", f"status {event.status!r} is not one of {sorted(STATUSES)}")
-    return json.dumps({
+    text = json.dumps({
         "repeater": batch.repeater, "site": batch.site,
         "events": [status_to_json(e) for e in batch.events],
     }, separators=(",", ":"), ensure_ascii=False).encode()
+    if len(text) > compress_above:
+        packed = zlib.compress(text, 6)
+        if len(packed) < len(text):
+            return packed
+    return text
 
 
 def status_to_json(event: StatusEvent) -> dict[str, Any]:
@@ -277,7 +279,10 @@ def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
 
 
 def decode_status_batch(data: bytes) -> StatusBatch:
-    obj = _json_object(data, "status batch", data)
+    raw = data
+    if data[:1] != b"{":
+        raw = _inflate(data, "status batch")
+    obj = _json_object(raw, "status batch", data)
     get = _Fields(obj, "status batch", data)
     events = obj.get("events")
     if not isinstance(events, list):
@@ -296,6 +301,18 @@ def decode_status_ack(data: bytes) -> StatusAck:
 
 
 # -- helpers --------------------------------------------------------------------------------
+
+
+def _inflate(packed: bytes, what: str, data: bytes | None = None) -> bytes:
+    data = packed if data is None else data
+    try:
+        inflater = zlib.decompressobj()
+        out = inflater.decompress(packed, MAX_ENVELOPE)
+        if inflater.unconsumed_tail:
+            raise EnvelopeError(what, f"inflates beyond {MAX_ENVELOPE} bytes", data)
+    except zlib.error as exc:
+        raise EnvelopeError(what, f"bad zlib data: {exc}", data) from None
+    return out
 
 
 def _json_object(raw: bytes, what: str, data: bytes) -> dict[str, Any]:

@@ -7,10 +7,11 @@ One file, ``<state_dir>/commands.journal``, one JSON object per line:
 * ``delivered`` / ``end`` — the command was first seen by a subscriber / stopped for good;
 * ``status`` / ``acked`` — a status event waiting for the uplink / acknowledged by it.
 
-A command line is fsynced before the uplink is told it was applied, so "applied once" holds
-across a crash. :func:`replay` rebuilds the state from the lines (a torn last line is
-skipped); :meth:`Journal.compact` rewrites the file with only what is still live (commands
-whose lease has not ended, unacknowledged events, the schemas they use), atomically.
+A command line is fsynced before the uplink is told it was applied, so the uplink commits
+only what a restarted repeater will recognise ("applied once" holds across a crash).
+:func:`replay` rebuilds the state from the lines (a torn last line is skipped);
+:meth:`Journal.compact` rewrites the file with only what is still live (commands whose lease
+has not ended, unacknowledged events, the schemas they use), atomically.
 """
 
 from __future__ import annotations
@@ -174,6 +175,19 @@ class Journal:
         except OSError as exc:
             raise JournalError(str(self.path), exc.strerror or str(exc)) from None
         self.lines += len(entries)
+
+    def sync(self) -> None:
+        """Make what was appended durable (fsync); safe to call without the writer's lock: a file
+        replaced by a compaction meanwhile was fsynced by it."""
+        out = self._file
+        if out is None:
+            return
+        try:
+            os.fsync(out.fileno())
+        except ValueError:
+            return  # closed by a concurrent compaction, which fsynced its replacement
+        except OSError as exc:
+            raise JournalError(str(self.path), exc.strerror or str(exc)) from None
 
     def compact(self, live: list[dict[str, Any]]) -> None:
         """Replace the file by ``live`` (written to a temp file, fsynced, renamed over it)."""

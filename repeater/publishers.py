@@ -1,6 +1,11 @@
-"""One rmw_zenoh publisher per ROS topic, created when a command needs it, reused by later
-commands on the same topic, and undeclared when no command is active there any more (so no
-publisher, no ``MP`` token and no cache outlives the lease)."""
+"""One rmw_zenoh publisher per ROS topic, created when a command needs it and reused by later
+commands on the same topic.
+
+When no command is active on a topic any more, its publisher is *released*: a TRANSIENT_LOCAL
+publisher is undeclared at once (its cache would otherwise serve the expired command to a late
+joiner); a volatile one is kept for ``idle_ttl`` seconds, so a fleet that gets a command every
+few seconds does not re-declare its publishers (and their liveliness tokens) each time.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,8 @@ from roswire.errors import QosParseError
 from roswire.node import RosNode
 from roswire.publisher import RosPublisher
 from roswire.qos import DEFAULT, QoS
+
+IDLE_TTL_S = 300.0
 
 
 @dataclass(frozen=True)
@@ -28,9 +35,11 @@ def parse_qos(text: str | None) -> QoS:
 class Publishers:
     """Not thread-safe: the repeater calls it under its lock."""
 
-    def __init__(self, node: RosNode) -> None:
+    def __init__(self, node: RosNode, *, idle_ttl: float = IDLE_TTL_S) -> None:
         self._node = node
+        self._idle_ttl = idle_ttl
         self._pubs: dict[str, tuple[_Spec, RosPublisher]] = {}
+        self._idle: dict[str, float] = {}  # topic -> released at (seconds, caller's clock)
 
     def get(self, topic: str, typename: str, qos_text: str | None) -> RosPublisher:
         """The publisher for ``topic``; a different type or QoS replaces the old one.
@@ -38,6 +47,7 @@ class Publishers:
         Raises ``QosParseError`` for a QoS string rmw_zenoh would not accept.
         """
         spec = _Spec(typename, parse_qos(qos_text))
+        self._idle.pop(topic, None)
         known = self._pubs.get(topic)
         if known is not None:
             if known[0] == spec:
@@ -47,17 +57,33 @@ class Publishers:
         self._pubs[topic] = (spec, publisher)
         return publisher
 
-    def release(self, topic: str) -> None:
-        known = self._pubs.pop(topic, None)
-        if known is not None:
-            known[1].stop()
+    def release(self, topic: str, now: float) -> None:
+        """No command is active on ``topic`` any more."""
+        known = self._pubs.get(topic)
+        if known is None:
+            return
+        if known[0].qos.transient_local:
+            self._stop(topic)
+        else:
+            self._idle.setdefault(topic, now)
+
+    def sweep(self, now: float) -> None:
+        """Undeclare the publishers idle for longer than ``idle_ttl``."""
+        for topic in [t for t, since in self._idle.items() if now - since >= self._idle_ttl]:
+            self._stop(topic)
 
     def topics(self) -> list[str]:
         return sorted(self._pubs)
 
     def stop_all(self) -> None:
         for topic in list(self._pubs):
-            self.release(topic)
+            self._stop(topic)
+
+    def _stop(self, topic: str) -> None:
+        self._idle.pop(topic, None)
+        known = self._pubs.pop(topic, None)
+        if known is not None:
+            known[1].stop()
 
 
 __all__ = ["Publishers", "QosParseError", "parse_qos"]

@@ -1,8 +1,9 @@
 """The repeater process: commands from the uplink, repeated near the robots under a lease.
 
 * a queryable on ``fleetlink/<site>/command/**`` takes command envelopes, converts each Avro
-  value to CDR, journals the command (fsynced) and answers what it did (``applied``,
-  ``duplicate``, ``expired``, ``superseded``, ``rejected``, ``need-schema``);
+  value to CDR, publishes it at once, journals the command (fsynced before the answer) and
+  answers what it did (``applied``, ``duplicate``, ``expired``, ``superseded``, ``rejected``,
+  ``need-schema``);
 * the :class:`~repeater.schedule.Schedule` decides what to publish when; one rmw_zenoh
   publisher per ROS topic publishes it;
 * a :class:`~roswire.discovery.GraphWatcher` sees subscriber (``MS``) tokens appear: a late
@@ -40,7 +41,7 @@ from repeater.envelope import (
     decode_envelope,
     encode_reply,
 )
-from repeater.errors import ConversionError, EnvelopeError, RepeaterConfigError
+from repeater.errors import ConversionError, EnvelopeError, JournalError, RepeaterConfigError
 from repeater.publishers import Publishers
 from repeater.schedule import Change, Command, Offer, Publish, Schedule
 from repeater.state import CommandStore
@@ -202,6 +203,13 @@ class Repeater:
             self.schedule.link_up()
             reply = self.accept(env)
         self._poke.set()
+        try:
+            self.store.sync()  # durable before the uplink may commit (outside the lock: fsyncs overlap)
+        except JournalError as exc:
+            log.error("cannot make command %s durable: %s", env.command_id, exc)
+            query.reply_err(f"repeater state not durable: {exc.reason}".encode())
+            query.drop()
+            return
         query.reply(query.key_expr, encode_reply(reply))
         query.drop()
 
@@ -302,7 +310,7 @@ class Repeater:
                 self.store.mark(ident, "end")
                 self._cdr.pop(ident, None)
                 if self._publishers is not None and cmd.ros_topic not in self.schedule.topics():
-                    self._publishers.release(cmd.ros_topic)
+                    self._publishers.release(cmd.ros_topic, change.at)
             elif change.status == "delivered":
                 self.store.mark(ident, "delivered")
             number = self.store.status(event)
@@ -379,6 +387,8 @@ class Repeater:
                 due, changes = self.schedule.tick(now)
                 self._record(changes)
                 self._publish(items + due, now)
+                if self._publishers is not None:
+                    self._publishers.sweep(now)
                 self.store.maybe_compact(now)
                 wake = self.schedule.next_wakeup()
                 timeout = MAX_WAIT_S if wake is None else min(max(wake - self._clock(), 0.001), MAX_WAIT_S)

@@ -52,7 +52,9 @@ class CommandStore:
     # -- writes ---------------------------------------------------------------------------
 
     def command(self, env: CommandEnvelope, received_at: float, *, ended: bool = False) -> None:
-        """Record a command (fsynced): applied, or refused but to be recognised when re-delivered."""
+        """Record a command: applied, or refused but to be recognised when re-delivered.
+
+        Written, not yet durable: call :meth:`sync` before telling the uplink."""
         entries: list[dict[str, Any]] = []
         if env.schema is not None and env.schema_fp not in self.schemas:
             self.schemas[env.schema_fp] = env.schema
@@ -62,7 +64,11 @@ class CommandStore:
         entries.append(command_line(env, received_at))
         if ended:
             entries.append(mark_line("end", *ident))
-        self._journal.append(*entries, sync=True)
+        self._journal.append(*entries)
+
+    def sync(self) -> None:
+        """fsync the journal (may run outside the repeater's lock)."""
+        self._journal.sync()
 
     def mark(self, ident: Ident, op: str) -> None:
         stored = self.commands.get(ident)

@@ -1,17 +1,18 @@
 """Status events to the uplink, and the pulse of the link to it (for the dead-man).
 
-Pending events go out in batches as a Zenoh query on ``fleetlink/<site>/command-status/<id>``;
-the uplink answers once Kafka has them, and only then are they acknowledged (``on_acked``),
-so delivery is at-least-once. With nothing pending, an empty batch every ``heartbeat``
-seconds asks the uplink whether it is there. Any answer from the uplink (even "not written
-now": Kafka may be down) reports the link up; a timeout or an error reply reports it down
-(``on_link``): that is what the dead-man watches.
+Pending events go out in batches (gathered for up to ``linger`` seconds) as a Zenoh query on
+``fleetlink/<site>/command-status/<id>``; the uplink answers once Kafka has them, and only then
+are they acknowledged (``on_acked``), so delivery is at-least-once. With nothing pending, an
+empty batch every ``heartbeat`` seconds asks the uplink whether it is there. Any answer from
+the uplink (even "not written now": Kafka may be down) reports the link up; a timeout or an
+error reply reports it down (``on_link``): that is what the dead-man watches.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from types import TracebackType
 
@@ -44,6 +45,7 @@ class StatusLink:
         timeout: float,
         on_link: LinkCallback,
         on_acked: AckCallback,
+        linger: float = 0.1,
     ) -> None:
         self._session = session
         self._site = site
@@ -53,6 +55,8 @@ class StatusLink:
         self._timeout = timeout
         self._on_link = on_link
         self._on_acked = on_acked
+        self._linger = linger
+        self._oldest: float | None = None  # when the oldest unsent event was submitted (monotonic)
         self._pending: dict[int, StatusEvent] = {}
         self._cond = threading.Condition()
         self._stop = threading.Event()
@@ -86,6 +90,8 @@ class StatusLink:
     def submit(self, number: int, event: StatusEvent) -> None:
         with self._cond:
             self._pending[number] = event
+            if self._oldest is None:
+                self._oldest = time.monotonic()
             self._cond.notify_all()
 
     def pending(self) -> int:
@@ -100,16 +106,26 @@ class StatusLink:
             with self._cond:
                 if backoff > 0 or not self._pending:
                     self._cond.wait(backoff if backoff > 0 else self._heartbeat)
+                # linger a little so events close in time share one batch (one query on the WAN)
+                while (self._pending and self._oldest is not None and len(self._pending) < MAX_BATCH
+                       and not self._stop.is_set()):
+                    left = self._oldest + self._linger - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
                 if self._stop.is_set():
                     return
                 numbers = sorted(self._pending)[:MAX_BATCH]
                 events = tuple(self._pending[n] for n in numbers)
+                self._oldest = None
             if self._send(events):
                 backoff = 0.0
                 if numbers:
                     with self._cond:
                         for n in numbers:
                             self._pending.pop(n, None)
+                        if self._pending and self._oldest is None:
+                            self._oldest = time.monotonic()
                     self._on_acked(numbers)
             else:
                 backoff = min(max(backoff * 2, 0.2), self._heartbeat)

@@ -265,7 +265,7 @@ def uplink_config(bootstrap: str, registry_url: str, cloud: str, commands: list[
 
 def lightring_mapping(topic: str, *, period: str = "1s", lease: str = "10s", **extra: Any) -> dict[str, Any]:
     return {"name": "lightring", "from": topic, "to": "/{key}/cmd_lightring", "type": LIGHTRING,
-            "repeat": {"period": period, "lease": lease}, **extra}
+            "repeat": {"period": period, "lease": lease}} | extra
 
 
 def repeater_config(site: Site, state_dir: Path, **repeater: Any) -> RepeaterConfig:

@@ -11,6 +11,7 @@ from pathlib import Path
 from repeater.service import Repeater
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
+    BLUE,
     GREEN,
     RED,
     CommandProducer,
@@ -27,6 +28,7 @@ from tests.integration.test_commands_harness import (
     uplink_config,
     wait_repeater_sees,
 )
+from uplink.commands.mapping import CommandMapping
 
 
 def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every_site(
@@ -89,3 +91,12 @@ def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every
                 assert not any(v["command_id"] == f"green-{run}" and v["status"] == "delivered"
                                and v["site"] == "site-a" for v in status.values())
                 assert router.stats.dead_lettered == 0
+
+                # mappings change at runtime: a second Kafka topic, routed without a restart
+                second = f"cmd.lightring2.{run}"
+                create_topics(kafka_bootstrap, second)
+                extra = CommandMapping.model_validate(lightring_mapping(second, name="lightring2"))
+                router.set_mappings([*config.commands, extra])
+                producer.send(second, "tb4_01", BLUE, command_id=f"blue-{run}")
+                wait_until(lambda: leds.first("tb4_01", "blue") is not None, timeout=20,
+                           message="a command from the new mapping")

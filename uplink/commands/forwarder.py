@@ -8,7 +8,9 @@ with exponential backoff (100 ms doubling to 2 s) until the lease ends: then the
 up and the command is reported ``expired``.
 
 Envelopes carry the writer schema's JSON only until the site has acknowledged one command
-with that schema: later ones carry just its fingerprint.
+with that schema: later ones carry just its fingerprint. A command for a robot of unknown site
+(a query to every site) goes lean once any site has the schema; a site that answers
+``need-schema`` then gets the full envelope at its own key.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from dataclasses import dataclass, field
 import zenoh
 
 from fleetlink.ratelimit import LogLimiter
+from fleetlink.wan.keys import command_key
 from repeater.envelope import SETTLED, CommandReply, decode_reply, encode_envelope
 from repeater.errors import EnvelopeError
 from uplink.commands.plan import Forward
@@ -58,32 +61,43 @@ class Forwarder:
         self._limiter = LogLimiter(log)
 
     def send(self, fwd: Forward) -> ForwardResult:
-        env = fwd.envelope
+        full = fwd.envelope
+        fp = full.schema_fp
         with self._lock:
-            lean = fwd.site is not None and (fwd.site, env.schema_fp) in self._known
-        if lean:
-            env = env.without_schema()
+            if fwd.site is None:  # every site: lean once any site has the schema (the rest ask)
+                lean = any(known == fp for _site, known in self._known)
+            else:
+                lean = (fwd.site, fp) in self._known
+        env = full.without_schema() if lean else full
         result = ForwardResult(fwd, settled=False)
         delay = FIRST_BACKOFF_S
         target = zenoh.QueryTarget.ALL if fwd.site is None else zenoh.QueryTarget.BEST_MATCHING
         while not self._stop.is_set():
-            remaining = env.lease_until_ms / 1000 - self._clock()
+            remaining = full.lease_until_ms / 1000 - self._clock()
             if remaining <= 0:
                 result.detail = f"no site acknowledged before the lease ended ({result.detail or 'no reply'})"
                 return result
+            timeout = min(self._timeout, max(remaining, 0.05))
             result.attempts += 1
-            replies, problem = self._query(fwd.key_expr, encode_envelope(env), target,
-                                           min(self._timeout, max(remaining, 0.05)))
+            replies, problem = self._query(fwd.key_expr, encode_envelope(env), target, timeout)
+            needy = [r for r in replies if r.result == "need-schema"] if env.schema is None else []
+            if needy and fwd.site is not None:
+                env = full  # the full envelope, with the schema: at once
+                continue
+            if needy:  # only the sites that lack the schema get it again, each at its own key
+                replies = [r for r in replies if r.result != "need-schema"]
+                for reply in needy:
+                    if reply.site:
+                        more, _ = self._query(command_key(reply.site, full.robot, full.mapping),
+                                              encode_envelope(full), zenoh.QueryTarget.BEST_MATCHING, timeout)
+                        replies += more
             result.replies = replies
             settled = [r for r in replies if r.result in SETTLED]
             if settled:
                 with self._lock:
-                    self._known.update((r.site, env.schema_fp) for r in settled if r.site)
+                    self._known.update((r.site, fp) for r in settled if r.site)
                 result.settled = True
                 return result
-            if env.schema is None and any(r.result == "need-schema" for r in replies):
-                env = fwd.envelope  # the full envelope, with the schema: at once
-                continue
             result.detail = problem or "; ".join(f"{r.result}: {r.detail}" for r in replies) or "no reply"
             self._limiter.log(logging.WARNING, f"forward:{fwd.site}",
                               "command %s for %s not acknowledged yet (%s); retrying",

@@ -1,8 +1,10 @@
 """Reads the registrations topic from the beginning, continuously, into a RobotDirectory.
 
-No consumer group offsets: every uplink reads the whole compacted topic at start (it is small:
-one record per robot after compaction) and follows it. :meth:`RegistrationsReader.start`
-waits, bounded, until it has caught up, so the first commands are routed with what is known.
+No consumer group: every uplink assigns itself every partition of the compacted topic (it is
+small: one record per robot after compaction), reads it from the beginning and follows it;
+partitions that appear later (or the topic, if it does not exist yet) are picked up by a
+metadata check every few seconds. :meth:`RegistrationsReader.start` waits, bounded, until it
+has caught up, so the first commands are routed with what is known.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from uplink.kafka_settings import KafkaSettings
 
 log = logging.getLogger(__name__)
 
+METADATA_EVERY_S = 5.0
+
 
 class RegistrationsReader:
     def __init__(self, kafka: KafkaSettings, topic: str, decoder: CommandDecoder,
@@ -43,12 +47,12 @@ class RegistrationsReader:
     def start(self, catch_up_s: float = 10.0) -> RegistrationsReader:
         conf: dict[str, Any] = dict(self._kafka.common_config())
         conf.update({
-            "group.id": f"fleetlink-registrations-{uuid.uuid4().hex[:12]}",  # never commits
+            "group.id": f"fleetlink-registrations-{uuid.uuid4().hex[:12]}",  # required; never joined
             "enable.auto.commit": False, "auto.offset.reset": "earliest",
             "enable.partition.eof": False,
         })
         self._consumer = Consumer(conf)
-        self._consumer.subscribe([self._topic], on_assign=self._on_assign)
+        self._assign_new(self._consumer)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="uplink-registrations", daemon=True)
         self._thread.start()
@@ -78,21 +82,35 @@ class RegistrationsReader:
     def caught_up(self) -> bool:
         return self._caught_up.is_set()
 
-    def _on_assign(self, consumer: Consumer, partitions: list[TopicPartition]) -> None:
-        for tp in partitions:
-            tp.offset = OFFSET_BEGINNING
-        consumer.assign(partitions)
-        self._assigned = list(partitions)
+    def _assign_new(self, consumer: Consumer) -> None:
+        """Assign (from the beginning) the topic's partitions not assigned yet."""
+        try:
+            meta = consumer.list_topics(self._topic, timeout=5.0).topics.get(self._topic)
+        except KafkaException as exc:
+            self._limiter.log(logging.WARNING, "metadata", "registrations: no metadata for %s: %s",
+                              self._topic, exc)
+            return
+        if meta is None or meta.error is not None:
+            return
+        known = {tp.partition for tp in self._assigned}
+        new = [TopicPartition(self._topic, p, OFFSET_BEGINNING)
+               for p in sorted(meta.partitions) if p not in known]
+        if new:
+            consumer.incremental_assign(new)
+            self._assigned += new
 
     def _run(self) -> None:
         consumer = self._consumer
         if consumer is None:
             return
-        last_check = 0.0
+        last_check = last_metadata = time.monotonic()
         while not self._stop.is_set():
             msg = consumer.poll(0.2)
             if msg is not None:
                 self._handle(msg)
+            if time.monotonic() - last_metadata > METADATA_EVERY_S:
+                last_metadata = time.monotonic()
+                self._assign_new(consumer)
             if not self._caught_up.is_set() and time.monotonic() - last_check > 0.2:
                 last_check = time.monotonic()
                 if self._at_end(consumer):

@@ -77,7 +77,7 @@ class CommandRouter:
         group_id: str | None = None,
         clock: Callable[[], float] = time.time,
         query_timeout: float = 5.0,
-        workers: int = 8,
+        workers: int = 32,
         max_in_flight: int = 256,
     ) -> None:
         self.config = config

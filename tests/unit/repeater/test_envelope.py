@@ -49,10 +49,11 @@ def test_envelope_round_trip(env: CommandEnvelope) -> None:
 
 
 def test_large_envelopes_are_compressed_small_ones_not() -> None:
-    big, small = encode_envelope(ENV), encode_envelope(ENV.without_schema())
+    big, small = encode_envelope(ENV), encode_envelope(ENV.without_schema(), compress_above=1 << 20)
     assert big[4] == FLAG_ZLIB
     assert len(big) < len(SCHEMA)
     assert small[4] == 0
+    assert decode_envelope(small) == ENV.without_schema()
     assert ENV.lease_ms == 10_000
     assert ENV.with_schema("x").schema == "x"
 
@@ -143,8 +144,12 @@ def test_malformed_replies(data: bytes, reason: str) -> None:
 def test_status_batch_and_ack_round_trip() -> None:
     events = (StatusEvent("c1", "tb4_01", "/tb4_01/cmd", "delivered", 5, "site-a", "publish #1"),
               StatusEvent("c2", "tb4_02", "/tb4_02/cmd", "expired", 6))
-    for batch in (StatusBatch("rep-1", "site-a", events), StatusBatch("rep-1", "site-a")):
+    for batch in (StatusBatch("rep-1", "site-a", events), StatusBatch("rep-1", "site-a"),
+                  StatusBatch("rep-1", "site-a", events * 50)):
         assert decode_status_batch(encode_status_batch(batch)) == batch
+        assert decode_status_batch(encode_status_batch(batch, compress_above=1 << 20)) == batch
+    big = StatusBatch("rep-1", "site-a", events * 50)
+    assert len(encode_status_batch(big)) * 5 < len(encode_status_batch(big, compress_above=1 << 20))
     assert decode_status_ack(encode_status_ack(StatusAck(2, "ok"))) == StatusAck(2, "ok")
 
 
@@ -154,6 +159,8 @@ def test_status_batch_and_ack_round_trip() -> None:
     (b'{"repeater": "r", "site": "s", "events": [{"id": "c", "robot": "r", "topic": "/t", '
      b'"status": "lost", "at": 1}]}', "status 'lost'"),
     (b'{"repeater": "", "site": "s", "events": []}', "'repeater' must not be empty"),
+    (b"x\x9cnot zlib", "bad zlib data"),
+    (zlib.compress(b"[1]"), "not a JSON object"),
 ])
 def test_malformed_status_batches(data: bytes, reason: str) -> None:
     with pytest.raises(EnvelopeError, match=reason):
