@@ -29,7 +29,7 @@ from typing import Any
 
 import zenoh
 
-from fleetlink.wan.keys import site_prefix
+from fleetlink.wan.keys import command_key, site_prefix
 from fleetlink.zenoh_options import ZenohOptions
 from repeater.config import RepeaterConfig
 from repeater.converter import Converter
@@ -210,7 +210,9 @@ class Repeater:
             query.reply_err(f"repeater state not durable: {exc.reason}".encode())
             query.drop()
             return
-        query.reply(query.key_expr, encode_reply(reply))
+        # reply on this site's own key (a query for every site carries a wildcard; routers'
+        # ACLs let a site answer only under fleetlink/<site>/**)
+        query.reply(command_key(self.site, env.robot, env.mapping), encode_reply(reply))
         query.drop()
 
     def accept(self, env: CommandEnvelope) -> CommandReply:
