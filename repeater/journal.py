@@ -190,23 +190,32 @@ class Journal:
             raise JournalError(str(self.path), exc.strerror or str(exc)) from None
 
     def compact(self, live: list[dict[str, Any]]) -> None:
-        """Replace the file by ``live`` (written to a temp file, fsynced, renamed over it)."""
+        """Replace the file by ``live`` (written to a temp file, fsynced, renamed over it).
+
+        On failure the old file stays in use (and open for appends)."""
         tmp = self.path.with_suffix(".compact")
         try:
             with tmp.open("wb") as out:
                 out.write(b"".join(_dump(e) for e in live))
                 out.flush()
                 os.fsync(out.fileno())
-            self.close()
+        except OSError as exc:
+            raise JournalError(str(self.path), f"compaction failed: {exc.strerror or exc}") from None
+        self.close()
+        try:
             tmp.replace(self.path)
             dir_fd = os.open(self.state_dir, os.O_RDONLY)
             try:
                 os.fsync(dir_fd)
             finally:
                 os.close(dir_fd)
-            self._file = self.path.open("ab")
         except OSError as exc:
             raise JournalError(str(self.path), f"compaction failed: {exc.strerror or exc}") from None
+        finally:
+            try:
+                self._file = self.path.open("ab")
+            except OSError as exc:
+                raise JournalError(str(self.path), f"cannot reopen: {exc.strerror or exc}") from None
         self.lines = len(live)
 
 

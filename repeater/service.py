@@ -29,6 +29,7 @@ from typing import Any
 
 import zenoh
 
+from fleetlink.ratelimit import LogLimiter
 from fleetlink.wan.keys import command_key, site_prefix
 from fleetlink.zenoh_options import ZenohOptions
 from repeater.config import RepeaterConfig
@@ -100,6 +101,7 @@ class Repeater:
         self._options = zenoh_options or config.zenoh.options()
         self._clock = clock
         self.stats = RepeaterStats()
+        self._limiter = LogLimiter(log)
         self.schedule = Schedule(dead_man=config.repeater.dead_man)
         self.store = CommandStore(config.repeater.state_dir)
         self._lock = threading.RLock()
@@ -199,11 +201,11 @@ class Repeater:
             query.reply_err(str(exc).encode())
             query.drop()
             return
-        with self._lock:
-            self.schedule.link_up()
-            reply = self.accept(env)
-        self._poke.set()
         try:
+            with self._lock:
+                self.schedule.link_up()
+                reply = self.accept(env)
+            self._poke.set()
             self.store.sync()  # durable before the uplink may commit (outside the lock: fsyncs overlap)
         except JournalError as exc:
             log.error("cannot make command %s durable: %s", env.command_id, exc)
@@ -391,7 +393,10 @@ class Repeater:
                 self._publish(items + due, now)
                 if self._publishers is not None:
                     self._publishers.sweep(now)
-                self.store.maybe_compact(now)
+                try:
+                    self.store.maybe_compact(now)
+                except JournalError as exc:  # the journal keeps growing; everything else goes on
+                    self._limiter.log(logging.ERROR, "compact", "repeater journal compaction failed: %s", exc)
                 wake = self.schedule.next_wakeup()
                 timeout = MAX_WAIT_S if wake is None else min(max(wake - self._clock(), 0.001), MAX_WAIT_S)
             self._poke.wait(timeout)

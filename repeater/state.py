@@ -8,10 +8,13 @@ acknowledged by the uplink. Not thread-safe: the repeater calls it under its loc
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
+from fleetlink.ratelimit import LogLimiter
 from repeater.envelope import CommandEnvelope, StatusEvent
+from repeater.errors import JournalError
 from repeater.journal import (
     Journal,
     JournalState,
@@ -22,6 +25,8 @@ from repeater.journal import (
     schema_line,
     status_line,
 )
+
+log = logging.getLogger(__name__)
 
 COMPACT_MIN_LINES = 1_000
 
@@ -36,6 +41,8 @@ class CommandStore:
         self.pending: dict[int, StatusEvent] = {}
         self._next = 1
         self.skipped_lines = 0
+        self.failures = 0
+        self._limiter = LogLimiter(log)
 
     def open(self) -> JournalState:
         state = self._journal.open()
@@ -78,19 +85,29 @@ class CommandStore:
             stored.ended = True
         elif op == "delivered":
             stored.delivered = True
-        self._journal.append(mark_line(op, *ident))
+        self._append_softly(mark_line(op, *ident))
 
     def status(self, event: StatusEvent) -> int:
         number = self._next
         self._next += 1
         self.pending[number] = event
-        self._journal.append(status_line(number, event))
+        self._append_softly(status_line(number, event))
         return number
 
     def acked(self, numbers: list[int]) -> None:
         done = [n for n in numbers if self.pending.pop(n, None) is not None]
         if done:
-            self._journal.append(*(acked_line(n) for n in done))
+            self._append_softly(*(acked_line(n) for n in done))
+
+    def _append_softly(self, *entries: dict[str, Any]) -> None:
+        """Marks and status events: a failing disk must not stop repeating and reporting (the
+        state stays right in memory; a restart may then report an event twice or miss a mark).
+        Commands themselves are journalled strictly (:meth:`command` raises)."""
+        try:
+            self._journal.append(*entries)
+        except JournalError as exc:
+            self.failures += 1
+            self._limiter.log(logging.ERROR, "journal", "repeater journal write failed: %s", exc)
 
     # -- compaction -----------------------------------------------------------------------
 

@@ -113,3 +113,29 @@ def test_an_unusable_state_dir_is_a_journal_error(tmp_path: Path) -> None:
     journal = Journal(tmp_path / "ok")
     with pytest.raises(JournalError, match="not open"):
         journal.append(acked_line(1))
+
+
+def test_a_failing_disk_stops_commands_but_not_status_bookkeeping(tmp_path: Path) -> None:
+    store = CommandStore(tmp_path)
+    store.open()
+    store.command(ENV, 1000.0)
+    store.close()  # from here on every write fails
+    store.mark(("c1", "tb4_01"), "delivered")
+    number = store.status(EVENT)
+    store.acked([number])
+    assert store.failures == 3
+    assert store.commands[("c1", "tb4_01")].delivered  # memory stays right
+    with pytest.raises(JournalError, match="not open"):
+        store.command(replace(ENV, command_id="c2"), 1001.0)
+
+
+def test_failed_compaction_keeps_the_old_file_in_use(tmp_path: Path) -> None:
+    journal = Journal(tmp_path / "s")
+    journal.open()
+    journal.append(acked_line(1))
+    (tmp_path / "s" / "commands.compact").mkdir()  # the temp file cannot be written
+    with pytest.raises(JournalError, match="compaction failed"):
+        journal.compact([acked_line(2)])
+    journal.append(acked_line(3))  # still open
+    journal.close()
+    assert replay((tmp_path / "s" / FILENAME).read_bytes().splitlines()).lines == 2
