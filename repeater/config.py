@@ -9,7 +9,8 @@
     ros: {domain_id: 0, distro: jazzy, message_paths: [msgs/irobot_create_msgs]}
     zenoh: {mode: peer, connect: [tcp/127.0.0.1:7447]}   # the site router
 
-Durations are ``"250ms"``, ``"1s"``, ``"2m"``, ``"1h"`` or a number of seconds.
+Durations are ``"250ms"``, ``"1s"``, ``"2m"``, ``"1h"`` or a number of seconds
+(:mod:`fleetlink.durations`).
 """
 
 from __future__ import annotations
@@ -17,37 +18,17 @@ from __future__ import annotations
 import re
 import socket
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from fleetlink.durations import Seconds
 from fleetlink.zenoh_options import ZenohSection
 from schemas.typestore import Distro
 
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s|m|h)\s*$")
-_UNITS = {"ms": 0.001, "s": 1.0, "m": 60.0, "h": 3600.0}
 _CHUNK = re.compile(r"[A-Za-z0-9_.-]+")
 
-
-def parse_seconds(value: Any) -> float:
-    """``"250ms"`` / ``"1s"`` / ``"2m"`` / ``"1h"`` / a number of seconds -> seconds (float)."""
-    if isinstance(value, bool):
-        raise ValueError("a duration is text such as '500ms' or '1s', or a number of seconds")
-    if isinstance(value, int | float):
-        seconds = float(value)
-    elif isinstance(value, str):
-        match = _DURATION.match(value)
-        if match is None:
-            raise ValueError(f"invalid duration {value!r}: use a number with a unit (ms, s, m, h), e.g. '1s'")
-        seconds = float(match.group(1)) * _UNITS[match.group(2)]
-    else:
-        raise ValueError("a duration is text such as '500ms' or '1s', or a number of seconds")
-    if not seconds > 0 or seconds == float("inf"):
-        raise ValueError(f"duration must be positive and finite, got {value!r}")
-    return seconds
-
-
-Seconds = Annotated[float, BeforeValidator(parse_seconds)]
+PositiveSeconds = Annotated[Seconds, Field(gt=0)]
 """A positive duration in seconds, written as ``"1s"``, ``"500ms"`` … in YAML."""
 
 
@@ -63,11 +44,11 @@ class RepeaterSection(BaseModel):
     state_dir: Path
     id: str = Field(default_factory=default_repeater_id, min_length=1, max_length=100)
     """Names this repeater in status batches (one key chunk)."""
-    dead_man: Seconds | None = None
+    dead_man: PositiveSeconds | None = None
     """Stop repeating when the uplink has been unreachable this long (capped by each command's lease)."""
-    heartbeat: Seconds = 2.0
+    heartbeat: PositiveSeconds = 2.0
     """How often the repeater checks its link to the uplink when it has no status to send."""
-    status_timeout: Seconds = 5.0
+    status_timeout: PositiveSeconds = 5.0
     """How long one status batch (or heartbeat) may wait for the uplink's answer."""
     max_active: int = Field(default=10_000, ge=1, le=1_000_000)
     """Active commands at most (one per robot and ROS topic); more are rejected."""

@@ -37,7 +37,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from fleetlink.wan.errors import WireError
 from fleetlink.wan.keys import check_key_name
-from repeater.config import Seconds
+from repeater.config import PositiveSeconds
 from roswire.errors import InvalidNameError
 from roswire.names import validate_topic
 from roswire.qos import Durability, QoS, Reliability
@@ -138,9 +138,9 @@ def resolve(ref: Ref, *, key: str | None, robot: str | None, record: Mapping[str
 class RepeatSettings(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    period: Seconds = 1.0
+    period: PositiveSeconds = 1.0
     """How often the repeater publishes the command while its lease holds."""
-    lease: Seconds = 10.0
+    lease: PositiveSeconds = 10.0
     """How long the command is valid, from its Kafka record's timestamp."""
 
 

@@ -7,10 +7,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pydantic import ValidationError
 
 from fleetlink.cli import main
 from fleetlink.validate_cli import validate_file
-from repeater.config import RepeaterConfig, parse_seconds
+from repeater.config import RepeaterConfig
 
 DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
 
@@ -31,17 +32,26 @@ def test_shipped_example_is_a_valid_repeater_config(no_sockets: None) -> None:
     assert (section.site, section.dead_man, section.heartbeat) == ("warehouse-a", 30.0, 2.0)
 
 
+def with_dead_man(value: object) -> RepeaterConfig:
+    section = {"site": "a", "state_dir": "/tmp/x", "dead_man": value}
+    return RepeaterConfig.model_validate({"repeater": section})
+
+
 @pytest.mark.parametrize(("text", "seconds"), [
     ("250ms", 0.25), ("1s", 1.0), (" 1.5 s ", 1.5), ("2m", 120.0), ("1h", 3600.0), (3, 3.0), (0.5, 0.5),
 ])
 def test_durations(text: object, seconds: float) -> None:
-    assert parse_seconds(text) == seconds
+    assert with_dead_man(text).repeater.dead_man == seconds
 
 
-@pytest.mark.parametrize("text", ["", "1", "1d", "-1s", "0s", "s", True, None, [1], float("inf"), 0])
-def test_bad_durations(text: object) -> None:
-    with pytest.raises(ValueError, match="duration"):
-        parse_seconds(text)
+@pytest.mark.parametrize(("text", "reason"), [
+    ("", "invalid duration"), ("1", "invalid duration"), ("1d", "invalid duration"),
+    ("-1s", "invalid duration"), ("0s", "greater than 0"), (0, "greater than 0"), (True, "a duration"),
+    ([1], "a duration"), (float("inf"), "finite"),
+])
+def test_bad_durations(text: object, reason: str) -> None:
+    with pytest.raises(ValidationError, match=reason):
+        with_dead_man(text)
 
 
 def test_defaults() -> None:

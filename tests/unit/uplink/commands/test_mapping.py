@@ -105,7 +105,7 @@ def test_records_that_address_no_usable_robot(fields: dict[str, Any], key: str |
     ({"to": "/{key}/cmd", "broadcast": True}, "needs {robot}"),
     ({"to": "/{robot}/cmd", "broadcast": True, "robot": "{key}"}, "drop 'robot'"),
     ({"repeat": {"period": "5s", "lease": "1s"}}, "published once"),
-    ({"repeat": {"period": "0s"}}, "positive"),
+    ({"repeat": {"period": "0s"}}, "greater than 0"),
     ({"qos": {"depth": 0}}, "greater than or equal to 1"),
     ({"qos": {"durability": "persistent"}}, "volatile"),
     ({"colour": "red"}, "Extra inputs"),
