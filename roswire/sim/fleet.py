@@ -162,9 +162,11 @@ class Fleet:
                         MessageFactory(self.typestore, name))
 
     def _start_robot(self, robot: SimRobot) -> None:
-        robot.node.start()
-        for topic, (typename, qos) in TOPICS.items():
-            robot.publishers[topic] = robot.node.create_publisher(topic, typename, qos)
+        # under the robot's lock: the fleet's ticker must not see a started node without publishers
+        with robot.lock:
+            robot.node.start()
+            for topic, (typename, qos) in TOPICS.items():
+                robot.publishers[topic] = robot.node.create_publisher(topic, typename, qos)
         robot.node.create_subscriber("cmd_lightring", LIGHTRING, lambda s: self._on_lightring(robot, s),
                                      decode=True)
 
