@@ -32,7 +32,8 @@ from fleetlink.demo.configs import (
     uplink_config,
 )
 from fleetlink.demo.story import Story, led_colour
-from fleetlink.demo.watch import TopicWatcher
+from fleetlink.demo.watch import TopicWatcher, app_has_committed
+from fleetlink.durations import parse_duration_ms
 from fleetlink.errors import FleetlinkError
 from fleetlink.localstack.process import ServerProcess, log_tail
 from fleetlink.localstack.stack import LocalStack
@@ -65,6 +66,7 @@ class Demo:
         self._lock = threading.Lock()
         self._exit = contextlib.ExitStack()
         self._since_ms = time.time_ns() // 1_000_000 - 1_000
+        self._app_group = f"fleetlink-demo-{uuid.uuid4().hex[:8]}"
 
     # -- telling ---------------------------------------------------------------------------
 
@@ -189,7 +191,7 @@ class Demo:
             bootstrap=places.bootstrap, registry_url=places.registry_url,
             window_ms=parse_duration_ms(self.o.window), state_dir=places.workdir / "app-state",
             # a fresh consumer group per run: on a shared Kafka, earlier runs' records are not replayed
-            group=f"fleetlink-demo-{uuid.uuid4().hex[:8]}", offset_reset="latest",
+            group=self._app_group, offset_reset="latest",
             msg_paths=places.msg_paths,
         )
         stop = threading.Event()
@@ -234,6 +236,10 @@ class Demo:
         self._until(lambda: all(self._flow.counts.get(t, 0) > 0 for t in SENSOR_TOPICS),
                     "records flowing into every sensor topic")
         self.say("sensor data is flowing: " + ", ".join(SENSOR_TOPICS))
+        # judge a fault only once the app has whole windows of healthy events behind it
+        self._until(lambda: app_has_committed(places.bootstrap, self._app_group, SENSOR_TOPICS),
+                    "the fault-detection app consuming every sensor topic")
+        self._wait(parse_duration_ms(self.o.window) / 1000 + 1.0)
 
         healthy, faulted = names[0], names[1 % len(names)]
         self.say(f"glitch: one spurious 'picked up' reading on {healthy} (shorter than the window)")

@@ -8,7 +8,8 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from confluent_kafka import Consumer, KafkaException, Message
+from confluent_kafka import Consumer, ConsumerGroupTopicPartitions, KafkaException, Message
+from confluent_kafka.admin import AdminClient
 from confluent_kafka.schema_registry import SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer
 from confluent_kafka.serialization import MessageField, SerializationContext
@@ -76,3 +77,16 @@ class TopicWatcher:
                 self._on_record(topic, msg.key(), value, msg)
         finally:
             consumer.close()
+
+
+def app_has_committed(bootstrap: str, group: str, topics: Sequence[str]) -> bool:
+    """Whether consumer ``group`` has committed an offset on every partition of ``topics``."""
+    admin = AdminClient({"bootstrap.servers": bootstrap})
+    try:
+        futures = admin.list_consumer_group_offsets([ConsumerGroupTopicPartitions(group)],
+                                                    request_timeout=5)
+        partitions = futures[group].result(timeout=10).topic_partitions or []
+    except KafkaException:
+        return False
+    committed = {tp.topic for tp in partitions if tp.offset >= 0 and tp.error is None}
+    return set(topics) <= committed
