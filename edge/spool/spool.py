@@ -25,12 +25,15 @@ from edge.spool.api import SpoolBatch, SpoolOptions, SpoolRecord, SpoolStats, ch
 from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, Frame, encode_frame, peek_timestamp
 from edge.spool.ledger import Ledger
 from edge.spool.reading import read_frames
+from edge.spool.recent import RecentFrames
 from edge.spool.segments import Cursor, Segment, recover
 from edge.spool.tracking import SendTracker, Slice
 from edge.spool.writer import DiskFull, SegmentWriter
 
 log = logging.getLogger(__name__)
 
+RECENT_BYTES = 8 << 20
+"""Frames appended last kept in memory for the sender (``RecentFrames``)."""
 RESERVE_BLOCK = 1 << 20
 """Seqs reserved (one fsynced ledger entry) at a time; an unclean restart skips to the bound."""
 COUNTERS = ("appended", "acked", "dropped_oldest", "dropped_newest", "corrupt_skipped",
@@ -63,6 +66,7 @@ class Spool:
         self._lock_fd = -1
         self._segments: list[Segment] = []
         self._tracker = SendTracker(Cursor())
+        self._recent = RecentFrames(min(RECENT_BYTES, self.options.max_bytes))
         self._next_seq = 1
         self._reserved = 1
         self._persisted_mark = 0
@@ -274,11 +278,15 @@ class Spool:
                         break
 
     def _write(self, items: list[Item]) -> None:
-        if self._writer.segment is None:
-            self._segments.append(self._writer.create(items[0][0]))
+        segment = self._writer.segment
+        if segment is None:
+            segment = self._writer.create(items[0][0])
+            self._segments.append(segment)
             self._bytes += SEGMENT_HEADER_SIZE
         data = b"".join(frame for _, _, frame in items)
+        offset = segment.size
         self._writer.write(data, [(seq, ts, len(frame)) for seq, ts, frame in items])
+        self._recent.add(segment, offset, items, len(data))
         self._bytes += len(data)
         self._depth += len(items)
         self._c["appended"] += len(items)
@@ -287,6 +295,7 @@ class Spool:
     # -- leaving the spool -----------------------------------------------------------------------
     def _remove_first(self) -> None:
         segment = self._segments.pop(0)
+        self._recent.forget(segment)
         if segment is self._writer.segment:
             self._writer.seal()
         dropped, orphaned = self._tracker.segment_removed(segment)
@@ -335,6 +344,16 @@ class Spool:
                         return None
                     cursor.index, cursor.offset, cursor.consumed = cursor.index + 1, SEGMENT_HEADER_SIZE, 0
                     continue
+                recent = self._recent.read(segment, cursor.offset, cursor.next_seq, max_records=max_records,
+                                           max_bytes=max_bytes)
+                if recent is not None:  # appended lately: from memory, as written
+                    records, end = recent
+                    head, tail = records[0], records[-1]
+                    piece = Slice(head.seq, tail.seq, len(records), segment, cursor.offset, end,
+                                  head.timestamp_ms)
+                    self._tracker.start(piece, len(records))
+                    return SpoolBatch(stream=self._stream, first_seq=head.seq, last_seq=tail.seq,
+                                      records=tuple(records))
                 found = read_frames(segment, cursor.offset, segment.size, after_seq=cursor.next_seq - 1,
                                     max_records=max_records, max_bytes=max_bytes, max_len=self._max_len)
                 self._c["corrupt_skipped"] += found.lost
