@@ -14,6 +14,7 @@ See docs/edge.md.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import logging
 import threading
@@ -119,6 +120,10 @@ class EdgeAgent:
                 self._teardown(0.0)
                 raise
             self._started = True
+        # Everything made so far (type store, codecs, config, Zenoh objects: tens of thousands of
+        # objects) lives as long as the agent. Frozen, a full collection no longer walks them:
+        # on the test machine that is a 30-40 ms pause (every record waits) cut to a few ms.
+        gc.freeze()
         log.info("edge %s of site %s started: %d mapping(s), %d robot type(s)", self.config.edge_id,
                  self.config.site, len(self.table.list()), len(self.config.robot_types))
         return self

@@ -215,12 +215,19 @@ class MemorySection(_Section):
 
 
 class WanSection(_Section):
-    batch_max_records: int = Field(default=500, ge=1, le=100_000)
+    # Defaults measured with bench/bench_e2e.py (docs/benchmarks.md): batches of 500 records cost
+    # the edge 14% and the uplink 12% more CPU per record than batches of up to 2,000 (each batch
+    # is a Zenoh query with its reply callbacks on both sides); 1 MiB, about 1,500 IMU records, is
+    # then what bounds a batch. Four batches in flight keep the re-send window (duplicates after a
+    # crash or timeout) at about the size it had with 8 x 500.
+    batch_max_records: int = Field(default=2000, ge=1, le=100_000)
+    """At most this many records per batch (``batch_max_bytes`` may end it earlier)."""
     batch_max_bytes: ByteSize = ByteSize(1 << 20)
     linger: DurationNs = 20_000_000
     """How long a partial batch may wait for more records."""
     ack_timeout: DurationNs = 10 * _NS
-    max_in_flight: int = Field(default=8, ge=1, le=1024)
+    max_in_flight: int = Field(default=4, ge=1, le=1024)
+    """Batches of a stream sent and not yet answered."""
     retry_backoff_min: DurationNs = 200_000_000
     retry_backoff_max: DurationNs = 30 * _NS
     codec: Codec = "zstd"

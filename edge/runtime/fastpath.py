@@ -36,22 +36,25 @@ class Lane:
 
 @dataclass(frozen=True, slots=True)
 class FastPlan:
-    """The lanes of one (topic, type, hash) for one mapping-table snapshot (``bounds``).
+    """The lanes of one data key (topic, type, hash) for one mapping-table snapshot (``bounds``).
 
     ``lanes`` is None when some mapping of the topic needs the general path (then the whole
     sample takes it); ``mismatched`` are mappings declaring another type (counted only).
     """
 
+    topic: str
     bounds: Sequence[BoundMapping]
     lanes: tuple[Lane, ...] | None
     mismatched: tuple[MappingCounters, ...] = ()
 
 
-Slow = Callable[[BoundMapping, RosSample, list[Outgoing]], None]
-"""The general path for one mapping and one sample (``RecordMaker._one``)."""
+Slow = Callable[[BoundMapping, RosSample, int, list[Outgoing]], None]
+"""The general path for one mapping and one sample (``RecordMaker._one(bound, sample, now_ns, out)``)."""
 
 
-def run_plan(plan: FastPlan, sample: RosSample, max_value_bytes: int, slow: Slow) -> list[Outgoing]:
+def run_plan(
+    plan: FastPlan, sample: RosSample, max_value_bytes: int, slow: Slow, now_ns: int
+) -> list[Outgoing]:
     """The records of ``sample`` through the fast lanes of ``plan`` (``plan.lanes`` is set)."""
     out: list[Outgoing] = []
     for counters in plan.mismatched:
@@ -65,15 +68,15 @@ def run_plan(plan: FastPlan, sample: RosSample, max_value_bytes: int, slow: Slow
     for lane in lanes:
         lane.counters.received += 1
         if seq is not None and seq < 0:
-            slow(lane.bound, sample, out)
+            slow(lane.bound, sample, now_ns, out)
             continue
         try:
             value = lane.head + lane.convert(payload)
         except SchemaError:
-            slow(lane.bound, sample, out)  # makes the dead letter, with the reason
+            slow(lane.bound, sample, now_ns, out)  # makes the dead letter, with the reason
             continue
         if len(value) > max_value_bytes:
-            slow(lane.bound, sample, out)
+            slow(lane.bound, sample, now_ns, out)
             continue
         out.append(Outgoing(lane.delivery, lane.template.payload(value, timestamp_ms, seq)))
         lane.counters.emitted += 1

@@ -33,7 +33,11 @@ class IntakeStats:
 
 
 class Intake(Generic[T]):
-    """A bounded FIFO of ``(item, size)``; thread-safe."""
+    """A bounded FIFO of ``(item, size)``; thread-safe.
+
+    The offering side runs once per received sample, so it is kept to one plain lock (a C-level
+    ``with``), plain integer counters and a wake-up only when the queue was empty.
+    """
 
     def __init__(self, *, max_items: int = 100_000, max_bytes: int = 64 << 20) -> None:
         if max_items < 1 or max_bytes < 1:
@@ -42,24 +46,27 @@ class Intake(Generic[T]):
         self.max_bytes = max_bytes
         self._items: deque[tuple[T, int]] = deque()
         self._bytes = 0
-        self._cond = threading.Condition(threading.Lock())
-        self._stats = IntakeStats()
+        self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self._offered = self._taken = self._dropped = self._dropped_bytes = self._high_water = 0
         self._closed = False
 
     def offer(self, item: T, size: int = 0, *, force: bool = False) -> bool:
         """Queue ``item``; False (counted) when the queue is full or closed. Never blocks long."""
-        with self._cond:
-            stats = self._stats
-            stats.offered += 1
-            full = len(self._items) >= self.max_items or self._bytes + size > self.max_bytes
-            if self._closed or (full and not force):
-                stats.dropped += 1
-                stats.dropped_bytes += size
+        with self._lock:
+            self._offered += 1
+            items = self._items
+            if self._closed or (
+                (len(items) >= self.max_items or self._bytes + size > self.max_bytes) and not force
+            ):
+                self._dropped += 1
+                self._dropped_bytes += size
                 return False
-            self._items.append((item, size))
+            items.append((item, size))
             self._bytes += size
-            stats.high_water = max(stats.high_water, len(self._items))
-            if len(self._items) == 1:
+            n = len(items)
+            self._high_water = max(self._high_water, n)
+            if n == 1:
                 self._cond.notify()
             return True
 
@@ -72,12 +79,16 @@ class Intake(Generic[T]):
                 if remaining <= 0 or self._closed:
                     return []
                 self._cond.wait(remaining)
+            items = self._items
+            count = min(max_items, len(items))
             out: list[T] = []
-            while self._items and len(out) < max_items:
-                item, size = self._items.popleft()
-                self._bytes -= size
+            taken_bytes = 0
+            for _ in range(count):
+                item, size = items.popleft()
+                taken_bytes += size
                 out.append(item)
-            self._stats.taken += len(out)
+            self._bytes -= taken_bytes
+            self._taken += count
             return out
 
     def close(self) -> None:
@@ -90,8 +101,7 @@ class Intake(Generic[T]):
         return len(self._items)
 
     def stats(self) -> IntakeStats:
-        with self._cond:
-            snap = IntakeStats(**self._stats.as_dict())
-            snap.queued = len(self._items)
-            snap.queued_bytes = self._bytes
-            return snap
+        with self._lock:
+            return IntakeStats(offered=self._offered, taken=self._taken, dropped=self._dropped,
+                               dropped_bytes=self._dropped_bytes, queued=len(self._items),
+                               queued_bytes=self._bytes, high_water=self._high_water)

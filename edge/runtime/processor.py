@@ -141,10 +141,11 @@ class Processor:
 
     def _records(self, items: list[Item], now_ns: int) -> list[Outgoing]:
         out: list[Outgoing] = []
+        extend, make = out.extend, self.maker.make
         for item in items:
             if isinstance(item, RosSample):
                 self.stats.samples += 1
-                out.extend(self.maker.make(item, now_ns))
+                extend(make(item, now_ns))
             elif isinstance(item, Rejected):
                 out.extend(self.maker.rejected_sample(item.topic, item.error, item.received_ns))
             else:

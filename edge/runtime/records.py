@@ -125,7 +125,7 @@ class RecordMaker:
         self._site_header = (H_SITE, site.encode())
         self._edge_header = (H_EDGE, edge_id.encode())
         self._routes: dict[tuple[str, str], _Route] = {}
-        self._plans: dict[tuple[str, str, str], FastPlan] = {}
+        self._plans: dict[str, FastPlan] = {}
         self._unknown_types: set[str] = set()
         self.counters: dict[str, MappingCounters] = {}
         self.unknown_type_samples = 0
@@ -136,12 +136,11 @@ class RecordMaker:
     def make(self, sample: RosSample, now_ns: int) -> list[Outgoing]:
         """Every record one received sample produces (possibly none, possibly dead letters)."""
         bounds = self._match(sample.topic)
-        plan = self._plans.get((sample.topic, sample.typename, sample.type_hash))
-        if plan is None or plan.bounds is not bounds:
+        plan = self._plans.get(sample.key)  # the data key names topic, type and hash
+        if plan is None or plan.bounds is not bounds or plan.topic != sample.topic:
             plan = self._plan(sample, bounds)
         if plan.lanes is not None:
-            return run_plan(plan, sample, self.max_value_bytes,
-                            lambda bound, s, out: self._one(bound, s, now_ns, out))
+            return run_plan(plan, sample, self.max_value_bytes, self._one, now_ns)
         out: list[Outgoing] = []
         for bound in bounds:
             counters = self._counters(bound.name)
@@ -164,7 +163,7 @@ class RecordMaker:
             route = self._route(bound, sample.typename)
             if (route is None or route.problem is not None or not route.fast or bound.topic_error is not None
                     or bound.kafka_topic is None or bound.key is None):
-                plan = FastPlan(bounds, None)
+                plan = FastPlan(sample.topic, bounds, None)
                 break
             origin = Origin(sample.topic, sample.typename, sample.type_hash, None, sample.key, 0, None)
             headers = self._headers(bound, origin)  # all but fleetlink.seq: it comes with each sample
@@ -172,10 +171,10 @@ class RecordMaker:
             lanes.append(Lane(bound, self._counters(bound.name), route.codec.cdr_to_avro,
                               SINGLE_OBJECT_MAGIC + route.source.fingerprint, template, bound.delivery))
         if plan is None:
-            plan = FastPlan(bounds, tuple(lanes), tuple(mismatched))
+            plan = FastPlan(sample.topic, bounds, tuple(lanes), tuple(mismatched))
         if len(self._plans) >= _PLAN_CACHE_SIZE:
             self._plans.clear()
-        self._plans[sample.topic, sample.typename, sample.type_hash] = plan
+        self._plans[sample.key] = plan
         return plan
 
     def tick(self, now_ns: int) -> list[Outgoing]:

@@ -35,11 +35,11 @@ _NS = 1_000_000_000
 
 @dataclass(frozen=True, slots=True)
 class SenderOptions:
-    batch_max_records: int = 500
+    batch_max_records: int = 2000
     batch_max_bytes: int = 1 << 20
     linger_s: float = 0.02
     ack_timeout_s: float = 10.0
-    max_in_flight: int = 8
+    max_in_flight: int = 4
     backoff_min_s: float = 0.2
     backoff_max_s: float = 30.0
     codec: Codec = "zstd"
