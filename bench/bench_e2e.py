@@ -16,6 +16,7 @@ durable spool, at-least-once) and the robots (real Husky IMU messages over rmw_z
 from __future__ import annotations
 
 import argparse
+import gc
 import io
 import os
 import statistics
@@ -31,6 +32,7 @@ from typing import Any
 import fastavro
 import yaml
 from confluent_kafka import Consumer, Producer, TopicPartition
+from confluent_kafka.admin import AdminClient, NewTopic
 from rosbags.typesys import Stores, get_typestore
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,6 +67,21 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
+def create_topic(bootstrap: str, prefix: str) -> str:
+    """A new one-partition topic, created before the run: the broker creating it on the first
+    produce (~0.1 s) and a consumer noticing it (up to its metadata refresh) are not per-record
+    costs of either path."""
+    topic = f"{prefix}.{uuid.uuid4().hex[:6]}"
+    admin = AdminClient({"bootstrap.servers": bootstrap})
+    admin.create_topics([NewTopic(topic, num_partitions=1, replication_factor=1)])[topic].result(30)
+    deadline = time.monotonic() + 30
+    while not admin.list_topics(topic, timeout=5).topics[topic].partitions:
+        if time.monotonic() > deadline:
+            raise SystemExit(f"topic {topic} has no partition after 30 s")
+        time.sleep(0.05)
+    return topic
+
+
 def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[tuple[float, int]]:
     """(receive time, record timestamp ms) for ``count`` records of a one-partition topic.
 
@@ -76,6 +93,7 @@ def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[t
                          "fetch.wait.max.ms": 5})
     consumer.assign([TopicPartition(topic, 0, 0)])
     out: list[tuple[float, int]] = []
+    gc.freeze()  # a full collection of this process (payloads, type store) would delay receive times
     deadline = time.monotonic() + timeout
     try:
         while len(out) < count and time.monotonic() < deadline:
@@ -155,7 +173,7 @@ def direct_path(bootstrap: str, registry: str, payloads: list[bytes], n: int) ->
     ts = get_typestore(Stores.ROS2_JAZZY)
     schema = get_codec(load_typestore("jazzy"), IMU, "jazzy").schema
     parsed = fastavro.parse_schema(schema)
-    topic = f"bench.direct.{uuid.uuid4().hex[:6]}"
+    topic = create_topic(bootstrap, "bench.direct")
     with SchemaRegistry(registry) as reg:
         schema_id = reg.register(f"{topic}-value", schema)
 
@@ -219,7 +237,7 @@ def main() -> None:
         rate = float("nan")
 
         if "throughput" in parts:
-            topic = f"bench.imu.{uuid.uuid4().hex[:6]}"
+            topic = create_topic(bootstrap, "bench.imu")
             (work / "tp").mkdir()
             with ExitStack() as stack1:
                 pipe = Pipeline(work / "tp", bootstrap, registry, topic, stack1)
@@ -247,7 +265,7 @@ def main() -> None:
                   ", ".join(f"{k} {cpu1[k] - cpu0[k]:.1f}" for k in cpu1) + broker)
 
         if "latency" in parts:
-            topic2 = f"bench.imu.lat.{uuid.uuid4().hex[:6]}"
+            topic2 = create_topic(bootstrap, "bench.imu.lat")
             (work / "lat").mkdir()
             with ExitStack() as stack2:
                 pipe2 = Pipeline(work / "lat", bootstrap, registry, topic2, stack2)

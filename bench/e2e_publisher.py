@@ -9,6 +9,7 @@ as possible), then prints ``done <messages> <seconds>``.
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 import time
 from pathlib import Path
@@ -52,6 +53,7 @@ def main() -> int:
              for i in range(args.robots)]
     qos = QoS(history=History.KEEP_ALL, depth=1000)  # reliable and blocking: no sample dropped
     pubs = [n.create_publisher(f"/{args.prefix}{i:02d}/imu", IMU, qos) for i, n in enumerate(nodes)]
+    gc.freeze()  # nothing made so far is garbage: keep full collections short while publishing
     print("ready", flush=True)
     sys.stdin.readline()
     total = args.count * args.robots
