@@ -80,16 +80,20 @@ class Intake(Generic[T]):
                     return []
                 self._cond.wait(remaining)
             items = self._items
-            count = min(max_items, len(items))
-            out: list[T] = []
-            taken_bytes = 0
-            for _ in range(count):
-                item, size = items.popleft()
-                taken_bytes += size
-                out.append(item)
-            self._bytes -= taken_bytes
-            self._taken += count
-            return out
+            if len(items) <= max_items:  # all of it: swap the queue, sort it out after the lock
+                self._items, self._bytes = deque(), 0
+                self._taken += len(items)
+            else:
+                taken_bytes = 0
+                chunk: deque[tuple[T, int]] = deque()
+                for _ in range(max_items):
+                    pair = items.popleft()
+                    taken_bytes += pair[1]
+                    chunk.append(pair)
+                self._bytes -= taken_bytes
+                self._taken += max_items
+                items = chunk
+        return [item for item, _size in items]
 
     def close(self) -> None:
         """Refuse new items (counted as dropped); queued ones can still be taken."""

@@ -5,8 +5,11 @@ the schema of every fingerprint it uses, send it; when the uplink answers ``ok``
 ``ack``\\ ed (it leaves the spool); on an ``error`` answer, no answer or a timeout it is
 ``release``\\ d (it will be read again, first) and sending pauses for a bounded, jittered,
 exponential backoff, after which one batch probes the link before the full window of
-``max_in_flight`` batches is used again. A partial batch waits up to ``linger`` for more
-records. One warning is logged when an outage starts and one line when it ends.
+``max_in_flight`` batches is used again. A partial batch leaves ``linger`` after the previous
+batch of the stream (so at once when the stream was quiet that long): at a steady rate that is
+one batch per ``linger`` as with a timer started by the first waiting record, but the first
+records after a pause (or at start, where the uplink may have a schema to register) do not wait.
+One warning is logged when an outage starts and one line when it ends.
 """
 
 from __future__ import annotations
@@ -109,7 +112,7 @@ class WanSender:
         self._in_flight: dict[int, _Flight] = {}
         self._retry_at = 0.0
         self._healthy = True
-        self._linger_from: float | None = None
+        self._last_send = float("-inf")
         self._outage_since: float | None = None
         self._last_error = ""
         self._stopping = threading.Event()
@@ -210,16 +213,14 @@ class WanSender:
     def _next_batch(self, now: float) -> tuple[SpoolBatch | None, float | None]:
         unsent = self._unsent()
         if unsent <= 0:
-            self._linger_from = None
             return None, None
         if unsent < self.options.batch_max_records and not self._stopping.is_set():
-            if self._linger_from is None:
-                self._linger_from = now
-            due = self._linger_from + self.options.linger_s
+            due = self._last_send + self.options.linger_s
             if now < due:
                 return None, due
-        self._linger_from = None
         batch = self.buffer.read_unacked(self.options.batch_max_records, self.options.batch_max_bytes)
+        if batch is not None:
+            self._last_send = now
         return batch, None
 
     def _wait(self, timeout: float) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol, get_args
+from typing import Literal, NamedTuple, Protocol, get_args
 
 from edge.errors import SpoolError
 
@@ -26,8 +26,9 @@ FULL_POLICIES: tuple[str, ...] = get_args(FullPolicy)
 FSYNC_POLICIES: tuple[str, ...] = get_args(FsyncPolicy)
 
 
-@dataclass(frozen=True, slots=True)
-class SpoolRecord:
+class SpoolRecord(NamedTuple):
+    """One record handed to the sender (a named tuple: thousands are made per second)."""
+
     seq: int
     timestamp_ms: int
     """When the record was appended (wall clock, ms): what ``oldest_age`` is measured from."""

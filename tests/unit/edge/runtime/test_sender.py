@@ -202,16 +202,19 @@ def test_after_a_failure_one_batch_probes_before_the_window_opens() -> None:
     assert sorted(set(firsts)) == [1, 11, 21, 31, 41, 51]
 
 
-def test_linger_fills_a_batch() -> None:
+def test_linger_fills_a_batch_after_the_previous_one_and_a_quiet_stream_sends_at_once() -> None:
     buffer = MemoryBuffer(first_seq=1)
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
-    options = SenderOptions(batch_max_records=10, linger_s=0.3, backoff_min_s=0.001, backoff_max_s=0.01)
-    with running(uplink, buffer, options) as sender:
-        for i in range(5):
-            buffer.append(payload(i))
-            sender.wake()
-        wait_until(drained(buffer), 5)
-    assert [len(b.records) for b in uplink.batches] == [5]
+    options = SenderOptions(batch_max_records=10, linger_s=30.0, backoff_min_s=0.001, backoff_max_s=0.01)
+    sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=options).start()
+    buffer.append(payload(0))
+    sender.wake()
+    wait_until(drained(buffer), 5)  # a quiet stream: the first record does not wait the 30 s
+    for i in range(1, 6):
+        buffer.append(payload(i))
+        sender.wake()  # each wake-up finds a partial batch within the linger of the last one
+    sender.stop(timeout_s=5.0)  # stopping sends what the linger holds
+    assert [len(b.records) for b in uplink.batches] == [1, 5]
 
 
 def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
@@ -231,9 +234,14 @@ def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
 
 def test_stop_drains_what_can_be_sent() -> None:
     buffer = MemoryBuffer(first_seq=1)
-    buffer.append_many([payload(i) for i in range(30)])
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
     sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1",
                        options=SenderOptions(linger_s=10.0, batch_max_records=100)).start()
-    sender.stop(timeout_s=5.0)  # the linger would hold the partial batch; stopping sends it now
+    buffer.append(payload(0))
+    sender.wake()
+    wait_until(drained(buffer), 5)
+    buffer.append_many([payload(i) for i in range(1, 31)])
+    sender.wake()
+    sender.stop(timeout_s=5.0)  # the linger would hold the partial batch for 10 s; stopping sends it now
     assert buffer.stats().depth == 0
+    assert [len(b.records) for b in uplink.batches] == [1, 30]
