@@ -37,7 +37,7 @@ def wait_until(
         now = time.monotonic()
         if now >= deadline:
             break
-        time.sleep(min(interval, max(deadline - now, 0.0)))
+        time.sleep(min(interval, max(deadline - now, 0.0)))  # ok-sleep: the poll interval of wait_until
     if pred():
         return
     what = message or getattr(pred, "__name__", "condition")
