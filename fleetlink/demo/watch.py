@@ -81,7 +81,7 @@ class TopicWatcher:
 
 def app_has_committed(bootstrap: str, group: str, topics: Sequence[str]) -> bool:
     """Whether consumer ``group`` has committed an offset on every partition of ``topics``."""
-    admin = AdminClient({"bootstrap.servers": bootstrap})
+    admin = AdminClient({"bootstrap.servers": bootstrap, "log_level": 3})  # no info lines on close
     try:
         futures = admin.list_consumer_group_offsets([ConsumerGroupTopicPartitions(group)],
                                                     request_timeout=5)
