@@ -11,13 +11,15 @@ Two ways to receive:
 
 * default: the callback runs on a Zenoh thread, for light traffic (discovery, commands);
 * ``ring=N``: samples go into a Rust-side ring channel of ``N`` samples and a thread of the
-  subscriber's own drains it and runs the callback. Use it for busy topics: a Python callback on
-  a Zenoh thread waits for the GIL while the process is busy, which stalls Zenoh's network
-  thread until the router's queue towards this process overflows and samples are lost before
-  they are seen (three robots replaying the Husky IMU at full speed through a router: a
-  callback received 7,169 + 6,687 + 847 of 3 x 11,865 samples, the ring all 35,595). A ring
-  that overflows while the process is far behind drops its oldest samples; the publishers'
-  sequence numbers show each such loss as a gap (``stats.missing``).
+  subscriber's own drains it and runs the callback (or, with ``on_samples``, hands over the
+  samples of each burst together: one call, one lock on the receiving side, per burst). Use
+  it for busy topics: a Python callback on a Zenoh thread waits for the GIL while the process
+  is busy, which stalls Zenoh's network thread until the router's queue towards this process
+  overflows and samples are lost before they are seen (three robots replaying the Husky IMU at
+  full speed through a router: a callback received 7,169 + 6,687 + 847 of 3 x 11,865 samples,
+  the ring all 35,595). A ring that overflows while the process is far behind drops its
+  oldest samples; the publishers' sequence numbers show each such loss as a gap
+  (``stats.missing``).
 """
 
 from __future__ import annotations
@@ -48,6 +50,9 @@ __all__ = ["ErrorHandler", "RosSample", "RosSubscriber", "SubscriberStats"]
 
 log = logging.getLogger(__name__)
 
+_BURST = 256
+"""With ``on_samples``: samples handed over at most this many at a time."""
+
 # What rosbags raises for bytes that are not a message of the type (or an unknown type).
 _DECODE_ERRORS = (SerdeError, KeyError, ValueError, IndexError, struct.error, UnicodeDecodeError)
 
@@ -61,7 +66,7 @@ class RosSubscriber:
         node: RosNode,
         topic: str,
         typename: str | None,
-        callback: Callable[[RosSample], object],
+        callback: Callable[[RosSample], object] | None,
         qos: QoS = DEFAULT,
         *,
         type_hash: str | None = None,
@@ -70,9 +75,12 @@ class RosSubscriber:
         on_error: ErrorHandler | None = None,
         declare_token: bool = True,
         ring: int | None = None,
+        on_samples: Callable[[list[RosSample]], object] | None = None,
     ) -> None:
         if ring is not None and ring < 1:
             raise RoswireError(f"subscriber on {topic}: a ring holds at least one sample, got {ring}")
+        if (callback is None) == (on_samples is None) or (on_samples is not None and ring is None):
+            raise RoswireError(f"subscriber on {topic}: give a callback, or on_samples with a ring")
         self.node = node
         self.topic = node.resolve(topic)
         self.typename = typename
@@ -84,6 +92,7 @@ class RosSubscriber:
         self.on_error = on_error
         self.declare_token = declare_token
         self.ring = ring
+        self.on_samples = on_samples
         self._acceptor = SampleAcceptor(accept_missing_attachment=accept_missing_attachment,
                                         decoder=self._decode if decode else None)
         self._sub: Any = None  # a (possibly advanced) subscriber, with a callback or a ring
@@ -180,8 +189,10 @@ class RosSubscriber:
         only the first sample of a burst is waited for; the rest are taken with ``try_recv``,
         which keeps the GIL (0.3 us a sample). One thread: the acceptor needs no lock here.
         """
-        accept, callback, try_recv = self._acceptor.accept, self.callback, ring.try_recv
+        accept, try_recv = self._acceptor.accept, ring.try_recv
         time_ns = time.time_ns
+        callback = self.callback
+        burst: list[RosSample] = []
         while True:
             try:
                 sample: zenoh.Sample | None = ring.recv()
@@ -193,13 +204,32 @@ class RosSubscriber:
                     except RoswireError as exc:
                         self._report(exc)
                     else:
-                        try:
-                            callback(out)
-                        except Exception as exc:  # noqa: BLE001 - counted; the subscription lives on
-                            self._callback_failed(out.key, exc)
+                        if callback is None:
+                            burst.append(out)
+                            if len(burst) >= _BURST:
+                                self._hand_over(burst)
+                                burst = []
+                        else:
+                            try:
+                                callback(out)
+                            except Exception as exc:  # noqa: BLE001 - counted; the subscription lives on
+                                self._callback_failed(out.key, exc)
                     sample = try_recv()
             except zenoh.ZError:  # undeclared, and nothing left
                 return
+            finally:
+                if burst:
+                    self._hand_over(burst)
+                    burst = []
+
+    def _hand_over(self, burst: list[RosSample]) -> None:
+        on_samples = self.on_samples
+        if on_samples is None:
+            return
+        try:
+            on_samples(burst)
+        except Exception as exc:  # noqa: BLE001 - counted; the subscription lives on
+            self._callback_failed(burst[0].key, exc)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         """The callback on Zenoh's threads (without a ring)."""
@@ -214,7 +244,8 @@ class RosSubscriber:
             self._report(exc)
             return
         try:
-            self.callback(out)
+            if self.callback is not None:
+                self.callback(out)
         except Exception as exc:  # noqa: BLE001 - any callback failure is counted; the subscription lives on
             self._callback_failed(key, exc)
 

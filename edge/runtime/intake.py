@@ -12,6 +12,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Generic, TypeVar
 
@@ -69,6 +70,31 @@ class Intake(Generic[T]):
             if n == 1:
                 self._cond.notify()
             return True
+
+    def offer_many(self, pairs: Sequence[tuple[T, int]]) -> int:
+        """Queue ``(item, size)`` pairs in order under one lock, while they fit; the rest are dropped
+        (counted). Returns how many were queued."""
+        with self._lock:
+            items = self._items
+            before = len(items)
+            self._offered += len(pairs)
+            room = 0 if self._closed else self.max_items - before
+            nbytes = self._bytes
+            taken = 0
+            for pair in pairs:
+                if taken >= room or nbytes + pair[1] > self.max_bytes:
+                    break
+                nbytes += pair[1]
+                taken += 1
+            if taken < len(pairs):
+                self._dropped += len(pairs) - taken
+                self._dropped_bytes += sum(size for _item, size in pairs[taken:])
+            items.extend(pairs[:taken] if taken < len(pairs) else pairs)
+            self._bytes = nbytes
+            self._high_water = max(self._high_water, before + taken)
+            if before == 0 and taken:
+                self._cond.notify()
+            return taken
 
     def take(self, max_items: int, timeout: float) -> list[T]:
         """Up to ``max_items`` items, waiting at most ``timeout`` s for the first one."""

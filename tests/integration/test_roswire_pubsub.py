@@ -17,7 +17,7 @@ from roswire.gid import entity_gid
 from roswire.names import data_key
 from roswire.node import RosNode
 from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
-from roswire.subscriber import RosSample
+from roswire.subscriber import RosSample, RosSubscriber
 from roswire.tokens import EndpointInfo, parse_token
 from roswire.wire_detect import probe_wire
 from schemas.typestore import load_typestore
@@ -182,9 +182,35 @@ def test_ring_subscriber_drains_a_burst_on_its_own_thread_in_order(
     assert (sub.stats.gaps, sub.stats.delivered) == (0, 2000)
 
 
-def test_ring_of_no_samples_is_refused(node: RosNode) -> None:
-    with pytest.raises(RoswireError, match="at least one sample"):
-        node.create_subscriber("/x", STRING, print, ring=0)
+def test_ring_hands_over_bursts_with_on_samples(node: RosNode) -> None:
+    bursts: list[list[RosSample]] = []
+    sub = RosSubscriber(node, "/bursts", STRING, None, type_hash=STRING_HASH, ring=10_000,
+                        on_samples=bursts.append).start()
+    pub = node.create_publisher("/bursts", STRING, type_hash=STRING_HASH)
+    wait_until(lambda: pub.matching, timeout=5, message="matched")
+    for _ in range(2000):
+        pub.publish_cdr(b"\x00\x01\x00\x00\x01\x00\x00\x00\x00")
+    wait_until(lambda: sum(len(b) for b in bursts) == 2000, timeout=10, message="2000 samples in bursts")
+    sub.stop()
+    assert [s.seq for b in bursts for s in b] == list(range(1, 2001))
+    assert max(len(b) for b in bursts) <= 256
+    assert sub.stats.delivered == 2000
+
+
+@pytest.mark.parametrize(
+    ("callback", "on_samples", "ring", "reason"),
+    [
+        (print, None, 0, "at least one sample"),
+        (None, None, 16, "give a callback"),
+        (print, print, 16, "give a callback"),
+        (None, print, None, "give a callback"),
+    ],
+)
+def test_subscriber_arguments_that_cannot_work_are_refused(
+    node: RosNode, callback: object, on_samples: object, ring: int | None, reason: str
+) -> None:
+    with pytest.raises(RoswireError, match=reason):
+        RosSubscriber(node, "/x", STRING, callback, ring=ring, on_samples=on_samples)  # type: ignore[arg-type]
 
 
 def test_callback_failure_does_not_stop_the_subscription(node: RosNode) -> None:

@@ -71,3 +71,42 @@ def test_take_wakes_up_when_an_item_arrives() -> None:
 def test_invalid_bounds() -> None:
     with pytest.raises(ValueError, match="positive"):
         Intake(max_items=0)
+
+
+@pytest.mark.parametrize(
+    ("max_items", "max_bytes", "queued", "sizes", "taken"),
+    [
+        (10, 100, 0, [10, 10, 10], 3),
+        (3, 100, 1, [1, 1, 1, 1], 2),        # room for two more items
+        (10, 25, 0, [10, 10, 10, 1], 2),     # the third does not fit: it and the rest are dropped
+        (10, 100, 0, [], 0),
+        (10, 100, 10, [1], 0),
+    ],
+)
+def test_offer_many_queues_in_order_while_it_fits(
+    max_items: int, max_bytes: int, queued: int, sizes: list[int], taken: int
+) -> None:
+    intake: Intake[str] = Intake(max_items=max_items, max_bytes=max_bytes)
+    for i in range(queued):
+        assert intake.offer(f"q{i}", 0)
+    pairs = [(f"s{i}", size) for i, size in enumerate(sizes)]
+    assert intake.offer_many(pairs) == taken
+    stats = intake.stats()
+    assert (stats.offered, stats.dropped, stats.dropped_bytes) == (
+        queued + len(sizes), len(sizes) - taken, sum(sizes[taken:]))
+    assert (stats.queued, stats.queued_bytes, stats.high_water) == (
+        queued + taken, sum(sizes[:taken]), queued + taken)
+    assert intake.take(100, timeout=0) == [f"q{i}" for i in range(queued)] + [f"s{i}" for i in range(taken)]
+
+
+def test_offer_many_wakes_a_waiting_taker_and_a_closed_intake_takes_none() -> None:
+    intake: Intake[str] = Intake()
+    got: list[list[str]] = []
+    taker = threading.Thread(target=lambda: got.append(intake.take(5, timeout=10)))
+    taker.start()
+    assert intake.offer_many([("a", 1), ("b", 1)]) == 2
+    taker.join(5)
+    assert got == [["a", "b"]]
+    intake.close()
+    assert intake.offer_many([("c", 1)]) == 0
+    assert intake.stats().dropped == 1
