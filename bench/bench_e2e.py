@@ -1,6 +1,6 @@
 """End-to-end benchmark: robots → edge agent → WAN → uplink → Kafka, against the direct path.
 
-    .venv/bin/python bench/bench_e2e.py [--robots 8] [--records 40000] [--latency-rate 1000]
+    .venv/bin/python bench/bench_e2e.py [--robots 8] [--records 40000] [--repeat 3] [--latency-rate 1000]
 
 Starts Kafka + Apicurio (or uses $KAFKA_BOOTSTRAP / $SCHEMA_REGISTRY_URL), then as separate
 processes: the uplink (also the cloud Zenoh router), the edge agent (also the site router,
@@ -15,9 +15,13 @@ durable spool, at-least-once) and the robots (real Husky IMU messages over rmw_z
 3. the original design's direct path in one process, same messages: rosbags deserialize →
    dict → fastavro → Kafka produce (no spool, no acknowledgements), and the ratio.
 
-Method: the broker is warmed up first (30,000 records produced and read back: a cold JVM
-otherwise charges whichever part runs first), every Kafka topic is created before its run, and
-records are read back one ``poll`` at a time (receive times to the millisecond).
+Method: ``--warmup-rounds`` rounds of parts 1 and 3 run first and are printed but not counted
+(a freshly started broker's JVM is cold: it charged the first rounds up to twice the broker CPU
+of a warm one); then parts 1 and 3 alternate ``--repeat`` times and their medians are compared
+(the machine's other load varies); every Kafka topic is created before its run; records are
+read back one ``poll`` at a time for latency (receive times to the millisecond), in 5 ms batches
+for throughput. Part 2 runs last. Environment: ``BENCH_LINGER`` (the edge's ``wan.linger``, default 10ms),
+``BENCH_METRICS=1`` (the uplink's Prometheus metrics on: every delivery report counted).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import tempfile
 import time
 import uuid
 from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -89,11 +94,14 @@ def create_topic(bootstrap: str, prefix: str) -> str:
     return topic
 
 
-def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[tuple[float, int]]:
+def read_topic(bootstrap: str, topic: str, count: int, timeout: float, *, per_record: bool = True
+               ) -> list[tuple[float, int]]:
     """(receive time, record timestamp ms) for ``count`` records of a one-partition topic.
 
-    One ``poll`` per record: ``consume(n, timeout)`` returns only when ``n`` records are there
-    or the timeout is over, which would add up to ``timeout`` to every receive time.
+    ``per_record``: one ``poll`` per record, receive times exact (latency). Otherwise batches of
+    up to 1,000 with a 5 ms timeout: times within 5 ms, and the reader (which shares the CPUs
+    with what it measures) costs a fraction. Never ``consume(n, 0.1)``: it returns only when
+    ``n`` records are there or the timeout is over, adding up to 0.1 s to receive times.
     """
     consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"bench-{uuid.uuid4().hex}",
                          "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 200,
@@ -104,31 +112,17 @@ def read_topic(bootstrap: str, topic: str, count: int, timeout: float) -> list[t
     deadline = time.monotonic() + timeout
     try:
         while len(out) < count and time.monotonic() < deadline:
-            msg = consumer.poll(0.1)
-            if msg is not None and msg.error() is None:
-                out.append((time.time(), msg.timestamp()[1]))
+            if per_record:
+                msg = consumer.poll(0.1)
+                if msg is not None and msg.error() is None:
+                    out.append((time.time(), msg.timestamp()[1]))
+                continue
+            msgs = consumer.consume(1000, timeout=0.005)
+            now = time.time()
+            out.extend((now, m.timestamp()[1]) for m in msgs if m.error() is None)
     finally:
         consumer.close()
     return out
-
-
-def warm_up_broker(bootstrap: str, n: int = 30_000) -> None:
-    """Produce and read back ``n`` records once before measuring anything: a freshly started
-    broker runs its first seconds partly interpreted (the JIT is cold), which measured ~1 s of
-    extra broker CPU and a fifth less throughput for whichever path happened to run first."""
-    topic = create_topic(bootstrap, "bench.warmup")
-    producer = Producer({"bootstrap.servers": bootstrap, "linger.ms": 5, "acks": "all",
-                         "enable.idempotence": True, "compression.type": "lz4"})
-    for i in range(n):
-        while True:
-            try:
-                producer.produce(topic, key=b"r%02d" % (i % 8), value=bytes(400), headers=[("h", b"v")])
-                break
-            except BufferError:
-                producer.poll(0.01)
-        producer.poll(0)
-    producer.flush(60)
-    read_topic(bootstrap, topic, n, timeout=60)
 
 
 class Pipeline:
@@ -136,11 +130,13 @@ class Pipeline:
 
     def __init__(self, work: Path, bootstrap: str, registry: str, topic: str, stack: ExitStack) -> None:
         self.cloud_port, self.site_port = free_port(), free_port()
-        uplink = {
+        uplink: dict[str, Any] = {
             "kafka": {"bootstrap_servers": bootstrap, "linger_ms": 5},
             "registry": {"url": registry},
             "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.cloud_port}"]},
         }
+        if os.environ.get("BENCH_METRICS"):  # Prometheus metrics on: every delivery report counted
+            uplink["metrics"] = {"listen": "127.0.0.1:0"}
         edge = {
             "site": "bench", "edge_id": "edge-1",
             "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.site_port}"],
@@ -233,10 +229,70 @@ def latency_line(lat: list[float]) -> str:
             f"max {max(lat):.1f} ms")
 
 
+@dataclass
+class Throughput:
+    got: int
+    elapsed: float
+    published: int
+    publish_s: float
+    cpu: dict[str, float]
+
+    @property
+    def rate(self) -> float:
+        return self.got / self.elapsed
+
+
+def run_throughput(work: Path, bootstrap: str, registry: str, robots: int, per_robot: int,
+                   broker_pid: int | None) -> Throughput:
+    """The robots publish ``per_robot`` messages each at once; first publish -> last record read."""
+    topic = create_topic(bootstrap, "bench.imu")
+    work.mkdir()
+    with ExitStack() as stack:
+        pipe = Pipeline(work, bootstrap, registry, topic, stack)
+        cpu0 = pipe.cpu()
+        broker0 = tree_cpu(broker_pid) if broker_pid else 0.0
+        pub, began = run_robots(pipe.site_port, robots, per_robot, 0)
+        got = read_topic(bootstrap, topic, per_robot * robots, timeout=300, per_record=False)
+        if pub.stdout is None or pub.stdin is None:
+            raise SystemExit("publisher has no pipes")
+        published = pub.stdout.readline().split()
+        cpu = {"robots": tree_cpu(pub.pid)}
+        pub.stdin.write("bye\n")
+        pub.stdin.flush()
+        pub.wait(30)
+        cpu1 = pipe.cpu()
+        cpu.update({k: cpu1[k] - cpu0[k] for k in cpu1})
+        if broker_pid:
+            cpu["Kafka broker"] = tree_cpu(broker_pid) - broker0
+    elapsed = got[-1][0] - began if got else float("nan")
+    return Throughput(len(got), elapsed, int(published[1]), float(published[2]), cpu)
+
+
+def run_latency(work: Path, bootstrap: str, registry: str, robots: int, rate: float, seconds: float
+                ) -> list[tuple[float, int]]:
+    topic = create_topic(bootstrap, "bench.imu.lat")
+    work.mkdir()
+    with ExitStack() as stack:
+        pipe = Pipeline(work, bootstrap, registry, topic, stack)
+        n = int(rate * seconds) // robots
+        pub, _ = run_robots(pipe.site_port, robots, n, rate)
+        got = read_topic(bootstrap, topic, n * robots, timeout=120)
+        if pub.stdin is None:
+            raise SystemExit("publisher has no pipes")
+        pub.stdin.write("bye\n")
+        pub.stdin.flush()
+        pub.wait(60)
+    return got
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robots", type=int, default=8)
     ap.add_argument("--records", type=int, default=40_000, help="total records for the throughput run")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="throughput rounds, fleetlink and the direct path alternating (medians compared)")
+    ap.add_argument("--warmup-rounds", type=int, default=1,
+                    help="rounds of both run first and not counted (a fresh broker's JVM is still cold)")
     ap.add_argument("--latency-rate", type=float, default=1000.0)
     ap.add_argument("--latency-seconds", type=float, default=10.0)
     ap.add_argument("--warmup", type=float, default=1.0,
@@ -258,67 +314,52 @@ def main() -> None:
             bootstrap, registry, broker_pid = info.bootstrap, info.registry_url, info.kafka_pid
         payloads = imu_payloads(2000)
         print(f"Imu CDR record: {len(payloads[0])} bytes; robots: {args.robots}; {os.cpu_count()} CPUs")
-        warm_up_broker(bootstrap)
         per_robot = args.records // args.robots
         total = per_robot * args.robots
-        rate = float("nan")
 
-        if "throughput" in parts:
-            topic = create_topic(bootstrap, "bench.imu")
-            (work / "tp").mkdir()
-            with ExitStack() as stack1:
-                pipe = Pipeline(work / "tp", bootstrap, registry, topic, stack1)
-                cpu0 = pipe.cpu()
-                broker0 = tree_cpu(broker_pid) if broker_pid else 0.0
-                pub, began = run_robots(pipe.site_port, args.robots, per_robot, 0)
-                got = read_topic(bootstrap, topic, total, timeout=300)
-                if pub.stdout is None or pub.stdin is None:
-                    raise SystemExit("publisher has no pipes")
-                published = pub.stdout.readline().split()
-                pub_cpu = tree_cpu(pub.pid)
-                pub.stdin.write("bye\n")
-                pub.stdin.flush()
-                pub.wait(30)
-                cpu1 = pipe.cpu()
-                broker1 = tree_cpu(broker_pid) if broker_pid else 0.0
-            elapsed = got[-1][0] - began if got else float("nan")
-            rate = len(got) / elapsed
-            print("\n1. throughput, at-least-once (durable spool, acked WAN batches, acks=all):")
-            print(f"   {len(got)}/{total} records in Kafka in {elapsed:.2f} s"
-                  f"  →  {rate:,.0f} records/s end to end")
-            print(f"   robots published {published[1]} in {float(published[2]):.2f} s")
-            broker = f", Kafka broker {broker1 - broker0:.1f}" if broker_pid else ""
-            print(f"   CPU seconds: robots {pub_cpu:.1f}, " +
-                  ", ".join(f"{k} {cpu1[k] - cpu0[k]:.1f}" for k in cpu1) + broker)
+        rates: list[float] = []
+        directs: list[float] = []
+        if parts & {"throughput", "direct"}:
+            print(f"\n1. throughput, {total} records, at-least-once (durable spool, acked WAN batches, "
+                  "acks=all), against 3. the direct path (one process: rosbags → dict → fastavro → "
+                  "produce; no spool, no acks), alternating:")
+        for i in range(-args.warmup_rounds, args.repeat):
+            line = f"   round {i + 1}:" if i >= 0 else "   warm-up (not counted):"
+            if "throughput" in parts:
+                t = run_throughput(work / f"tp{i + args.warmup_rounds}", bootstrap, registry, args.robots,
+                                   per_robot, broker_pid)
+                rates.append(t.rate)
+                line += (f" fleetlink {t.got}/{total} in {t.elapsed:.2f} s = {t.rate:,.0f} records/s"
+                         f" (robots published in {t.publish_s:.2f} s; CPU s: "
+                         + ", ".join(f"{k} {v:.1f}" for k, v in t.cpu.items()) + ")")
+            if "direct" in parts:
+                directs.append(direct_path(bootstrap, registry, payloads, total))
+                line += f" | direct {directs[-1]:,.0f} records/s"
+            if rates and directs:
+                line += f" | ratio {rates[-1] / directs[-1]:.2f}"
+            print(line, flush=True)
+            if i < 0:
+                rates.clear()
+                directs.clear()
+        if rates:
+            print(f"   fleetlink end to end, median: {statistics.median(rates):,.0f} records/s")
+        if directs:
+            print(f"   direct path, median: {statistics.median(directs):,.0f} records/s")
+        if rates and directs:
+            print(f"\nratio fleetlink end to end / direct path (medians): "
+                  f"{statistics.median(rates) / statistics.median(directs):.2f}")
 
         if "latency" in parts:
-            topic2 = create_topic(bootstrap, "bench.imu.lat")
-            (work / "lat").mkdir()
-            with ExitStack() as stack2:
-                pipe2 = Pipeline(work / "lat", bootstrap, registry, topic2, stack2)
-                n = int(args.latency_rate * args.latency_seconds)
-                pub2, _ = run_robots(pipe2.site_port, args.robots, n // args.robots, args.latency_rate)
-                got2 = read_topic(bootstrap, topic2, (n // args.robots) * args.robots, timeout=120)
-                if pub2.stdin is None:
-                    raise SystemExit("publisher has no pipes")
-                pub2.stdin.write("bye\n")
-                pub2.stdin.flush()
-                pub2.wait(60)
-            lat = [(recv * 1000 - stamp) for recv, stamp in got2]
-            first = min(stamp for _recv, stamp in got2)
-            steady = [(recv * 1000 - stamp) for recv, stamp in got2 if stamp - first >= args.warmup * 1000]
+            got = run_latency(work / "lat", bootstrap, registry, args.robots, args.latency_rate,
+                              args.latency_seconds)
+            lat = [(recv * 1000 - stamp) for recv, stamp in got]
+            first = min(stamp for _recv, stamp in got)
+            steady = [(recv * 1000 - stamp) for recv, stamp in got if stamp - first >= args.warmup * 1000]
             print(f"\n2. latency at {args.latency_rate:,.0f} records/s (publish → record read from Kafka), "
                   f"{len(lat)} records:")
             print(f"   all records:            {latency_line(lat)}")
             if steady:
                 print(f"   after the first {args.warmup:g} s ({len(steady)} records): {latency_line(steady)}")
-
-        if "direct" in parts:
-            direct = direct_path(bootstrap, registry, payloads, total)
-            print("\n3. direct path (one process: rosbags → dict → fastavro → produce; no spool, no acks):")
-            print(f"   {direct:,.0f} records/s")
-            if "throughput" in parts:
-                print(f"\nratio fleetlink end to end / direct path: {rate / direct:.2f}")
 
 
 if __name__ == "__main__":
