@@ -121,6 +121,8 @@ class SampleAcceptor:
 
     def _observe(self, gid: bytes, seq: int) -> None:
         result = self.sequences.observe(gid, seq)
+        if result.status is SeqStatus.NEXT:
+            return
         if result.status is SeqStatus.GAP:
             self.stats.gaps += 1
             self.stats.missing += result.missing

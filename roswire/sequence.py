@@ -41,10 +41,14 @@ class SequenceTracker:
         self.duplicates = 0
 
     def observe(self, gid: bytes, seq: int) -> SeqResult:
-        last = self._last.get(gid)
+        last_seen = self._last
+        last = last_seen.get(gid)
         if last is None:
-            result = _FIRST
-        elif seq == last + 1:
+            last_seen[gid] = seq  # a new key goes to the end: the most recent
+            while len(last_seen) > self.max_sources:
+                last_seen.popitem(last=False)
+            return _FIRST
+        if seq == last + 1:
             result = _NEXT
         elif seq > last + 1:
             result = SeqResult(SeqStatus.GAP, seq - last - 1)
@@ -52,12 +56,12 @@ class SequenceTracker:
             self.missing += result.missing
         else:
             self.duplicates += 1
-            self._last.move_to_end(gid)
+            if len(last_seen) > 1:
+                last_seen.move_to_end(gid)
             return _DUPLICATE
-        self._last[gid] = seq
-        self._last.move_to_end(gid)
-        while len(self._last) > self.max_sources:
-            self._last.popitem(last=False)
+        last_seen[gid] = seq
+        if len(last_seen) > 1:  # one publisher (the usual case): nothing to reorder
+            last_seen.move_to_end(gid)
         return result
 
     def last(self, gid: bytes) -> int | None:

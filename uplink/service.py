@@ -56,6 +56,7 @@ class Uplink:
             else PrometheusMetrics("uplink") if config.metrics is not None else NullMetrics()
         )
         self._metrics_server: HttpServer | None = None
+        self._gc_before: tuple[int, int, int] | None = None
         self._zenoh_options = zenoh_options or config.zenoh.options()
         self.stats = IngestStats()
         self._session: zenoh.Session | None = None
@@ -101,10 +102,18 @@ class Uplink:
 
             self.console = UplinkConsole(cfg.console, session=self._session, router=lambda: self._commands,
                                          latency=self.delivery_latency).start()
-        gc.freeze()  # see edge.agent: what start made lives as long as the process; keep it out of full GCs
+        # what start made lives as long as the service: out of full collections; young ones rarer
+        # (deliveries and records never form cycles): 90 ms of collections for 60,000 records before
+        self._gc_before = gc.get_threshold()
+        gc.freeze()
+        gc.set_threshold(50_000, 20, 100)
         return self
 
     def stop(self) -> None:
+        if self._gc_before is not None:
+            gc.set_threshold(*self._gc_before)
+            gc.unfreeze()
+            self._gc_before = None
         if self._metrics_server is not None:
             self._metrics_server.stop()
             self._metrics_server = None

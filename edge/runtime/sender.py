@@ -30,7 +30,7 @@ from edge.runtime.schema_book import SchemaBook
 from edge.runtime.transport import Transport
 from edge.spool import RecordBuffer, SpoolBatch
 from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan import Codec, WireError, decode_ack, encode_batch_payloads, payload_fingerprint
+from fleetlink.wan import Codec, WireError, decode_ack, encode_batch_payloads, payload_fingerprints
 
 log = logging.getLogger(__name__)
 _NS = 1_000_000_000
@@ -240,7 +240,7 @@ class WanSender:
     # -- one batch -------------------------------------------------------------------------------
     def _send(self, batch: SpoolBatch) -> None:
         payloads = [record.payload for record in batch.records]
-        fps = {fp for p in payloads if (fp := payload_fingerprint(p)) is not None}
+        fps = payload_fingerprints(payloads)
         schemas, missing = self.schemas.lookup(fps)
         if missing:
             self.stats.missing_schemas += len(missing)

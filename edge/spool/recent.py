@@ -38,7 +38,7 @@ class _Chunk:
 class RecentFrames:
     """Chunks in append order, at most about ``max_bytes`` of frames (the oldest go first)."""
 
-    def __init__(self, max_bytes: int = 8 << 20) -> None:
+    def __init__(self, max_bytes: int = 32 << 20) -> None:
         self.max_bytes = max_bytes
         self._kept: deque[_Chunk] = deque()
         self._bytes = 0

@@ -32,8 +32,9 @@ from edge.spool.writer import DiskFull, SegmentWriter
 
 log = logging.getLogger(__name__)
 
-RECENT_BYTES = 8 << 20
-"""Frames appended last kept in memory for the sender (``RecentFrames``)."""
+RECENT_BYTES = 32 << 20
+"""Frames appended last kept in memory for the sender (``RecentFrames``): with less, a burst of
+60,000 IMU records (41 MB) sent the sender back to the file for part of it."""
 RESERVE_BLOCK = 1 << 20
 """Seqs reserved (one fsynced ledger entry) at a time; an unclean restart skips to the bound."""
 COUNTERS = ("appended", "acked", "dropped_oldest", "dropped_newest", "corrupt_skipped",

@@ -73,6 +73,7 @@ from fleetlink.wan.records import (
     decode_payload,
     encode_payload,
     payload_fingerprint,
+    payload_fingerprints,
     single_object,
     split_single_object,
 )
@@ -109,6 +110,7 @@ __all__ = [
     "events_key",
     "ingest_key",
     "payload_fingerprint",
+    "payload_fingerprints",
     "single_object",
     "site_prefix",
     "split_single_object",

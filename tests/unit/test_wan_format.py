@@ -35,6 +35,7 @@ from fleetlink.wan import (
     events_key,
     ingest_key,
     payload_fingerprint,
+    payload_fingerprints,
     single_object,
     site_prefix,
     split_single_object,
@@ -399,3 +400,13 @@ def test_templated_batches_round_trip_or_raise_wire_error_when_mutated(
     mutated[i] = data.draw(st.integers(0, 255))
     with contextlib.suppress(WireError):
         assert len(decode_batch(bytes(mutated)).records) >= 1
+
+
+@settings(max_examples=200)
+@given(st.lists(records_st, max_size=6), st.lists(st.binary(max_size=30), max_size=3))
+def test_payload_fingerprints_is_the_set_of_each_payload_fingerprint(
+    records: list[Record], junk: list[bytes]
+) -> None:
+    payloads = [encode_payload(r) for r in records] + junk
+    expected = {fp for p in payloads if (fp := payload_fingerprint(p)) is not None}
+    assert payload_fingerprints(payloads) == expected
