@@ -61,17 +61,11 @@ from schemas.typestore import load_typestore  # noqa: E402
 CLK = os.sysconf("SC_CLK_TCK")
 
 
-def cpu_seconds(pid: int) -> float:
+def tree_cpu(pid: int) -> float:
+    """CPU seconds (user + system) of the whole process: /proc/<pid>/stat counts every thread,
+    also those that ended (summing /proc/<pid>/task/* would miss them, and race their exit)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / CLK  # utime + stime
-
-
-def tree_cpu(pid: int) -> float:
-    total = 0.0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        stat = (task / "stat").read_text().rsplit(")", 1)[1].split()
-        total += (int(stat[11]) + int(stat[12])) / CLK
-    return total
 
 
 def percentile(values: list[float], q: float) -> float:

@@ -116,6 +116,9 @@ class WanSender:
         self._outage_since: float | None = None
         self._last_error = ""
         self._stopping = threading.Event()
+        self._mutex = threading.Lock()
+        """Guards the state above: the sender's thread and ``pump`` (another thread) both send."""
+        self._closed = False
         self._stop_deadline = 0.0
         self._thread: threading.Thread | None = None
         self._limiter = LogLimiter(log)
@@ -154,6 +157,32 @@ class WanSender:
         """New records were appended (or something changed): look again now."""
         self._events.put(None)
 
+    def pump(self) -> None:
+        """Send the full batches that can go now, from the calling thread (the processing thread,
+        right after appending), then wake the sender's own thread for the rest.
+
+        Measured: with eight receiver threads draining a burst, the sender's thread waited up to
+        0.3 s for the GIL while full batches piled up; the appending thread holds it already.
+        Partial batches (``linger``), answers, retries and backoff stay with the sender's thread.
+        """
+        if self._mutex.acquire(blocking=False):  # else the sender's thread is at it
+            try:
+                while not self._closed and self._clock() >= self._retry_at and (
+                    len(self._in_flight) < self._window()
+                    and self._unsent() >= self.options.batch_max_records
+                ):
+                    batch = self.buffer.read_unacked(self.options.batch_max_records,
+                                                     self.options.batch_max_bytes)
+                    if batch is None:
+                        break
+                    self._last_send = self._clock()
+                    self._send(batch)
+            except SpoolError as exc:  # closed under us: the sender's thread winds down
+                log.debug("sender %s: pump stops: %s", self.stream, exc)
+            finally:
+                self._mutex.release()
+        self.wake()
+
     def __enter__(self) -> WanSender:
         return self.start()
 
@@ -176,28 +205,31 @@ class WanSender:
         except SpoolError as exc:  # the buffer was closed under us: nothing more to do
             log.debug("sender %s stops: %s", self.stream, exc)
         finally:
-            if self._in_flight:
-                with contextlib.suppress(SpoolError):
-                    self.buffer.release_all()
-                self._in_flight.clear()
-            self.stats.in_flight = 0
+            with self._mutex:
+                self._closed = True
+                if self._in_flight:
+                    with contextlib.suppress(SpoolError):
+                        self.buffer.release_all()
+                    self._in_flight.clear()
+                self.stats.in_flight = 0
 
     def _loop(self) -> None:
         idle = max(0.05, self.options.linger_s)
         while True:
-            now = self._clock()
-            if self._stopping.is_set() and (
-                now >= self._stop_deadline or (not self._in_flight and not self._unsent())
-            ):
-                return
-            wait_until: float | None = None
-            if now < self._retry_at:
-                wait_until = self._retry_at
-            elif len(self._in_flight) < self._window():
-                batch, wait_until = self._next_batch(now)
-                if batch is not None:
-                    self._send(batch)
-                    continue
+            with self._mutex:
+                now = self._clock()
+                if self._stopping.is_set() and (
+                    now >= self._stop_deadline or (not self._in_flight and not self._unsent())
+                ):
+                    return
+                wait_until: float | None = None
+                if now < self._retry_at:
+                    wait_until = self._retry_at
+                elif len(self._in_flight) < self._window():
+                    batch, wait_until = self._next_batch(now)
+                    if batch is not None:
+                        self._send(batch)
+                        continue
             timeout = idle if wait_until is None else max(0.0, wait_until - now)
             if self._stopping.is_set():
                 timeout = min(timeout, max(0.0, self._stop_deadline - now))
@@ -231,7 +263,8 @@ class WanSender:
             return
         while True:
             if event is not None:
-                self._complete(*event)
+                with self._mutex:
+                    self._complete(*event)
             try:
                 event = self._events.get_nowait()
             except queue.Empty:

@@ -217,6 +217,29 @@ def test_linger_fills_a_batch_after_the_previous_one_and_a_quiet_stream_sends_at
     assert [len(b.records) for b in uplink.batches] == [1, 5]
 
 
+def test_pump_sends_full_batches_from_the_calling_thread_and_leaves_the_rest() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    buffer.append_many([payload(i) for i in range(25)])
+    threads: list[str] = []
+
+    def policy(batch: Batch, attempt: int) -> Answer:
+        threads.append(threading.current_thread().name)
+        return ok(batch)
+
+    uplink = ScriptedUplink(policy)
+    options = SenderOptions(batch_max_records=10, linger_s=30.0, max_in_flight=4, backoff_min_s=0.001,
+                            backoff_max_s=0.01)
+    sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=options)
+    sender.pump()  # the sender's own thread is not even running: the caller sends
+    assert [len(b.records) for b in uplink.batches] == [10, 10]
+    assert threads == [threading.current_thread().name] * 2
+    sender.start()  # answers the two batches; the partial one waits for the linger
+    wait_until(lambda: buffer.stats().acked == 20, 5)
+    sender.stop(timeout_s=5.0)
+    assert [len(b.records) for b in uplink.batches] == [10, 10, 5]
+    assert buffer.stats().depth == 0
+
+
 def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
     buffer = MemoryBuffer(first_seq=1)
     buffer.append_many([payload(i) for i in range(30)])
