@@ -1,10 +1,16 @@
-"""The hand-off from Zenoh callbacks to the processing thread: bounded, never blocking.
+"""The hand-off from the receivers to the processing thread: bounded, never blocking Zenoh.
 
 A Zenoh callback must return at once (a blocked callback stalls the session, and with it
 discovery and every other subscription), so it only ``offer``\\ s the item: when the queue is at
-``max_items`` or ``max_bytes`` the item is dropped and counted, and the back-pressure of a
-full spool lands here, visibly, instead of in Zenoh. Control items (robot events) are ``force``\\ d
-in: they are few and must not be lost.
+``max_items`` or ``max_bytes`` the item is dropped and counted. Control items (robot events) are
+``force``\\ d in: they are few and must not be lost.
+
+A receiver's drain thread is not a Zenoh thread: ``offer_many(pairs, wait_s=...)`` waits up to
+``wait_s`` for room, while the samples behind it stay in the subscription's Rust-side ring (no
+Python objects, no GIL). So a burst larger than the intake is absorbed by the rings instead of
+being dropped here, and the receivers stop competing with the processing thread for the GIL
+while it catches up. What still does not fit after the wait is dropped and counted, as is what
+a ring overflows (sequence gaps): the back-pressure of a full spool stays visible.
 """
 
 from __future__ import annotations
@@ -49,6 +55,8 @@ class Intake(Generic[T]):
         self._bytes = 0
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
+        self._room = threading.Condition(self._lock)
+        self._waiting = 0
         self._offered = self._taken = self._dropped = self._dropped_bytes = self._high_water = 0
         self._closed = False
 
@@ -71,10 +79,22 @@ class Intake(Generic[T]):
                 self._cond.notify()
             return True
 
-    def offer_many(self, pairs: Sequence[tuple[T, int]]) -> int:
-        """Queue ``(item, size)`` pairs in order under one lock, while they fit; the rest are dropped
-        (counted). Returns how many were queued."""
+    def offer_many(self, pairs: Sequence[tuple[T, int]], *, wait_s: float = 0.0) -> int:
+        """Queue ``(item, size)`` pairs in order under one lock, while they fit, after waiting up
+        to ``wait_s`` for room for all of them; the rest are dropped (counted). Returns how many
+        were queued."""
         with self._lock:
+            if wait_s > 0 and not self._fits(pairs):
+                deadline = time.monotonic() + wait_s
+                self._waiting += 1
+                try:
+                    while not self._closed and not self._fits(pairs):
+                        remaining = deadline - time.monotonic()
+                        if remaining <= 0:
+                            break
+                        self._room.wait(remaining)
+                finally:
+                    self._waiting -= 1
             items = self._items
             before = len(items)
             self._offered += len(pairs)
@@ -95,6 +115,10 @@ class Intake(Generic[T]):
             if before == 0 and taken:
                 self._cond.notify()
             return taken
+
+    def _fits(self, pairs: Sequence[tuple[T, int]]) -> bool:
+        return (len(self._items) + len(pairs) <= self.max_items
+                and self._bytes + sum(size for _item, size in pairs) <= self.max_bytes)
 
     def take(self, max_items: int, timeout: float) -> list[T]:
         """Up to ``max_items`` items, waiting at most ``timeout`` s for the first one."""
@@ -119,6 +143,8 @@ class Intake(Generic[T]):
                 self._bytes -= taken_bytes
                 self._taken += max_items
                 items = chunk
+            if self._waiting:
+                self._room.notify_all()
         return [item for item, _size in items]
 
     def close(self) -> None:
@@ -126,6 +152,7 @@ class Intake(Generic[T]):
         with self._cond:
             self._closed = True
             self._cond.notify_all()
+            self._room.notify_all()
 
     def __len__(self) -> int:
         return len(self._items)

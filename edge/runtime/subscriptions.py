@@ -12,8 +12,10 @@ record's headers. A mapping that declares its type subscribes as soon as its top
 
 Each subscriber receives through a Rust-side ring channel drained by a thread of its own
 (``RosSubscriber(ring=...)``: a Python callback on a Zenoh thread loses samples on a busy edge)
-and hands its samples to the ``Intake``; refused samples (no attachment, broken CDR header) are
-handed over as ``Rejected`` so they become dead letters.
+and hands its samples to the ``Intake`` a burst at a time, waiting up to ``offer_wait_s`` for
+room when the processing thread is behind (the ring holds what arrives meanwhile); refused
+samples (no attachment, broken CDR header) are handed over as ``Rejected`` so they become dead
+letters.
 """
 
 from __future__ import annotations
@@ -98,12 +100,15 @@ class SubscriptionManager:
         *,
         known_type: Callable[[str], bool] | None = None,
         capacity: int = 65536,
+        offer_wait_s: float = 1.0,
     ) -> None:
         self.node = node
         self.table = table
         self.intake = intake
         self._known_type = known_type or _any_type
         self.capacity = capacity
+        self.offer_wait_s = offer_wait_s
+        """How long a receiver waits for room in a full intake (its ring keeps what comes meanwhile)."""
         self._publishers: dict[str, dict[str, str]] = {}  # topic -> token key -> type
         self._active: dict[str, _Active] = {}
         self._lock = threading.Lock()
@@ -228,10 +233,10 @@ class SubscriptionManager:
         self.generation += 1
 
     def _open(self, topic: str, typename: str | None) -> RosSubscriber:
-        intake = self.intake
+        intake, wait_s = self.intake, self.offer_wait_s
 
         def on_samples(samples: list[RosSample]) -> None:  # a burst: one lock for all of it
-            intake.offer_many([(sample, len(sample.payload)) for sample in samples])
+            intake.offer_many([(sample, len(sample.payload)) for sample in samples], wait_s=wait_s)
 
         def on_error(error: RoswireError) -> None:
             intake.offer(Rejected(topic, error, time.time_ns()), len(getattr(error, "raw", b"")))

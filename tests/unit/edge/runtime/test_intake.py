@@ -7,6 +7,7 @@ import threading
 import pytest
 
 from edge.runtime.intake import Intake
+from tests.helpers import wait_until
 
 
 @pytest.mark.parametrize(
@@ -110,3 +111,33 @@ def test_offer_many_wakes_a_waiting_taker_and_a_closed_intake_takes_none() -> No
     intake.close()
     assert intake.offer_many([("c", 1)]) == 0
     assert intake.stats().dropped == 1
+
+
+def test_offer_many_waits_for_room_that_a_taker_makes() -> None:
+    intake: Intake[str] = Intake(max_items=4, max_bytes=1000)
+    assert intake.offer_many([(f"a{i}", 1) for i in range(4)]) == 4
+    queued: list[int] = []
+    offerer = threading.Thread(target=lambda: queued.append(
+        intake.offer_many([("b0", 1), ("b1", 1)], wait_s=30)))
+    offerer.start()
+    wait_until(lambda: intake._waiting == 1, 5)  # the offerer waits for room
+    assert intake.take(2, timeout=0) == ["a0", "a1"]
+    offerer.join(5)
+    assert queued == [2]
+    assert intake.take(10, timeout=0) == ["a2", "a3", "b0", "b1"]
+    assert intake.stats().dropped == 0
+
+
+def test_offer_many_drops_what_does_not_fit_after_the_wait_and_close_ends_a_wait() -> None:
+    intake: Intake[str] = Intake(max_items=3, max_bytes=1000)
+    assert intake.offer_many([("a", 1), ("b", 1)]) == 2
+    assert intake.offer_many([("c", 1), ("d", 1)], wait_s=0.01) == 1  # room for one after the wait
+    assert (intake.stats().dropped, intake.stats().queued) == (1, 3)
+    results: list[int] = []
+    offerer = threading.Thread(target=lambda: results.append(intake.offer_many([("e", 1)], wait_s=30)))
+    offerer.start()
+    wait_until(lambda: intake._waiting == 1, 5)
+    intake.close()
+    offerer.join(5)
+    assert results == [0]
+    assert intake.stats().dropped == 2
