@@ -157,7 +157,7 @@ class EdgeAgent:
         }
         senders = self._senders
         self._processor = Processor(self.intake, self._maker, buffers,
-                                    on_appended=lambda delivery: senders[delivery].pump())
+                                    on_appended=lambda delivery, linger: senders[delivery].pump(linger))
         attachment: AttachmentVersion = 1 if config.ros.attachment == "v1" else 2
         self._node = RosNode("fleetlink_edge", "/", domain_id=config.ros.domain_id, session=session,
                              typestore=typestore, distro=distro, attachment_version=attachment).start()

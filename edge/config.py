@@ -37,7 +37,7 @@ from edge.mapping import (
 from edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
 from edge.mapping.templates import kafka_topic_problem
 from edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
-from edge.stages import DurationNs, StageSpec
+from edge.stages import AggregateSpec, DurationNs, StageSpec
 from fleetlink.wan import Codec, WireError, check_key_name
 from fleetlink.zenoh_options import ZenohSection
 
@@ -83,6 +83,17 @@ class MappingConfig(_Section):
     type: str | None = None
     delivery: Delivery = "at_least_once"
     stages: list[StageSpec] = []
+    linger: DurationNs | None = None
+    """How long this mapping's records may wait at the edge for others to share their WAN batch.
+    Default: ``wan.linger``; with an ``aggregate`` stage, the stage's hop (its window when
+    tumbling), at most 5s: window records are few, and each batch costs a query and an answer."""
+
+    @field_validator("linger")
+    @classmethod
+    def _linger(cls, value: int | None) -> int | None:
+        if value is not None and not 0 <= value <= MAX_LINGER_NS:
+            raise ValueError("linger must be between 0s and 60s")
+        return value
 
     @field_validator("from_")
     @classmethod
@@ -121,7 +132,18 @@ class MappingConfig(_Section):
 
     def spec(self) -> MappingSpec:
         return MappingSpec(name=self.name, source=self.from_, topic=self.to, key=self.key,
-                           ros_type=self.type, delivery=self.delivery, stages=tuple(self.stages))
+                           ros_type=self.type, delivery=self.delivery, stages=tuple(self.stages),
+                           linger_ns=aggregate_linger(self.stages) if self.linger is None else self.linger)
+
+
+MAX_LINGER_NS = 60 * _NS
+AGGREGATE_LINGER_MAX_NS = 5 * _NS
+
+
+def aggregate_linger(stages: list[StageSpec]) -> int | None:
+    """The default linger of a mapping with an aggregate stage (see ``MappingConfig.linger``)."""
+    periods = [s.hop or s.window for s in stages if isinstance(s, AggregateSpec)]
+    return min([*periods, AGGREGATE_LINGER_MAX_NS]) if periods else None
 
 
 def _check_template(value: str, info: ValidationInfo, what: str, *, topic: bool) -> str:

@@ -201,6 +201,21 @@ class Uplink:
             query.reply_err(b"uplink stopping")
             query.drop()
             return
+        ids.learn(batch.schemas)
+        missing = ids.unknown(batch.elided) if batch.elided else ()
+        if missing:  # before anything is produced: the edge sends the batch again, with them
+            self._slots.release()
+            self.metrics.on_ingested(batch.site, "need_schemas", 0)
+            log.info("batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
+                     batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, len(missing))
+            try:
+                query.reply(query.key_expr, encode_ack(Ack(
+                    edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
+                    last_seq=batch.last_seq, status="need_schemas", missing_schemas=missing,
+                    detail="send the batch again with these schemas")))
+            finally:
+                query.drop()
+            return
 
         def done(ack: Ack) -> None:
             self._slots.release()

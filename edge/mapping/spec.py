@@ -40,6 +40,9 @@ class MappingSpec:
     ros_type: str | None = None
     delivery: Delivery = "at_least_once"
     stages: tuple[Any, ...] = ()
+    linger_ns: int | None = None
+    """How long the mapping's records may wait at the edge for company in a WAN batch
+    (``None``: the edge's ``wan.linger``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,6 +121,8 @@ def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> Comp
         raise MappingError(f"delivery {spec.delivery!r} must be one of {', '.join(DELIVERIES)}", mapping=name)
     if spec.ros_type is not None:
         check_ros_type(spec.ros_type, mapping=name)
+    if spec.linger_ns is not None and spec.linger_ns < 0:
+        raise MappingError(f"linger {spec.linger_ns} ns must not be negative", mapping=name)
     pattern = TopicPattern.parse(spec.source, mapping=name)
     if robot_type is not None and not pattern.is_single("robot"):
         raise MappingError(

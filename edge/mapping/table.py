@@ -53,6 +53,9 @@ class BoundMapping:
     key: str | None
     topic_error: str | None = None
     """Set when the topic is fully bound but illegal: every record is a ``RenderError``."""
+    linger_s: float | None = None
+    """How long this mapping's records may wait for company in a WAN batch (``None``: the
+    stream's default)."""
 
     @property
     def needs_message_fields(self) -> bool:
@@ -146,6 +149,7 @@ def _bind(entry: _Entry, topic: str, captures: dict[str, str]) -> BoundMapping:
         ros_type=compiled.spec.ros_type, delivery=compiled.spec.delivery, stages=compiled.spec.stages,
         captures=captures, topic_template=topic_t, key_template=key_t, kafka_topic=kafka_topic,
         key=key_t.literal_text if key_t.is_literal else None, topic_error=error,
+        linger_s=None if compiled.spec.linger_ns is None else compiled.spec.linger_ns / 1e9,
     )
 
 

@@ -32,6 +32,7 @@ class Lane:
     """``C3 01`` + the schema fingerprint: the single-object header."""
     template: PayloadTemplate
     delivery: Delivery
+    linger_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,6 +79,6 @@ def run_plan(
         if len(value) > max_value_bytes:
             slow(lane.bound, sample, now_ns, out)
             continue
-        out.append(Outgoing(lane.delivery, lane.template.payload(value, timestamp_ms, seq)))
+        out.append(Outgoing(lane.delivery, lane.template.payload(value, timestamp_ms, seq), lane.linger_s))
         lane.counters.emitted += 1
     return out

@@ -14,10 +14,12 @@ class Outgoing(NamedTuple):
 
     delivery: Delivery
     payload: bytes
+    linger_s: float | None = None
+    """How long the record may wait for company in a WAN batch (``None``: the stream's default)."""
 
     @classmethod
-    def of(cls, delivery: Delivery, record: Record) -> Outgoing:
-        return cls(delivery, encode_payload(record))
+    def of(cls, delivery: Delivery, record: Record, linger_s: float | None = None) -> Outgoing:
+        return cls(delivery, encode_payload(record), linger_s)
 
     @property
     def record(self) -> Record:

@@ -69,7 +69,7 @@ class Processor:
         maker: RecordMaker,
         buffers: Mapping[Delivery, RecordBuffer],
         *,
-        on_appended: Callable[[Delivery], object] | None = None,
+        on_appended: Callable[[Delivery, float | None], object] | None = None,
         tick_interval_s: float = 0.1,
         chunk: int = 512,
         clock_ns: Callable[[], int] = time.time_ns,
@@ -157,14 +157,18 @@ class Processor:
             return
         self.stats.records += len(out)
         groups: dict[Delivery, list[bytes]] = {}
-        for delivery, payload in out:
+        lingers: dict[Delivery, float | None] = {}
+        for delivery, payload, linger in out:
             group = groups.get(delivery)
             if group is None:
                 group = groups[delivery] = []
+                lingers[delivery] = linger
+            elif linger != lingers[delivery]:
+                lingers[delivery] = _shorter(lingers[delivery], linger)
             group.append(payload)
         for delivery, payloads in groups.items():
             self._append_to(delivery, self.buffers[delivery], payloads)
-            self._on_appended(delivery)
+            self._on_appended(delivery, lingers[delivery])
 
     def _append_to(self, delivery: Delivery, buffer: RecordBuffer, payloads: list[bytes]) -> None:
         stats = self.stats
@@ -192,5 +196,10 @@ class Processor:
         stats.spool_dropped += len(results) - taken
 
 
-def _nothing(_delivery: Delivery) -> None:
+def _shorter(a: float | None, b: float | None) -> float | None:
+    """The shorter of two lingers, ``None`` (the stream's default) counting as the shortest."""
+    return None if a is None or b is None else min(a, b)
+
+
+def _nothing(_delivery: Delivery, _linger_s: float | None) -> None:
     """Default ``on_appended``."""

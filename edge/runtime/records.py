@@ -169,7 +169,8 @@ class RecordMaker:
             headers = self._headers(bound, origin)  # all but fleetlink.seq: it comes with each sample
             template = PayloadTemplate(bound.kafka_topic, bound.key.encode("utf-8"), headers)
             lanes.append(Lane(bound, self._counters(bound.name), route.codec.cdr_to_avro,
-                              SINGLE_OBJECT_MAGIC + route.source.fingerprint, template, bound.delivery))
+                              SINGLE_OBJECT_MAGIC + route.source.fingerprint, template, bound.delivery,
+                              bound.linger_s))
         if plan is None:
             plan = FastPlan(sample.topic, bounds, tuple(lanes), tuple(mismatched))
         if len(self._plans) >= _PLAN_CACHE_SIZE:
@@ -315,7 +316,7 @@ class RecordMaker:
         out.append(Outgoing.of(bound.delivery, Record(
             kafka_topic=topic, key=key.encode("utf-8"), value=value, headers=self._headers(bound, origin),
             timestamp_ms=origin.stamp_ns // 1_000_000,
-        )))
+        ), bound.linger_s))
 
     # -- routes ----------------------------------------------------------------------------------
     def _route(self, bound: BoundMapping, typename: str) -> _Route | None:

@@ -9,6 +9,13 @@ exponential backoff, after which one batch probes the link before the full windo
 batch of the stream (so at once when the stream was quiet that long): at a steady rate that is
 one batch per ``linger`` as with a timer started by the first waiting record, but the first
 records after a pause (or at start, where the uplink may have a schema to register) do not wait.
+Records may bring their own, usually longer, linger (``pump(linger_s)``: a mapping's
+``linger``, by default its aggregate window): the shortest one among the waiting records counts.
+
+A batch carries the text of each schema its records use until the uplink has acknowledged a
+batch that carried it; later batches list the fingerprint alone. An uplink that does not know a
+left-out schema (it restarted, or it is another uplink) answers ``need_schemas``: the batch goes
+again at once with those texts, without backoff, and they travel again until acknowledged.
 One warning is logged when an outage starts and one line when it ends.
 """
 
@@ -70,6 +77,10 @@ class SenderStats:
     bytes_sent: int = 0
     stale_acks: int = 0
     missing_schemas: int = 0
+    schemas_elided: int = 0
+    """Schema texts left out of batches because an uplink had acknowledged them."""
+    schema_requests: int = 0
+    """Batches an uplink answered with ``need_schemas`` (sent again with the texts)."""
     outages: int = 0
     in_flight: int = 0
 
@@ -83,6 +94,10 @@ class _Flight:
     last_seq: int
     records: int
     sent_at: float
+    carried: frozenset[bytes]
+    """Fingerprints whose schema text the batch carried."""
+    elided: frozenset[bytes]
+    """Fingerprints the batch used without their text."""
 
 
 class WanSender:
@@ -113,6 +128,10 @@ class WanSender:
         self._retry_at = 0.0
         self._healthy = True
         self._last_send = float("-inf")
+        self._due: float | None = None
+        """When the waiting records may leave as a partial batch, if some brought their linger."""
+        self._known: set[bytes] = set()
+        """Fingerprints whose schema an uplink acknowledged (left out of later batches)."""
         self._outage_since: float | None = None
         self._last_error = ""
         self._stopping = threading.Event()
@@ -157,14 +176,19 @@ class WanSender:
         """New records were appended (or something changed): look again now."""
         self._events.put(None)
 
-    def pump(self) -> None:
+    def pump(self, linger_s: float | None = None) -> None:
         """Send the full batches that can go now, from the calling thread (the processing thread,
-        right after appending), then wake the sender's own thread for the rest.
+        right after appending), then wake the sender's own thread for the rest. ``linger_s``: how
+        long the records just appended may wait for company (``None``: ``options.linger_s``).
 
         Measured: with eight receiver threads draining a burst, the sender's thread waited up to
         0.3 s for the GIL while full batches piled up; the appending thread holds it already.
         Partial batches (``linger``), answers, retries and backoff stay with the sender's thread.
         """
+        due = self._last_send + (self.options.linger_s if linger_s is None else linger_s)
+        current = self._due
+        if current is None or due < current:
+            self._due = due
         if self._mutex.acquire(blocking=False):  # else the sender's thread is at it
             try:
                 while not self._closed and self._clock() >= self._retry_at and (
@@ -247,7 +271,9 @@ class WanSender:
         if unsent <= 0:
             return None, None
         if unsent < self.options.batch_max_records and not self._stopping.is_set():
-            due = self._last_send + self.options.linger_s
+            due = self._due
+            if due is None:
+                due = self._last_send + self.options.linger_s
             if now < due:
                 return None, due
         batch = self.buffer.read_unacked(self.options.batch_max_records, self.options.batch_max_bytes)
@@ -272,9 +298,11 @@ class WanSender:
 
     # -- one batch -------------------------------------------------------------------------------
     def _send(self, batch: SpoolBatch) -> None:
+        self._due = None
         payloads = [record.payload for record in batch.records]
         fps = payload_fingerprints(payloads)
-        schemas, missing = self.schemas.lookup(fps)
+        elided = fps & self._known
+        schemas, missing = self.schemas.lookup(fps - elided if elided else fps)
         if missing:
             self.stats.missing_schemas += len(missing)
             self._limiter.log(logging.WARNING, "missing-schema",
@@ -283,7 +311,8 @@ class WanSender:
         try:
             data = encode_batch_payloads(
                 site=self.site, edge_id=self.edge_id, stream=self.stream,
-                items=[(r.seq, r.payload) for r in batch.records], schemas=schemas, codec=self.options.codec,
+                items=[(r.seq, r.payload) for r in batch.records], schemas=schemas, elided=elided,
+                codec=self.options.codec,
             )
         except WireError as exc:  # cannot happen for what the spool hands out; never loop on it
             log.error("stream %s: cannot encode batch %d..%d: %s", self.stream, batch.first_seq,
@@ -292,8 +321,9 @@ class WanSender:
             self._failed(f"batch encoding: {exc}")
             return
         self._in_flight[batch.first_seq] = _Flight(batch.first_seq, batch.last_seq, len(batch.records),
-                                                   self._clock())
+                                                   self._clock(), frozenset(schemas), frozenset(elided))
         stats = self.stats
+        stats.schemas_elided += len(elided)
         stats.batches_sent += 1
         stats.records_sent += len(batch.records)
         stats.bytes_sent += len(data)
@@ -330,8 +360,11 @@ class WanSender:
         ):
             return (f"acknowledgement for {ack.edge_id}/{ack.stream} {ack.first_seq}..{ack.last_seq} "
                     f"does not match batch {flight.first_seq}..{flight.last_seq}")
+        if ack.status == "need_schemas":
+            return self._resend_with_schemas(flight, ack.missing_schemas)
         if ack.status != "ok":
             return f"uplink: {ack.detail or 'batch not produced'}"
+        self._known.update(flight.carried)
         if not self.buffer.ack(flight.first_seq):
             self.stats.stale_acks += 1
         stats = self.stats
@@ -344,6 +377,21 @@ class WanSender:
                               "stream %s: the uplink dead-lettered %d record(s) of batch %d..%d: %s",
                               self.stream, dead, flight.first_seq, flight.last_seq, ack.failures[0].reason)
         self._succeeded()
+        return None
+
+    def _resend_with_schemas(self, flight: _Flight, asked: tuple[bytes, ...]) -> str | None:
+        """The uplink lacks schemas the batch left out: forget that they were acknowledged and
+        send the batch again now (no backoff: nothing is wrong with the link)."""
+        unexpected = [fp for fp in asked if fp not in flight.elided]
+        if unexpected:  # the batch carried them, or never used them: retry like an error
+            names = ", ".join(fp.hex() for fp in unexpected)
+            return f"uplink asks for schemas the batch did not leave out: {names}"
+        self._known.difference_update(asked)
+        self.stats.schema_requests += 1
+        self.buffer.release(flight.first_seq)
+        log.info("stream %s: the uplink asks for %d schema(s) again (restarted, or another uplink); "
+                 "batch %d..%d goes again with them", self.stream, len(asked), flight.first_seq,
+                 flight.last_seq)
         return None
 
     def _succeeded(self) -> None:

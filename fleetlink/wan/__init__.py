@@ -4,9 +4,9 @@ Pure: bytes in, bytes out. Both sides import this one package, so the format has
 
 Batch (edge -> uplink, one Zenoh payload; little-endian throughout)::
 
-    "FLB" | version u8 (=2) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
+    "FLB" | version u8 (=3) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
     body:  site str16 | edge_id str16 | stream str16 | first_seq u64
-           | n_schemas u16 | { fingerprint 8 bytes | schema JSON str32 } * n_schemas
+           | n_schemas u16 | { fingerprint 8 bytes | schema JSON str32, or u32 0xFFFFFFFF } * n_schemas
            | n_records u32 | { seq u64 | payload_len u32 | payload } * n_records
 
 Record payload (what the edge spool stores, so a batch is built without re-encoding)::
@@ -23,23 +23,31 @@ uplink reads both, the edge writes version 2 (an uplink that only knows version 
 a batch with "unsupported batch version 2", and the edge keeps it until the uplink is upgraded).
 
 A value is Avro single-object encoded (``C3 01`` + 8-byte CRC-64-AVRO fingerprint, little-endian,
-+ Avro body) unless the raw flag is set (dead letters are produced exactly as given). Every batch
-carries the schema JSON of each fingerprint it uses, so any stateless uplink can register it: an
-Imu schema compresses to a few hundred bytes, small beside a batch.
++ Avro body) unless the raw flag is set (dead letters are produced exactly as given). A batch
+lists every fingerprint its records use, with the schema JSON, so that any stateless uplink can
+register it, until an uplink has acknowledged a batch carrying that schema: from then on the
+edge sends the fingerprint alone (length 0xFFFFFFFF, version 3). An uplink remembers the schema
+text of every batch it read; one that meets a left-out schema it does not know (restarted, or
+another uplink) produces nothing of the batch and answers ``need_schemas`` with the missing
+fingerprints, and the edge sends the batch again with their text. A schema costs 300-700 bytes
+compressed, which outweighs a batch of a few small records (docs/wan_bytes.md).
 
 Ack (uplink -> edge, uncompressed)::
 
     "FLA" | version u8 | edge_id str16 | stream str16 | first_seq u64 | last_seq u64 | status u8
-    (0 ok, 1 error) | detail str16 | n_failures u32 | { seq u64 | dead_lettered u8 | reason str16 } *
+    (0 ok, 1 error, 2 need_schemas) | detail str16 | n_failures u32
+    | { seq u64 | dead_lettered u8 | reason str16 } * n_failures
+    | [n_missing u16 | { fingerprint 8 bytes } * n_missing, with status 2]
 
 ``ok``: every record of the batch is in Kafka, or in the dead-letter topic (listed in failures,
 all with ``dead_lettered``); the edge may drop the whole range from its spool. ``error``: the
-batch was not (entirely) made safe; the edge sends it again later.
+batch was not (entirely) made safe; the edge sends it again later. ``need_schemas``: nothing
+was produced; send the batch again with the text of the listed schemas.
 
 Decoding anything malformed raises ``WireError`` with the reason and the offset.
 """
 
-from fleetlink.wan.ack import ACK_MAGIC, Ack, RecordFailure, decode_ack, encode_ack
+from fleetlink.wan.ack import ACK_MAGIC, Ack, AckStatus, RecordFailure, decode_ack, encode_ack
 from fleetlink.wan.batch import (
     BATCH_MAGIC,
     BATCH_VERSION,
@@ -90,6 +98,7 @@ __all__ = [
     "VALUE_OFFSET",
     "VERSION",
     "Ack",
+    "AckStatus",
     "Batch",
     "Codec",
     "PayloadTemplate",

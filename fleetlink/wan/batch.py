@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -29,12 +29,16 @@ _CODECS: dict[str, int] = {"none": 0, "zlib": 1, "zstd": 2}
 _CODEC_NAMES = {v: k for k, v in _CODECS.items()}
 
 BATCH_MAGIC = b"FLB"
-BATCH_VERSION = 2
-"""What ``encode_batch_payloads`` writes. Version 2 adds the record flag ``FLAG_SOURCE_SEQ``;
-version 1 batches (from edges not yet upgraded) are still read."""
-_RECORD_FLAGS = {1: FLAGS_V1, 2: FLAGS_V2}
+BATCH_VERSION = 3
+"""What ``encode_batch_payloads`` writes. Version 2 adds the record flag ``FLAG_SOURCE_SEQ``,
+version 3 schema entries without their text (``Batch.elided``); versions 1 and 2 (from edges
+not yet upgraded) are still read."""
+_RECORD_FLAGS = {1: FLAGS_V1, 2: FLAGS_V2, 3: FLAGS_V2}
+_ELIDED = 0xFFFFFFFF
+"""A schema entry's length that says "text left out" (version 3)."""
 MAX_BATCH_BYTES = 64 * 1024 * 1024
 """Default cap on a batch's uncompressed body (a decompression-bomb guard)."""
+_ELIDED_BYTES = U32.pack(_ELIDED)
 _HEAD = struct.Struct("<3sBBI")
 _SEQ_LEN = struct.Struct("<QI")
 
@@ -46,7 +50,9 @@ def zstd_available() -> bool:
 @dataclass(frozen=True, slots=True)
 class Batch:
     """Records from one edge stream, ``seq`` strictly increasing from ``first_seq``, with the
-    schema JSON of every fingerprint they use (``schemas``: fingerprint -> JSON text)."""
+    schema JSON of the fingerprints they use (``schemas``: fingerprint -> JSON text). ``elided``
+    are fingerprints they use whose text the edge left out, because an uplink acknowledged a
+    batch carrying it before (an uplink that does not know one answers ``need_schemas``)."""
 
     site: str
     edge_id: str
@@ -54,6 +60,7 @@ class Batch:
     first_seq: int
     records: tuple[Record, ...]
     schemas: Mapping[bytes, str] = field(default_factory=dict)
+    elided: frozenset[bytes] = frozenset()
 
     @property
     def last_seq(self) -> int:
@@ -77,19 +84,32 @@ def encode_batch_payloads(
     stream: str,
     items: Sequence[tuple[int, bytes]],
     schemas: Mapping[bytes, str],
+    elided: Collection[bytes] = (),
     codec: Codec = "zlib",
     level: int | None = None,
 ) -> bytes:
-    """A batch from spool payloads ``(seq, payload)`` as stored (no per-record re-encoding)."""
+    """A batch from spool payloads ``(seq, payload)`` as stored (no per-record re-encoding);
+    ``elided``: fingerprints used without their text (see ``Batch``)."""
     if not items:
         raise WireError("a batch needs at least one record")
     if codec not in _CODECS:
         raise WireError(f"unknown codec {codec!r}")
-    parts = [str16(site), str16(edge_id), str16(stream), U64.pack(items[0][0]), U16.pack(len(schemas))]
+    if len(schemas) + len(elided) > 0xFFFF:
+        raise WireError(f"{len(schemas) + len(elided)} schemas do not fit a 16-bit count")
+    parts = [str16(site), str16(edge_id), str16(stream), U64.pack(items[0][0]),
+             U16.pack(len(schemas) + len(elided))]
+    for fingerprint in elided:
+        if len(fingerprint) != 8:
+            raise WireError(f"a schema fingerprint has 8 bytes, got {len(fingerprint)}")
+        if fingerprint in schemas:
+            raise WireError(f"schema {fingerprint.hex()} is both carried and elided")
+        parts += (fingerprint, U32.pack(_ELIDED))
     for fingerprint, schema in schemas.items():
         if len(fingerprint) != 8:
             raise WireError(f"a schema fingerprint has 8 bytes, got {len(fingerprint)}")
         data = schema.encode("utf-8")
+        if len(data) >= _ELIDED:
+            raise WireError(f"schema {fingerprint.hex()} of {len(data)} bytes is too long")
         parts += (fingerprint, U32.pack(len(data)), data)
     parts.append(U32.pack(len(items)))
     previous = -1
@@ -109,7 +129,7 @@ def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = Non
     return encode_batch_payloads(
         site=batch.site, edge_id=batch.edge_id, stream=batch.stream,
         items=[(r.seq, encode_payload(r)) for r in batch.records], schemas=batch.schemas,
-        codec=codec, level=level,
+        elided=batch.elided, codec=codec, level=level,
     )
 
 
@@ -128,6 +148,23 @@ def _decompress(codec: int, data: memoryview, size: int) -> bytes:
     except _DECOMPRESS_ERRORS as exc:
         raise WireError(f"corrupt {_CODEC_NAMES[codec]} data: {exc}") from None
     return bytes(out)
+
+
+def _read_schemas(r: Reader, version: int) -> tuple[dict[bytes, str], frozenset[bytes]]:
+    """The schema section: texts by fingerprint, and the fingerprints left out (version 3)."""
+    (n_schemas,) = r.unpack(U16, "schema count")
+    schemas: dict[bytes, str] = {}
+    elided: set[bytes] = set()
+    for _ in range(n_schemas):
+        fingerprint = r.take(8, "schema fingerprint")
+        if fingerprint in schemas or fingerprint in elided:
+            raise WireError(f"schema {fingerprint.hex()} is listed twice", offset=r.pos - 8)
+        if version >= 3 and r.data[r.pos : r.pos + 4] == _ELIDED_BYTES:
+            r.pos += 4
+            elided.add(fingerprint)
+        else:
+            schemas[fingerprint] = r.text("schema JSON", wide=True)
+    return schemas, frozenset(elided)
 
 
 def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
@@ -149,11 +186,7 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     r = Reader(body)
     site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
     (first_seq,) = r.unpack(U64, "first_seq")
-    (n_schemas,) = r.unpack(U16, "schema count")
-    schemas: dict[bytes, str] = {}
-    for _ in range(n_schemas):
-        fingerprint = r.take(8, "schema fingerprint")
-        schemas[fingerprint] = r.text("schema JSON", wide=True)
+    schemas, elided = _read_schemas(r, version)
     (n_records,) = r.unpack(U32, "record count")
     if n_records == 0:
         raise WireError("a batch needs at least one record", offset=r.pos - 4)
@@ -180,5 +213,5 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     if records[0].seq != first_seq:
         raise WireError(f"first_seq {first_seq} is not the first record's seq {records[0].seq}")
     return Batch(site=site, edge_id=edge_id, stream=stream, first_seq=first_seq,
-                 records=tuple(records), schemas=schemas)
+                 records=tuple(records), schemas=schemas, elided=elided)
 

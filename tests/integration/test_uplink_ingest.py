@@ -167,3 +167,28 @@ def test_unknown_schema_and_oversized_record_are_dead_lettered(
     assert big_headers["fleetlink.dlq.sha256"] == hashlib.sha256(huge.value).hexdigest().encode()
     unknown = next(m for m in dead if dict(m.headers() or [])["fleetlink.dlq.stage"] == b"register")
     assert unknown.value() == no_schema.value  # raw bytes kept
+
+
+def test_a_left_out_schema_the_uplink_never_read_is_asked_for_and_nothing_is_produced(
+    uplink: Uplink, edge_session: zenoh.Session, kafka_bootstrap: str
+) -> None:
+    topic = f"fleet.lean.{uuid.uuid4().hex[:6]}"
+    schema = {"type": "record", "name": f"Lean{uuid.uuid4().hex[:6]}",
+              "fields": [{"name": "n", "type": "long"}]}
+    fp = fingerprint(schema)
+
+    def records(first: int) -> tuple[Record, ...]:
+        return tuple(Record(topic, b"k", single_object(fp, bytes([2 * n])), seq=n)
+                     for n in range(first, first + 3))
+
+    lean = Batch("site-a", "edge-2", "durable", 1, records(1), elided=frozenset({fp}))
+    refused = send(edge_session, lean)
+    assert (refused.status, refused.missing_schemas, refused.first_seq, refused.last_seq) == (
+        "need_schemas", (fp,), 1, 3)
+    ack = send(edge_session, Batch("site-a", "edge-2", "durable", 1, records(1), {fp: json.dumps(schema)}))
+    assert ack.status == "ok"
+    # from now on the fingerprint alone will do, from any edge
+    again = send(edge_session, Batch("site-a", "edge-3", "durable", 4, records(4), elided=frozenset({fp})))
+    assert (again.status, again.failures) == ("ok", ())
+    got = read_topic(kafka_bootstrap, topic, 6)
+    assert sorted(m.value()[-1] for m in got) == [2, 4, 6, 8, 10, 12]  # 1..3 once: the refusal produced none

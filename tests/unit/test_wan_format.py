@@ -140,9 +140,10 @@ def test_template_refuses_a_source_seq_beyond_u64(source_seq: int) -> None:
         PayloadTemplate("t", b"k").payload(b"v", 0, source_seq)
 
 
-def test_version_2_is_written_and_version_1_still_read() -> None:
+def test_version_3_is_written_and_versions_1_and_2_still_read() -> None:
     record = rec(1)
-    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 2
+    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 3
+    assert decode_batch(_raw(_body([(1, encode_payload(record))]), version=2)).records == (record,)
     v1 = _raw(_body([(1, encode_payload(record))]), version=1)
     assert decode_batch(v1).records == (record,)
     seq_payload = PayloadTemplate("t", b"k").payload(b"v", 0, 5)
@@ -203,7 +204,7 @@ BAD_BATCHES: list[tuple[bytes, str]] = [
     (b"", "at least 9 bytes"),
     (b"FLB\x01\x00", "at least 9 bytes"),
     (_raw(_body([(1, GOOD)]), magic=b"XYZ"), "not a fleetlink batch"),
-    (_raw(_body([(1, GOOD)]), version=3), "unsupported batch version 3"),
+    (_raw(_body([(1, GOOD)]), version=4), "unsupported batch version 4"),
     (_raw(_body([(1, GOOD)]), version=0), "unsupported batch version 0"),
     (_raw(_body([(1, GOOD)]), codec=7), "unknown codec 7"),
     (_raw(_body([(1, GOOD)]), size=10), "header says 10"),
@@ -255,7 +256,33 @@ ACKS: list[Ack] = [
         failures=(RecordFailure(seq=1, reason="message too large: 2 MB", dead_lettered=True),)),
     Ack(edge_id="e", stream="memory", first_seq=7, last_seq=9, status="error", detail="Kafka unavailable",
         failures=(RecordFailure(seq=8, reason="timed out", dead_lettered=False),)),
+    Ack(edge_id="e", stream="durable", first_seq=3, last_seq=4, status="need_schemas",
+        missing_schemas=(FP, FP2), detail="send the batch again with these schemas"),
 ]
+
+
+def test_a_batch_lists_left_out_schemas_by_fingerprint_alone() -> None:
+    schema = '{"type": "record", "name": "Imu", "fields": []}' * 20
+    records = (rec(1), rec(2))
+    full = batch(records, schemas={FP: schema})
+    lean = Batch(site=full.site, edge_id=full.edge_id, stream=full.stream, first_seq=1, records=records,
+                 elided=frozenset({FP}))
+    decoded = decode_batch(encode_batch(lean, codec="none"))
+    assert (decoded.schemas, decoded.elided) == ({}, frozenset({FP}))
+    assert len(encode_batch(full, codec="none")) - len(encode_batch(lean, codec="none")) == len(schema)
+    with pytest.raises(WireError, match="both carried and elided"):
+        encode_batch(Batch(site="s", edge_id="e", stream="d", first_seq=1, records=records,
+                           schemas={FP: schema}, elided=frozenset({FP})))
+    # before version 3 the marker is a length like any other (here: far past the end)
+    def body(entries: int) -> bytes:
+        head = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QH", 1, entries)
+        return head + (FP + b"\xff\xff\xff\xff") * entries + _body([(1, encode_payload(rec(1)))])[19:]
+
+    assert decode_batch(_raw(body(1), version=3)).elided == frozenset({FP})
+    with pytest.raises(WireError, match="truncated"):
+        decode_batch(_raw(body(1), version=2))
+    with pytest.raises(WireError, match="listed twice"):
+        decode_batch(_raw(body(2), version=3))
 
 
 @pytest.mark.parametrize("ack", ACKS)
@@ -269,6 +296,12 @@ def test_ack_invariants() -> None:
             failures=(RecordFailure(seq=1, reason="x", dead_lettered=False),))
     with pytest.raises(WireError, match="empty"):
         Ack(edge_id="e", stream="d", first_seq=3, last_seq=2, status="ok")
+    with pytest.raises(WireError, match="missing schemas"):
+        Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="need_schemas")
+    with pytest.raises(WireError, match="missing schemas"):
+        Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="ok", missing_schemas=(FP,))
+    with pytest.raises(WireError, match="8 bytes"):
+        Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="need_schemas", missing_schemas=(b"x",))
     good = encode_ack(ACKS[0])
     with pytest.raises(WireError, match="not a fleetlink ack"):
         decode_ack(b"XXX" + good[3:])
@@ -327,8 +360,10 @@ def batches(draw: st.DrawFn) -> Batch:
     records = tuple(Record(r.kafka_topic, r.key, r.value, r.headers, r.timestamp_ms, s, r.raw_value)
                     for r, s in zip(rs, seqs, strict=True))
     schemas = draw(st.dictionaries(st.binary(min_size=8, max_size=8), texts, max_size=3))
+    elided = draw(st.frozensets(st.binary(min_size=8, max_size=8).filter(lambda fp: fp not in schemas),
+                                max_size=3))
     return Batch(site=draw(texts), edge_id=draw(texts), stream=draw(texts), first_seq=seqs[0],
-                 records=records, schemas=schemas)
+                 records=records, schemas=schemas, elided=elided)
 
 
 @settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])

@@ -62,6 +62,7 @@ def test_the_example_declares_what_the_warehouse_needs() -> None:
         assert [(b.kafka_topic, b.key) for b in bound] == [(kafka, "tb4_01"), (kafka, "tb4_02")]
     (odom,) = table.match("/tb4_01/odom")
     assert [s.type for s in odom.stages] == ["aggregate"]
+    assert odom.linger_s == 1.0  # an aggregate's records may wait one window for company
     (imu,) = table.match("/tb4_01/imu")
     assert imu.delivery == "best_effort"
     (tasks,) = table.match("/tb4_01/task_status")
@@ -79,6 +80,27 @@ def test_minimal_config_and_defaults(tmp_path: Path) -> None:
     assert config.wan.codec == "zstd"
     assert config.admin is None
     assert config.mapping_table().list() == []
+
+
+AGGREGATE = "{type: aggregate, window: %s, fields: [x], ops: [mean]}"
+
+
+@pytest.mark.parametrize(("extra", "expected_s"), [
+    ("", None),  # the edge's wan.linger
+    ("        linger: 250ms\n", 0.25),
+    (f"        stages: [{AGGREGATE % '2s'}]\n", 2.0),
+    (f"        stages: [{AGGREGATE % '2s'}]\n        linger: 0s\n", 0.0),
+    (f"        stages: [{AGGREGATE % '1m'}]\n", 5.0),
+    ("        stages: [{type: aggregate, window: 10s, hop: 3s, fields: [x], ops: [max]}]\n", 3.0),
+])
+def test_mapping_linger_defaults_to_the_aggregate_period(
+    tmp_path: Path, extra: str, expected_s: float | None
+) -> None:
+    config = load(tmp_path, BASE + extra)
+    table = config.mapping_table()
+    table.add_robot("tb4_01")
+    (bound,) = table.match("/tb4_01/ir_intensity")
+    assert bound.linger_s == expected_s
 
 
 def test_default_edge_id_is_a_key_chunk(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -139,6 +161,8 @@ BAD: list[tuple[str, str, str]] = [
     ("bad registration topic", BASE + "registration: {topic: register}\n",
      f"registration.topic (line 10): {VE}'register' is not an absolute ROS topic name"),
     ("bad distro", BASE + "ros: {distro: foxy}\n", "ros.distro (line 10): Input should be 'humble'"),
+    ("linger too long", BASE + "        linger: 2m\n",
+     f"{M0}.linger (line 10): {VE}linger must be between 0s and 60s"),
 ]
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from functools import cache
 
+import pytest
+
 from edge.errors import SpoolFullError
 from edge.mapping import MappingSpec, MappingTable
 from edge.runtime.intake import Intake
@@ -38,6 +40,8 @@ def maker() -> RecordMaker:
     table = MappingTable([], [
         MappingSpec(name="chat", source="/{robot}/chat", topic="fleet.chat"),
         MappingSpec(name="fast", source="/{robot}/fast", topic="fleet.fast", delivery="best_effort"),
+        MappingSpec(name="slow", source="/{robot}/slow", topic="fleet.slow", linger_ns=1_500_000_000),
+        MappingSpec(name="slower", source="/{robot}/slower", topic="fleet.slower", linger_ns=3_000_000_000),
     ])
     return RecordMaker(site="s", edge_id="e", match=table.match, types=codecs(), dead_letter_topic="dlq")
 
@@ -71,7 +75,7 @@ def test_order_and_delivery_classes() -> None:
     durable, memory = MemoryBuffer(stream="durable", first_seq=1), MemoryBuffer(first_seq=1)
     woken: list[str] = []
     processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": memory},
-                          on_appended=woken.append)
+                          on_appended=lambda delivery, _linger: woken.append(delivery))
     event = Outgoing.of("at_least_once", Record(kafka_topic="fleetlink.robots", key=b"r9", value=b"ev",
                                                 raw_value=True))
     items: list[Item] = [
@@ -93,6 +97,24 @@ def test_order_and_delivery_classes() -> None:
     assert stats["processor"] == {"samples": 4, "records": 5, "appended": 5, "spool_dropped": 0,
                                   "spool_refused": 0, "errors": 0}
     assert set(woken) == {"at_least_once", "best_effort"}
+
+
+@pytest.mark.parametrize(("topics", "expected"), [
+    (["/r1/slow"], 1.5),
+    (["/r1/slower", "/r1/slow", "/r1/slower"], 1.5),
+    (["/r1/slow", "/r1/chat"], None),  # a record with the stream's default: the default applies
+    (["/r1/chat"], None),
+])
+def test_each_append_says_how_long_its_records_may_wait(topics: list[str], expected: float | None) -> None:
+    intake: Intake[Item] = Intake()
+    durable = MemoryBuffer(stream="durable", first_seq=1)
+    lingers: list[tuple[str, float | None]] = []
+    processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": MemoryBuffer()},
+                          on_appended=lambda delivery, linger: lingers.append((delivery, linger)))
+    intake.offer_many([(string_sample(topic, "x", n + 1), 1) for n, topic in enumerate(topics)])
+    with processor:
+        wait_until(lambda: processor.stats.appended == len(topics), 5)
+    assert lingers == [("at_least_once", expected)]
 
 
 def test_a_full_spool_refuses_and_counts() -> None:

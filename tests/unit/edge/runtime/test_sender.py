@@ -268,3 +268,97 @@ def test_stop_drains_what_can_be_sent() -> None:
     sender.stop(timeout_s=5.0)  # the linger would hold the partial batch for 10 s; stopping sends it now
     assert buffer.stats().depth == 0
     assert [len(b.records) for b in uplink.batches] == [1, 30]
+
+
+def need_schemas(batch: Batch, missing: frozenset[bytes]) -> Answer:
+    return encode_ack(Ack(batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, "need_schemas",
+                          missing_schemas=tuple(sorted(missing)))), None
+
+
+def send_and_drain(sender: WanSender, buffer: MemoryBuffer, payloads: list[bytes]) -> None:
+    buffer.append_many(payloads)
+    sender.wake()
+    wait_until(drained(buffer), 5, message="buffer drained")
+
+
+def test_a_schema_travels_until_a_batch_carrying_it_is_acknowledged_then_its_fingerprint_alone() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
+    with running(uplink, buffer) as sender:
+        send_and_drain(sender, buffer, [payload(i) for i in range(3)])
+        send_and_drain(sender, buffer, [payload(i) for i in range(3)] + [payload(9, SCHEMA_B.fingerprint)])
+        send_and_drain(sender, buffer, [payload(9, SCHEMA_B.fingerprint)])
+    assert [(set(b.schemas), set(b.elided)) for b in uplink.batches] == [
+        ({SCHEMA_A.fingerprint}, set()),
+        ({SCHEMA_B.fingerprint}, {SCHEMA_A.fingerprint}),
+        (set(), {SCHEMA_B.fingerprint}),
+    ]
+    assert sender.stats.schemas_elided == 2
+
+
+def test_an_uplink_without_a_left_out_schema_gets_the_batch_again_at_once_with_it() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    learned: set[bytes] = set()  # the texts the uplink has read
+
+    def policy(batch: Batch, attempt: int) -> Answer:
+        learned.update(batch.schemas)
+        if batch.elided - learned:
+            return need_schemas(batch, batch.elided - learned)
+        return ok(batch)
+
+    uplink = ScriptedUplink(policy)
+    slow_retry = SenderOptions(batch_max_records=10, linger_s=0.0, max_in_flight=4, backoff_min_s=30.0,
+                               backoff_max_s=30.0, codec="zlib")
+    with running(uplink, buffer, slow_retry) as sender:
+        send_and_drain(sender, buffer, [payload(1)])
+        learned.clear()  # the uplink restarted
+        send_and_drain(sender, buffer, [payload(2)])  # well within the 30 s backoff: none was used
+        send_and_drain(sender, buffer, [payload(3)])
+    assert [(b.first_seq, set(b.schemas), set(b.elided)) for b in uplink.batches] == [
+        (1, {SCHEMA_A.fingerprint}, set()),
+        (2, set(), {SCHEMA_A.fingerprint}),  # refused: nothing produced
+        (2, {SCHEMA_A.fingerprint}, set()),  # the same records, with the text
+        (3, set(), {SCHEMA_A.fingerprint}),
+    ]
+    assert uplink.delivered_seqs() == [1, 2, 2, 3]
+    stats = sender.stats
+    assert (stats.schema_requests, stats.batches_retried, stats.outages, stats.records_acked) == (1, 0, 0, 3)
+
+
+def test_a_request_for_a_schema_the_batch_carried_is_a_failure_retried_with_backoff() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+
+    def policy(batch: Batch, attempt: int) -> Answer:
+        if attempt == 0:
+            return encode_ack(Ack(batch.edge_id, batch.stream, batch.first_seq, batch.last_seq,
+                                  "need_schemas", missing_schemas=(SCHEMA_A.fingerprint,))), None
+        return ok(batch)
+
+    uplink = ScriptedUplink(policy)
+    with running(uplink, buffer) as sender:
+        send_and_drain(sender, buffer, [payload(1)])
+    assert [set(b.schemas) for b in uplink.batches] == [{SCHEMA_A.fingerprint}] * 2
+    assert "did not leave out" in sender.last_error
+    assert (sender.stats.batches_retried, sender.stats.schema_requests) == (1, 0)
+
+
+def test_records_may_bring_their_own_linger_and_the_shortest_waiting_one_counts() -> None:
+    buffer = MemoryBuffer(first_seq=1)
+    uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
+    options = SenderOptions(batch_max_records=10, linger_s=0.0, backoff_min_s=0.001, backoff_max_s=0.01)
+    sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=options).start()
+    try:
+        buffer.append(payload(0))
+        sender.pump()
+        wait_until(drained(buffer), 5)
+        for i in range(1, 4):  # e.g. window records of an aggregate mapping: they may wait 30 s
+            buffer.append(payload(i))
+            sender.pump(30.0)
+        wait_until(lambda: sender.snapshot()["in_flight"] == 0, 5)
+        assert len(uplink.batches) == 1
+        buffer.append(payload(4))
+        sender.pump(None)  # a record with the stream's linger (0 s): everything waiting leaves now
+        wait_until(drained(buffer), 5)
+    finally:
+        sender.stop(timeout_s=5.0)
+    assert [len(b.records) for b in uplink.batches] == [1, 4]
