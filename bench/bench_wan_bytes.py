@@ -13,8 +13,10 @@ both ways. Every mode has its own robot, routers and relay, and all modes run at
 - ds5:         the same at the rates of deploy/zenoh/edge-router.json5 (imu 5, odom 5, fix 1 Hz);
 - fl-raw:      the edge agent maps the three topics unchanged to Kafka through the uplink
                (at-least-once spool, zstd batches, acknowledgements), default WAN settings;
-- fl-agg:      the edge agent aggregates each topic per robot into 1 s windows; default settings;
-- fl-agg-10s:  fl-agg with ``wan.linger: 10s`` (batches wait up to 10 s to fill: more latency).
+- fl-agg:      the edge agent aggregates each topic per robot into 1 s windows; default settings
+               (an aggregate mapping's records may wait one window, 1 s, to share a batch);
+- fl-agg-20ms: fl-agg with the mappings' ``linger: 20ms`` (the edge's default for other mappings);
+- fl-agg-10s:  fl-agg with the mappings' ``linger: 10s`` (batches wait up to 10 s: more latency).
 
 Each message carries its recorded time as its rmw_zenoh source timestamp (the aggregate windows
 follow source time). ``--speed`` replays faster and scales the wall-clock settings (downsampling
@@ -75,8 +77,10 @@ AGGREGATES: dict[str, dict[str, Any]] = {
 RULE_KEYS = {"imu": "*/**/imu/**", "odom": "*/**/odom/**", "fix": "*/**/fix/**"}
 RATES_HZ: dict[str, dict[str, float]] = {"ds1": dict.fromkeys(RULE_KEYS, 1.0),
                                          "ds5": {"imu": 5.0, "odom": 5.0, "fix": 1.0}}  # edge-router.json5
-LINGER_S = {"fl-raw": 0.02, "fl-agg": 0.02, "fl-agg-10s": 10.0}  # 20 ms: edge.config.WanSection default
-MODES = ("raw", "ds1", "ds5", "fl-raw", "fl-agg", "fl-agg-10s")
+LINGER_S = 0.02  # edge.config.WanSection's default
+MAPPING_LINGER_S = {"fl-raw": None, "fl-agg": 1.0, "fl-agg-20ms": 0.02, "fl-agg-10s": 10.0}
+"""A mapping's linger (None: the edge's wan.linger; 1 s: what an aggregate mapping gets by default)."""
+MODES = ("raw", "ds1", "ds5", "fl-raw", "fl-agg", "fl-agg-20ms", "fl-agg-10s")
 MARKER = "/bench_end"
 NS = 1_000_000_000
 Message = tuple[int, str, bytes]  # (recorded ns, bag topic, CDR)
@@ -266,12 +270,15 @@ def schema_bytes(spool: Path, *, aggregate: bool) -> str:
 def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: float, *,
                   bootstrap: str, registry: str, work: Path) -> Result:
     run, aggregate = uuid.uuid4().hex[:8], mode.startswith("fl-agg")
+    linger = MAPPING_LINGER_S[mode]
     topics = {t: f"bench.wan.{run}.{SHORT[t]}{'_1s' if aggregate else ''}" for t in TYPES}
     mappings: list[dict[str, Any]] = []
     for t, kind in TYPES.items():
         mapping: dict[str, Any] = {"name": SHORT[t], "from": f"/{{robot}}{t}", "to": topics[t], "type": kind}
         if aggregate:
             mapping["stages"] = [{"type": "aggregate", "window": "1s", **AGGREGATES[t]}]
+        if linger is not None and (mode != "fl-agg" or speed != 1):  # fl-agg: the default, unless scaled
+            mapping["linger"] = us(linger / speed)
         mappings.append(mapping)
     side_topics = {"dead_letter": f"bench.wan.{run}.dead-letter", "registrations": f"bench.wan.{run}.robots"}
     spool = work / run
@@ -285,7 +292,7 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
             "zenoh": {"mode": "client", "connect": [wan.site.endpoint]},
             "robot_types": {"husky": {"match": "/husky_*", "mappings": mappings}},
             "spool": {"dir": str(spool)},
-            "wan": {"linger": f"{LINGER_S[mode] / speed * 1e6:.0f}us"},
+            "wan": {"linger": us(LINGER_S / speed)},
             "topics": side_topics,
         })))
 
@@ -307,7 +314,8 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
             buffer = durable()["buffer"]
             return bool(buffer["appended"] - base["buffer"]["appended"] >= expected and buffer["depth"] == 0)
 
-        wait_for(delivered, 60 + LINGER_S[mode] / speed, f"{mode}: {expected} records spooled and acked")
+        wait_for(delivered, 60 + (linger or LINGER_S) / speed,
+                 f"{mode}: {expected} records spooled and acked")
         up, down = wan.split()
         end = durable()
         crossed = kafka_records(bootstrap, list(topics.values()))
@@ -322,6 +330,10 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
                   f"payload, {(up - up0) / n:.0f} B up, {(down - down0) / n:.0f} B down (ack); "
                   f"schemas JSON->zstd B: {schemas}; "
                   f"replay late by {late * 1000:.0f} ms at worst")
+
+
+def us(seconds: float) -> str:
+    return f"{seconds * 1e6:.0f}us"
 
 
 def table(results: Sequence[Result]) -> str:
