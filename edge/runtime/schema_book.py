@@ -1,10 +1,11 @@
 """Fingerprint -> schema JSON for every value the edge ever spooled, kept on disk.
 
 A batch carries the schema of each fingerprint its records use (until an uplink acknowledged
-it), so any stateless uplink can register it. Records outlive the process that made them (the spool survives restarts), so the
-book is durable too: a schema is written (fsynced, then renamed into place) *before* the first
-record using it is appended, one ``<fingerprint hex>.json`` file per schema, and read back at
-start. A file whose content does not hash to its name is skipped and counted.
+it), so any stateless uplink can register it. Records outlive the process that made them (the
+spool survives restarts), so the book is durable too: a schema is written (fsynced, then
+renamed into place) *before* the first record using it is appended, one ``<fingerprint
+hex>.json`` file per schema, and read back at start. A file whose content does not hash to its
+name is skipped and counted.
 """
 
 from __future__ import annotations

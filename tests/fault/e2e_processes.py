@@ -209,6 +209,12 @@ def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s
             test_bed.stop_all()
 
 
+def generate(b: Bed, gen: Generator, records: int, timeout: float = 30.0) -> None:
+    """Let the generator publish ``records`` more."""
+    target = gen.sent + records
+    b.wait(lambda: gen.sent >= target, timeout, f"{records} more records published")
+
+
 class Generator:
     """Robot ``tb4_01`` publishing ``"0"``, ``"1"``, ... on ``/tb4_01/chatter`` at ``rate`` Hz."""
 

@@ -16,28 +16,18 @@ Row 2  Kafka crash:     SIGKILL the broker mid-stream, restart it on the same da
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from fleetlink.localstack.artifacts import fetch_all
-from fleetlink.localstack.java import KAFKA_MIN_JAVA, find_java
-from fleetlink.localstack.kafka import KafkaBroker, KafkaSettings
-from fleetlink.localstack.process import free_port
-from tests.fault.e2e_processes import BATCH, Bed, Generator, bed, count, read_all
+from fleetlink.localstack.kafka import KafkaBroker
+from tests.fault.e2e_processes import BATCH, Generator, bed, count, generate, read_all
 from tests.integration.e2e_stack import TopicReader
 
 
 @pytest.fixture
 def reader(kafka_bootstrap: str, schema_registry_url: str) -> TopicReader:
     return TopicReader(kafka_bootstrap, schema_registry_url)
-
-
-def generate(b: Bed, gen: Generator, records: int, timeout: float = 30.0) -> None:
-    """Let the generator publish ``records`` more."""
-    target = gen.sent + records
-    b.wait(lambda: gen.sent >= target, timeout, f"{records} more records published")
 
 
 def test_baseline_then_graceful_stop_and_restart(kafka_bootstrap: str, schema_registry_url: str,
@@ -178,20 +168,6 @@ def test_edge_killed_with_unacknowledged_records(kafka_bootstrap: str, schema_re
     assert result.lost == [], str(result)
     assert result.unexpected == 0
     assert result.duplicated <= BATCH, str(result)
-
-
-@pytest.fixture
-def own_kafka(tmp_path: Path) -> Iterator[KafkaBroker]:
-    """A broker of this test's own, to kill: same data directory across restarts."""
-    artifacts = fetch_all()
-    broker = KafkaBroker(KafkaSettings(port=free_port(), controller_port=free_port(),
-                                       data_dir=tmp_path / "kafka"),
-                         artifacts.kafka_classpath, find_java(KAFKA_MIN_JAVA, "Apache Kafka 4"))
-    broker.start(90)
-    try:
-        yield broker
-    finally:
-        broker.stop()
 
 
 def test_kafka_killed_mid_stream(own_kafka: KafkaBroker, schema_registry_url: str, tmp_path: Path) -> None:
