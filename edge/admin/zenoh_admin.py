@@ -8,7 +8,6 @@ key. With an admin token configured, a query must carry ``Bearer <token>`` as it
 from __future__ import annotations
 
 import logging
-from concurrent.futures import ThreadPoolExecutor
 from types import TracebackType
 from typing import Any
 
@@ -19,6 +18,7 @@ from edge.admin.auth import authorized
 from edge.admin.listing import declared
 from edge.admin.service import AdminService
 from edge.admin.space import Target, envelope, execute, parse_body, targets
+from fleetlink.pooled_queryable import PooledQueryable
 from fleetlink.wan.keys import admin_key
 
 log = logging.getLogger(__name__)
@@ -33,25 +33,17 @@ class ZenohAdmin:
         self.edge_id = edge_id
         self.token = token
         self.key = admin_key(service.site)
-        self._queryable: Any = None
-        self._pool: ThreadPoolExecutor | None = None
+        self._queryable = PooledQueryable(self._answer, workers=2, name="edge-admin-zenoh")
         self.answered = 0
 
     def start(self) -> ZenohAdmin:
-        if self._queryable is not None:
-            return self
-        self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="edge-admin-zenoh")
-        self._queryable = self.session.declare_queryable(self.key, self._on_query)
-        log.info("admin queries served on %s", self.key)
+        if not self._queryable.running:
+            self._queryable.start(self.session, self.key)
+            log.info("admin queries served on %s", self.key)
         return self
 
     def stop(self) -> None:
-        if self._queryable is not None:
-            self._queryable.undeclare()
-            self._queryable = None
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
+        self._queryable.stop()
 
     def __enter__(self) -> ZenohAdmin:
         return self.start()
@@ -60,13 +52,6 @@ class ZenohAdmin:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
-
-    def _on_query(self, query: zenoh.Query) -> None:
-        pool = self._pool
-        if pool is None:
-            query.drop()
-            return
-        pool.submit(self._answer, query)
 
     def _answer(self, query: zenoh.Query) -> None:
         try:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from types import TracebackType
 from typing import Any
 
@@ -33,6 +32,7 @@ from fleetlink.console.app import create_console_app
 from fleetlink.console.local import LocalSite
 from fleetlink.console.remote import status_key
 from fleetlink.console.status import site_status
+from fleetlink.pooled_queryable import PooledQueryable
 
 log = logging.getLogger(__name__)
 
@@ -59,8 +59,7 @@ class EdgeConsole:
         self._clock = clock
         self.site = LocalSite(service, edge_id=edge_id, status=self.status)
         self.poll_interval_s = poll_interval_s
-        self._queryable: Any = None
-        self._pool: ThreadPoolExecutor | None = None
+        self._queryable = PooledQueryable(self._answer, workers=1, name="edge-console-status")
         self.answered = 0
 
     def status(self) -> dict[str, Any]:
@@ -75,19 +74,11 @@ class EdgeConsole:
 
     # -- the status key --------------------------------------------------------------------------
     def start(self, session: zenoh.Session) -> EdgeConsole:
-        if self._queryable is not None:
-            return self
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="edge-console-status")
-        self._queryable = session.declare_queryable(status_key(self.service.site), self._on_query)
+        self._queryable.start(session, status_key(self.service.site))
         return self
 
     def stop(self) -> None:
-        if self._queryable is not None:
-            self._queryable.undeclare()
-            self._queryable = None
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
+        self._queryable.stop()
 
     def __enter__(self) -> EdgeConsole:
         return self
@@ -96,13 +87,6 @@ class EdgeConsole:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
-
-    def _on_query(self, query: zenoh.Query) -> None:
-        pool = self._pool
-        if pool is None:
-            query.drop()
-            return
-        pool.submit(self._answer, query)
 
     def _answer(self, query: zenoh.Query) -> None:
         site = self.service.site

@@ -209,6 +209,29 @@ def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s
             test_bed.stop_all()
 
 
+@contextmanager
+def streaming(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s",
+              rate: float = 400.0) -> Iterator[tuple[Bed, Generator]]:
+    """A bed with the uplink and the edge started and the generator publishing."""
+    with bed(tmp, bootstrap, registry_url, ack_timeout=ack_timeout) as b:
+        b.start_uplink()
+        b.start_edge()
+        gen = Generator(b.site.endpoint, rate)
+        try:
+            gen.wait_subscribed()
+            gen.start()
+            yield b, gen
+        finally:
+            gen.close()
+
+
+def tally(reader: TopicReader, b: Bed, sent: int, what: str = "") -> Count:
+    """Count what reached the bed's topic (and print it, with ``what`` happened)."""
+    result = count(reader, read_all(reader, b.topic, sent), sent)
+    print(f"\n[{b.site_name}] {sent} sent{what}: {result}")
+    return result
+
+
 def generate(b: Bed, gen: Generator, records: int, timeout: float = 30.0) -> None:
     """Let the generator publish ``records`` more."""
     target = gen.sent + records

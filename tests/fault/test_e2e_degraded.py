@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from fleetlink.localstack.kafka import KafkaBroker
-from tests.fault.e2e_processes import BATCH, Bed, Count, Generator, bed, count, generate, read_all
+from tests.fault.e2e_processes import BATCH, Bed, Count, generate, streaming, tally
 from tests.integration.e2e_stack import TopicReader
 
 
@@ -38,69 +38,51 @@ def check(result: Count, retried: int) -> None:
 def test_kafka_frozen_longer_than_the_ack_timeout(own_kafka: KafkaBroker, schema_registry_url: str,
                                                   tmp_path: Path) -> None:
     reader = TopicReader(own_kafka.bootstrap, schema_registry_url)
-    with bed(tmp_path, own_kafka.bootstrap, schema_registry_url, ack_timeout="2s") as b:
-        b.start_uplink()
-        b.start_edge()
-        gen = Generator(b.site.endpoint)
+    with streaming(tmp_path, own_kafka.bootstrap, schema_registry_url, ack_timeout="2s") as (b, gen):
+        generate(b, gen, 600)
+        b.wait(lambda: b.durable().get("buffer", {}).get("acked", 0) > 0, 20, "records reach Kafka")
+        before = sender(b).get("batches_retried", 0)  # e.g. a first batch before the uplink was up
+        own_kafka.process.signal(signal.SIGSTOP)
+        frozen_at = time.monotonic()
         try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 600)
-            b.wait(lambda: b.durable().get("buffer", {}).get("acked", 0) > 0, 20, "records reach Kafka")
-            before = sender(b).get("batches_retried", 0)  # e.g. a first batch before the uplink was up
-            own_kafka.process.signal(signal.SIGSTOP)
-            frozen_at = time.monotonic()
-            try:
-                b.wait(lambda: sender(b).get("batches_retried", 0) > before, 15,
-                       "the edge times out on the frozen broker and re-sends")
-                generate(b, gen, 800)
-                assert b.durable()["buffer"]["depth"] >= 400  # the edge keeps spooling
-            finally:
-                own_kafka.process.signal(signal.SIGCONT)
-            frozen_s = time.monotonic() - frozen_at
-            generate(b, gen, 300)
-            sent = gen.pause()
-            b.wait_drained(sent, 60)
-            retried = sender(b)["batches_retried"]
+            b.wait(lambda: sender(b).get("batches_retried", 0) > before, 15,
+                   "the edge times out on the frozen broker and re-sends")
+            generate(b, gen, 800)
+            assert b.durable()["buffer"]["depth"] >= 400  # the edge keeps spooling
         finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent, Kafka frozen {frozen_s:.1f} s, {retried} retried: {result}")
-    check(result, retried)
+            own_kafka.process.signal(signal.SIGCONT)
+        frozen_s = time.monotonic() - frozen_at
+        generate(b, gen, 300)
+        sent = gen.pause()
+        b.wait_drained(sent, 60)
+        retried = sender(b)["batches_retried"]
+    check(tally(reader, b, sent, f", Kafka frozen {frozen_s:.1f} s, {retried} retried"), retried)
     # a retry waits for its ack timeout (2 s) or its backoff: a frozen broker is not hammered
     assert retried <= math.ceil(frozen_s / 2.0) + 3
 
 
 def test_flapping_wan(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
     reader = TopicReader(kafka_bootstrap, schema_registry_url)
-    with bed(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="1s") as b:
-        b.start_uplink()
-        edge = b.start_edge()
-        gen = Generator(b.site.endpoint)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 400)
-            began = time.monotonic()
-            for _ in range(4):  # 1.5 s cut, 1.5 s up, four times
-                b.relay.set_mode("blackhole")
-                time.sleep(1.5)
-                b.relay.set_mode("pass")
-                time.sleep(1.5)
-            flapped_s = time.monotonic() - began
-            generate(b, gen, 200)
-            sent = gen.pause()
-            b.wait_drained(sent, 60)
-            stats = sender(b)
-        finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="1s") as (b, gen):
+        generate(b, gen, 400)
+        began = time.monotonic()
+        for _ in range(4):  # 1.5 s cut, 1.5 s up, four times
+            b.relay.set_mode("blackhole")
+            time.sleep(1.5)
+            b.relay.set_mode("pass")
+            time.sleep(1.5)
+        flapped_s = time.monotonic() - began
+        generate(b, gen, 200)
+        sent = gen.pause()
+        b.wait_drained(sent, 60)
+        stats = sender(b)
+        assert b.edge is not None
+        warnings = b.edge.log_lines("batch not acknowledged")
     retried, outages = stats["batches_retried"], stats["outages"]
-    print(f"\n[{b.site_name}] {sent} sent over {flapped_s:.1f} s of flapping, {outages} outage(s), "
-          f"{retried} retried: {result}")
-    check(result, retried)
+    what = f" over {flapped_s:.1f} s of flapping, {outages} outage(s), {retried} retried"
+    check(tally(reader, b, sent, what), retried)
     assert 1 <= outages <= 8  # each cut is one outage (a heal may break Zenoh's stream once more)
-    assert edge.log_lines("batch not acknowledged") == outages  # one warning per outage, no storm
+    assert warnings == outages  # one warning per outage, no storm
     # backoff between attempts (100 ms doubling to 1 s) and the ack timeout bound the retries
     assert retried <= flapped_s / 0.1
 
@@ -109,27 +91,18 @@ def test_slow_wan_backlog_grows_in_the_spool_not_in_front_of_zenoh(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
     reader = TopicReader(kafka_bootstrap, schema_registry_url)
-    with bed(tmp_path, kafka_bootstrap, schema_registry_url) as b:
-        b.start_uplink()
-        b.start_edge()
-        gen = Generator(b.site.endpoint, rate=600.0)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 300)
-            b.relay.set_mode("delay", 0.2)  # ~0.4 s a round trip: a batch of 100 can't keep up with 600/s
-            generate(b, gen, 2400)
-            backlog = b.durable()["buffer"]["depth"]
-            assert backlog >= 500, f"the backlog should wait in the spool ({backlog} records there)"
-            b.relay.set_mode("pass")
-            sent = gen.pause()
-            b.wait_drained(sent, 60)
-            stats = b.stats()
-        finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent, {backlog} in the spool at the slowest: {result}")
-    check(result, stats["streams"]["durable"]["sender"]["batches_retried"])
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url, rate=600.0) as (b, gen):
+        generate(b, gen, 300)
+        b.relay.set_mode("delay", 0.2)  # ~0.4 s a round trip: a batch of 100 can't keep up with 600/s
+        generate(b, gen, 2400)
+        backlog = b.durable()["buffer"]["depth"]
+        assert backlog >= 500, f"the backlog should wait in the spool ({backlog} records there)"
+        b.relay.set_mode("pass")
+        sent = gen.pause()
+        b.wait_drained(sent, 60)
+        stats = b.stats()
+    check(tally(reader, b, sent, f", {backlog} in the spool at the slowest"),
+          stats["streams"]["durable"]["sender"]["batches_retried"])
     assert stats["intake"]["dropped"] == 0
     chatter = stats["subscriptions"]["/tb4_01/chatter"]
     assert (chatter["missing"], chatter["received"]) == (0, sent)

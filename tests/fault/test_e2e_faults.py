@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from fleetlink.localstack.kafka import KafkaBroker
-from tests.fault.e2e_processes import BATCH, Generator, bed, count, generate, read_all
+from tests.fault.e2e_processes import BATCH, Count, generate, streaming, tally
 from tests.integration.e2e_stack import TopicReader
 
 
@@ -32,76 +32,63 @@ def reader(kafka_bootstrap: str, schema_registry_url: str) -> TopicReader:
 
 def test_baseline_then_graceful_stop_and_restart(kafka_bootstrap: str, schema_registry_url: str,
                                                  reader: TopicReader, tmp_path: Path) -> None:
-    with bed(tmp_path, kafka_bootstrap, schema_registry_url) as b:
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url) as (b, gen):
+        generate(b, gen, 1500)
+        first = gen.pause()
+        b.wait_drained(first, 30)
+        assert b.durable()["buffer"]["depth"] == 0
+
+        assert b.edge is not None
+        assert b.uplink is not None
+        edge_code, edge_s = b.edge.terminate(15)
+        uplink_code, uplink_s = b.uplink.terminate(15)
+        assert (edge_code, uplink_code) == (0, 0)
+        assert edge_s < 10
+        assert uplink_s < 10
+        assert b.stats()["running"] is False  # the last stats were written after the clean stop
+
         b.start_uplink()
-        edge = b.start_edge()
-        gen = Generator(b.site.endpoint)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 1500)
-            first = gen.pause()
-            b.wait_drained(first, 30)
-            assert b.durable()["buffer"]["depth"] == 0
-
-            assert b.uplink is not None
-            edge_code, edge_s = edge.terminate(15)
-            uplink_code, uplink_s = b.uplink.terminate(15)
-            assert (edge_code, uplink_code) == (0, 0)
-            assert edge_s < 10
-            assert uplink_s < 10
-            assert b.stats()["running"] is False  # the last stats were written after the clean stop
-
-            b.start_uplink()
-            b.start_edge()
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 1000)
-            sent = gen.pause()
-            b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= sent - first
-                   and b.durable().get("buffer", {}).get("depth") == 0, 30, "second run drained")
-            resent = b.durable()["sender"]["records_sent"]
-            assert resent == sent - first + 1  # the new records and this run's registration event only
-        finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent: {result}")
+        b.start_edge()
+        gen.wait_subscribed()
+        gen.start()
+        generate(b, gen, 1000)
+        sent = gen.pause()
+        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= sent - first
+               and b.durable().get("buffer", {}).get("depth") == 0, 30, "second run drained")
+        resent = b.durable()["sender"]["records_sent"]
+        assert resent == sent - first + 1  # the new records and this run's registration event only
+    result = tally(reader, b, sent)
     summary = (result.lost, result.duplicated, result.unexpected, result.out_of_order)
     assert summary == ([], 0, 0, 0), str(result)
 
 
 def test_wan_cut_hang_style(kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader,
                             tmp_path: Path) -> None:
-    with bed(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as b:
-        b.start_uplink()
-        edge = b.start_edge()
-        gen = Generator(b.site.endpoint)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 400)
-            b.relay.set_mode("blackhole")
-            generate(b, gen, 800)
-            b.wait(lambda: b.durable().get("buffer", {}).get("depth", 0) >= 600, 10,
-                   "the spool grows while the WAN is cut")
-            generate(b, gen, 1200)  # about 5 s of cut in all
-            depth = b.durable()["buffer"]["depth"]
-            assert depth >= 1500
-            b.relay.set_mode("pass")
-            generate(b, gen, 200)
-            sent = gen.pause()
-            b.wait_drained(sent, 45)
-            # one warning when an outage starts, one line when it ends: no storm. The link may
-            # drop once more right after the heal (the bytes the relay swallowed break the
-            # stream Zenoh was using, so it reconnects): at most two outages.
-            outages = b.durable()["sender"]["outages"]
-            assert 1 <= outages <= 2
-            assert edge.log_lines("batch not acknowledged") == outages
-            assert edge.log_lines("acknowledges again") == outages
-        finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent: {result}")
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as (b, gen):
+        generate(b, gen, 400)
+        b.relay.set_mode("blackhole")
+        generate(b, gen, 800)
+        b.wait(lambda: b.durable().get("buffer", {}).get("depth", 0) >= 600, 10,
+               "the spool grows while the WAN is cut")
+        generate(b, gen, 1200)  # about 5 s of cut in all
+        depth = b.durable()["buffer"]["depth"]
+        assert depth >= 1500
+        b.relay.set_mode("pass")
+        generate(b, gen, 200)
+        sent = gen.pause()
+        b.wait_drained(sent, 45)
+        # one warning when an outage starts, one line when it ends: no storm. The link may
+        # drop once more right after the heal (the bytes the relay swallowed break the
+        # stream Zenoh was using, so it reconnects): at most two outages.
+        outages = b.durable()["sender"]["outages"]
+        assert 1 <= outages <= 2
+        assert b.edge is not None
+        assert b.edge.log_lines("batch not acknowledged") == outages
+        assert b.edge.log_lines("acknowledges again") == outages
+    within_window(tally(reader, b, sent))
+
+
+def within_window(result: Count) -> None:
     assert result.lost == [], str(result)
     assert result.unexpected == 0
     assert result.duplicated <= BATCH, str(result)
@@ -109,91 +96,58 @@ def test_wan_cut_hang_style(kafka_bootstrap: str, schema_registry_url: str, read
 
 def test_uplink_killed_mid_stream(kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader,
                                   tmp_path: Path) -> None:
-    with bed(tmp_path, kafka_bootstrap, schema_registry_url) as b:
-        uplink = b.start_uplink()
-        b.start_edge()
-        gen = Generator(b.site.endpoint)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 600)
-            uplink.kill()
-            generate(b, gen, 600)
-            b.wait(lambda: b.durable().get("sender", {}).get("batches_retried", 0) > 0, 10,
-                   "the edge noticed the uplink is gone")
-            b.start_uplink()
-            generate(b, gen, 400)
-            sent = gen.pause()
-            b.wait_drained(sent, 40)
-        finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent: {result}")
-    assert result.lost == [], str(result)
-    assert result.unexpected == 0
-    assert result.duplicated <= BATCH, str(result)
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url) as (b, gen):
+        generate(b, gen, 600)
+        assert b.uplink is not None
+        b.uplink.kill()
+        generate(b, gen, 600)
+        b.wait(lambda: b.durable().get("sender", {}).get("batches_retried", 0) > 0, 10,
+               "the edge noticed the uplink is gone")
+        b.start_uplink()
+        generate(b, gen, 400)
+        sent = gen.pause()
+        b.wait_drained(sent, 40)
+    within_window(tally(reader, b, sent))
 
 
 def test_edge_killed_with_unacknowledged_records(kafka_bootstrap: str, schema_registry_url: str,
                                                  reader: TopicReader, tmp_path: Path) -> None:
-    with bed(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as b:
-        b.start_uplink()
-        edge = b.start_edge()
-        gen = Generator(b.site.endpoint)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 500)
-            b.relay.set_mode("blackhole")  # nothing is acknowledged from here on
-            generate(b, gen, 1000)
-            spooled = gen.pause()
-            b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= spooled, 10, "all spooled")
-            unacked = b.durable()["buffer"]["depth"]
-            assert unacked >= 900
-            edge.kill()
-            b.relay.set_mode("pass")
-            b.start_edge()
-            b.wait(lambda: b.stats().get("running") and b.durable().get("buffer", {}).get("depth") == 0, 40,
-                   "the restarted edge sent what the crashed one left in the spool")
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 300)
-            sent = gen.pause()
-            b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= sent - spooled
-                   and b.durable().get("buffer", {}).get("depth") == 0, 30, "the new records drained")
-        finally:
-            gen.close()
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent: {result}")
-    assert result.lost == [], str(result)
-    assert result.unexpected == 0
-    assert result.duplicated <= BATCH, str(result)
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as (b, gen):
+        generate(b, gen, 500)
+        b.relay.set_mode("blackhole")  # nothing is acknowledged from here on
+        generate(b, gen, 1000)
+        spooled = gen.pause()
+        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= spooled, 10, "all spooled")
+        unacked = b.durable()["buffer"]["depth"]
+        assert unacked >= 900
+        assert b.edge is not None
+        b.edge.kill()
+        b.relay.set_mode("pass")
+        b.start_edge()
+        b.wait(lambda: b.stats().get("running") and b.durable().get("buffer", {}).get("depth") == 0, 40,
+               "the restarted edge sent what the crashed one left in the spool")
+        gen.wait_subscribed()
+        gen.start()
+        generate(b, gen, 300)
+        sent = gen.pause()
+        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= sent - spooled
+               and b.durable().get("buffer", {}).get("depth") == 0, 30, "the new records drained")
+    within_window(tally(reader, b, sent))
 
 
 def test_kafka_killed_mid_stream(own_kafka: KafkaBroker, schema_registry_url: str, tmp_path: Path) -> None:
     reader = TopicReader(own_kafka.bootstrap, schema_registry_url)
-    with bed(tmp_path, own_kafka.bootstrap, schema_registry_url, ack_timeout="40s") as b:
-        uplink = b.start_uplink()
-        b.start_edge()
-        gen = Generator(b.site.endpoint)
-        try:
-            gen.wait_subscribed()
-            gen.start()
-            generate(b, gen, 600)
-            b.wait(lambda: b.durable().get("buffer", {}).get("acked", 0) > 0, 20, "records reach Kafka")
-            own_kafka.process.kill()
-            generate(b, gen, 800)
-            assert b.durable()["buffer"]["depth"] >= 400  # the edge keeps spooling
-            own_kafka.start(60)
-            generate(b, gen, 300)
-            sent = gen.pause()
-            b.wait_drained(sent, 50)
-        finally:
-            gen.close()
-        warnings = uplink.log_lines("WARNING")
-    result = count(reader, read_all(reader, b.topic, sent), sent)
-    print(f"\n[{b.site_name}] {sent} sent: {result}")
-    assert result.lost == [], str(result)
-    assert result.unexpected == 0
-    assert result.duplicated <= BATCH, str(result)
+    with streaming(tmp_path, own_kafka.bootstrap, schema_registry_url, ack_timeout="40s") as (b, gen):
+        generate(b, gen, 600)
+        b.wait(lambda: b.durable().get("buffer", {}).get("acked", 0) > 0, 20, "records reach Kafka")
+        own_kafka.process.kill()
+        generate(b, gen, 800)
+        assert b.durable()["buffer"]["depth"] >= 400  # the edge keeps spooling
+        own_kafka.start(60)
+        generate(b, gen, 300)
+        sent = gen.pause()
+        b.wait_drained(sent, 50)
+        assert b.uplink is not None
+        warnings = b.uplink.log_lines("WARNING")
+    within_window(tally(reader, b, sent))
     assert warnings <= 30, f"{warnings} warning lines from the uplink for one Kafka outage"
