@@ -290,9 +290,15 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
             assert last is not None
             assert last <= sent + lease + 0.3  # ... and stopped when the lease ran out
             site.relay.set_mode("pass")
-            # at-least-once: a batch whose answer the cut swallowed comes again
-            wait_until(lambda: distinct(status.statuses(f"cut-{run}")) == ["delivered", "expired"],
-                       timeout=30, message="statuses reach Kafka after the heal")
+            # at-least-once: a batch whose answer the cut swallowed comes again. The bytes the
+            # relay swallowed broke the Zenoh stream of the WAN link, which may have to time out
+            # and reconnect first.
+            try:
+                wait_until(lambda: distinct(status.statuses(f"cut-{run}")) == ["delivered", "expired"],
+                           timeout=60, message="statuses reach Kafka after the heal")
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; in Kafka: {status.statuses(f'cut-{run}')}, still pending at "
+                                     f"the repeater: {rep.pending_statuses()}") from None
             assert leds.last("tb4_01") == last
 
 
