@@ -120,14 +120,20 @@ class BatchJob:
         produce = self._sink.produce_raw
         report = self._report
         heads: dict[tuple[str, bytes], bytes] = {}
+        unavailable: dict[tuple[str, bytes], str] = {}  # the registry failed once: not again per record
         for index, record in enumerate(records):
             topic, value = record.kafka_topic, record.value
             if not record.raw_value:
                 head = heads.get((topic, value[2:10])) if value[:2] == SINGLE_OBJECT_MAGIC else None
                 if head is None:
+                    failed = unavailable.get((topic, value[2:10]))
+                    if failed is not None:
+                        self._settle(record, retry=failed)
+                        continue
                     try:
                         value = self._kafka_value(record)
                     except SchemaUnavailableError as exc:
+                        unavailable[topic, record.value[2:10]] = str(exc)
                         self._settle(record, retry=str(exc))
                         continue
                     except (SchemaRefusedError, WireError) as exc:

@@ -1,4 +1,4 @@
-"""A TCP relay the tests control: pass, blackhole (hang-style), delay, reset; counts bytes.
+"""A TCP relay the tests control: pass, blackhole (hang-style), delay, refuse, reset; counts bytes.
 
 Placed between two Zenoh routers (the WAN link) or between clients and Kafka, it injects the
 faults of docs/reliability.md and counts the bytes that really cross the link. It runs an
@@ -8,6 +8,8 @@ asyncio loop in a daemon thread; every public method is thread-safe.
 - ``blackhole``: connections stay open but bytes are silently dropped (a hung WAN: no RST,
   no FIN), and new connections are accepted and then starved the same way.
 - ``delay``: each chunk is forwarded after ``delay_s``.
+- ``refuse``: a service that is down: open connections are reset and new ones are aborted as
+  soon as they are accepted (the client sees a reset, at once).
 - ``reset()``: every open connection is aborted with RST (new ones are accepted as usual).
 """
 
@@ -21,7 +23,7 @@ import threading
 from dataclasses import dataclass
 from typing import Literal
 
-Mode = Literal["pass", "blackhole", "delay"]
+Mode = Literal["pass", "blackhole", "delay", "refuse"]
 
 
 @dataclass
@@ -88,6 +90,8 @@ class TcpRelay:
         with self._lock:
             self.mode = mode
             self.delay_s = delay_s
+        if mode == "refuse":
+            self.reset()
 
     def reset(self) -> None:
         """Abort every open connection with RST."""
@@ -117,18 +121,26 @@ class TcpRelay:
 
     async def _reset_all(self) -> None:
         for writer in list(self._writers):
-            sock = writer.get_extra_info("socket")
-            if sock is not None:
-                with contextlib.suppress(OSError):
-                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
-            writer.transport.abort()
-            with self._lock:
-                self.counters.resets += 1
+            self._abort(writer)
         self._writers.clear()
+
+    def _abort(self, writer: asyncio.StreamWriter) -> None:
+        """Close with RST (SO_LINGER 0), not FIN."""
+        sock = writer.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        writer.transport.abort()
+        with self._lock:
+            self.counters.resets += 1
 
     async def _handle(self, client_r: asyncio.StreamReader, client_w: asyncio.StreamWriter) -> None:
         with self._lock:
             self.counters.connections += 1
+            refuse = self.mode == "refuse"
+        if refuse:
+            self._abort(client_w)
+            return
         try:
             target_r, target_w = await asyncio.open_connection(self.host, self.target_port)
         except OSError:

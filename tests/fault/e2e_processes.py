@@ -26,6 +26,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit, urlunsplit
 
 import yaml
 from confluent_kafka import Message
@@ -67,6 +68,15 @@ class Process:
             self.proc.kill()
             self.proc.wait(10)
             self.proc = None
+
+    def pause(self) -> None:
+        """SIGSTOP: every thread of the process stops (a stalled host, not a crash)."""
+        if self.proc is not None:
+            self.proc.send_signal(signal.SIGSTOP)
+
+    def resume(self) -> None:
+        if self.proc is not None:
+            self.proc.send_signal(signal.SIGCONT)
 
     def terminate(self, timeout: float) -> tuple[int | None, float]:
         """SIGTERM; returns (exit code, seconds it took), code None if it did not exit in time."""
@@ -117,6 +127,8 @@ class Bed:
     edge_yaml: Path
     uplink_yaml: Path
     stats_file: Path
+    registry_relay: TcpRelay | None = None
+    """Between the uplink and the schema registry, when the bed was asked for one."""
     edge: Process | None = None
     uplink: Process | None = None
     processes: list[Process] = field(default_factory=list)
@@ -175,10 +187,19 @@ def _write_yaml(path: Path, data: dict[str, Any]) -> Path:
 
 
 @contextmanager
-def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s") -> Iterator[Bed]:
-    """Routers and the relay in this process; config files for the edge and uplink processes."""
+def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s",
+        registry_relay: bool = False) -> Iterator[Bed]:
+    """Routers and the relay in this process; config files for the edge and uplink processes.
+    ``registry_relay``: the uplink reaches the registry through a relay too (``Bed.registry_relay``)."""
     run = uuid.uuid4().hex[:8]
     with ExitStack() as stack:
+        to_registry = None
+        uplink_registry = registry_url
+        if registry_relay:
+            url = urlsplit(registry_url)
+            assert url.port is not None, registry_url
+            to_registry = stack.enter_context(TcpRelay(url.port))
+            uplink_registry = urlunsplit(url._replace(netloc=f"127.0.0.1:{to_registry.port}"))
         cloud = stack.enter_context(ZenohRouter())
         relay = stack.enter_context(TcpRelay(cloud.port))
         site = stack.enter_context(ZenohRouter(connect=(relay.endpoint,)))
@@ -197,12 +218,12 @@ def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s
         })
         uplink_yaml = _write_yaml(tmp / "uplink.yaml", {
             "kafka": {"bootstrap_servers": bootstrap},
-            "registry": {"url": registry_url},
+            "registry": {"url": uplink_registry},
             "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
             "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
         })
         test_bed = Bed(tmp, bootstrap, registry_url, cloud, relay, site, site_name, topic, dead_letter,
-                       edge_yaml, uplink_yaml, tmp / "edge-stats.json")
+                       edge_yaml, uplink_yaml, tmp / "edge-stats.json", to_registry)
         try:
             yield test_bed
         finally:

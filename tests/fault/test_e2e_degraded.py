@@ -5,6 +5,12 @@ Row 3  Kafka frozen:   SIGSTOP the broker mid-stream for longer than the edge's 
                        out; lost 0, and every duplicate is explained by a retried batch.
 Row 5  flapping WAN:   the relay alternates between swallowing everything and passing for a
                        few seconds; lost 0, one warning per outage, retries bounded.
+Row 15 edge stalled:   SIGSTOP the edge for 2 s while the robot publishes; whatever does not
+                       reach Kafka is counted by the edge (intake drops, sequence gaps at the
+                       subscriber): nothing disappears silently.
+Row 16 registry down:  the uplink's registry refuses connections when a new topic's schema must
+                       be registered; its batches are answered ``error`` and stay in the edge's
+                       spool; once the registry is back everything lands; lost 0.
 Row 6  slow WAN:       the relay holds every chunk 0.2 s each way; the robot's rate exceeds what
                        the link carries, so the backlog grows in the spool, not in front of
                        Zenoh: no sample dropped at the intake or missing at the subscriber.
@@ -19,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from fleetlink.localstack.kafka import KafkaBroker
-from tests.fault.e2e_processes import BATCH, Bed, Count, generate, streaming, tally
+from tests.fault.e2e_processes import BATCH, Bed, Count, Generator, bed, generate, streaming, tally
 from tests.integration.e2e_stack import TopicReader
 
 
@@ -106,3 +112,64 @@ def test_slow_wan_backlog_grows_in_the_spool_not_in_front_of_zenoh(
     assert stats["intake"]["dropped"] == 0
     chatter = stats["subscriptions"]["/tb4_01/chatter"]
     assert (chatter["missing"], chatter["received"]) == (0, sent)
+
+
+def test_registry_down_when_a_new_topic_needs_its_schema(kafka_bootstrap: str, schema_registry_url: str,
+                                                         tmp_path: Path) -> None:
+    reader = TopicReader(kafka_bootstrap, schema_registry_url)
+    with bed(tmp_path, kafka_bootstrap, schema_registry_url, registry_relay=True) as b:
+        registry = b.registry_relay
+        assert registry is not None
+        b.start_uplink()
+        b.start_edge()
+        gen = Generator(b.site.endpoint)  # the robot joins: its registration event is the first record
+        try:
+            b.wait(lambda: b.durable().get("buffer", {}).get("acked", 0) >= 1, 30,
+                   "the registration event in Kafka (the registry is reachable)")
+            registry.set_mode("refuse")
+            gen.wait_subscribed()
+            gen.start()
+            b.wait(lambda: sender(b).get("batches_retried", 0) >= 2, 15,
+                   "batches answered 'error' while the registry is down, and sent again")
+            generate(b, gen, 400)
+            assert b.durable()["buffer"]["depth"] >= 300  # waiting in the spool
+            assert reader.consume(b.topic, 0, lambda ms: False, 0.5) == []  # nothing half-produced
+            registry.set_mode("pass")
+            generate(b, gen, 200)
+            sent = gen.pause()
+            b.wait_drained(sent, 40)
+            retried = sender(b)["batches_retried"]
+            assert b.uplink is not None
+            errors = b.uplink.log_lines("not fully delivered")
+        finally:
+            gen.close()
+    check(tally(reader, b, sent, f", registry down then back, {retried} retried"), retried)
+    assert errors >= 1  # the uplink said why
+
+
+def test_a_stalled_edge_loses_nothing_silently(kafka_bootstrap: str, schema_registry_url: str,
+                                               tmp_path: Path) -> None:
+    reader = TopicReader(kafka_bootstrap, schema_registry_url)
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url) as (b, gen):
+        generate(b, gen, 400)
+        edge = b.edge
+        assert edge is not None
+        edge.pause()
+        try:
+            time.sleep(2.0)  # the robot goes on publishing (or its publisher blocks: congestion "block")
+        finally:
+            edge.resume()
+        generate(b, gen, 400)
+        sent = gen.pause()
+
+        def counted() -> int:
+            stats = b.stats()
+            chatter = stats.get("subscriptions", {}).get("/tb4_01/chatter", {})
+            return int(stats.get("intake", {}).get("dropped", 0)) + int(chatter.get("missing", 0))
+
+        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) + counted() >= sent
+               and b.durable().get("buffer", {}).get("depth") == 0, 40, "everything processed or counted")
+        accounted = counted()
+    result = tally(reader, b, sent, f" with the edge stopped 2 s; {accounted} counted as lost by the edge")
+    assert len(result.lost) == accounted, str(result)
+    assert (result.unexpected, result.duplicated) == (0, 0), str(result)

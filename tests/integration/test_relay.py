@@ -77,6 +77,19 @@ def test_reset_aborts_open_connections(echo_port: int) -> None:
         assert relay.counters.resets >= 1
 
 
+def test_refuse_resets_open_connections_and_new_ones_until_passing_again(echo_port: int) -> None:
+    with TcpRelay(echo_port) as relay, socket.create_connection(("127.0.0.1", relay.port), timeout=2) as s:
+        s.sendall(b"x")
+        assert s.recv(1) == b"x"
+        relay.set_mode("refuse")
+        with pytest.raises((ConnectionResetError, BrokenPipeError)):
+            _write_until_broken(s)
+        with pytest.raises((ConnectionResetError, BrokenPipeError)):
+            _roundtrip(relay.port, b"anyone there?")
+        relay.set_mode("pass")
+        assert _roundtrip(relay.port, b"back") == b"back"
+
+
 def _write_until_broken(s: socket.socket) -> None:
     for _ in range(50):
         s.sendall(b"y" * 1024)
