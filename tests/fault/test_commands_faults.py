@@ -43,6 +43,7 @@ from tests.integration.test_commands_harness import (
     distinct,
     fleet,
     irobot_store,
+    lightring_bed,
     lightring_mapping,
     repeater_config,
     running_uplink,
@@ -190,18 +191,11 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
 def test_row25_repeater_restarted_after_the_lease_does_not_replay(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
-    ts = irobot_store()
-    run = uid()
-    topic = f"cmd.lightring.{run}"
     lease = 3.0
-    producer = CommandProducer(kafka_bootstrap, schema_registry_url, ts)
-    leds = LedLog()
     state = tmp_path / "state"
-    with Wan() as wan:
-        site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic, period="500ms", lease=f"{lease}s")], suffix=run)
-        create_topics(kafka_bootstrap, topic)
+    with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease=f"{lease}s") as bed:
+        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
+                                                        bed.site, bed.config)
         with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
                 running_uplink(config), fleet(site, ts, leds) as robots:
             with Repeater(repeater_config(site, state)) as rep:
@@ -230,17 +224,10 @@ def test_row25_repeater_restarted_after_the_lease_does_not_replay(
 def test_repeater_restarted_within_the_lease_resumes_without_reapplying(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
-    ts = irobot_store()
-    run = uid()
-    topic = f"cmd.lightring.{run}"
-    producer = CommandProducer(kafka_bootstrap, schema_registry_url, ts)
-    leds = LedLog()
     state = tmp_path / "state"
-    with Wan() as wan:
-        site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic, period="500ms", lease="20s")], suffix=run)
-        create_topics(kafka_bootstrap, topic)
+    with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease="20s") as bed:
+        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
+                                                        bed.site, bed.config)
         with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
                 fleet(site, ts, leds) as robots, running_uplink(config):
             robots.add_robot("tb4_01")
@@ -262,17 +249,10 @@ def test_repeater_restarted_within_the_lease_resumes_without_reapplying(
 def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
-    ts = irobot_store()
-    run = uid()
-    topic = f"cmd.lightring.{run}"
     lease = 5.0
-    producer = CommandProducer(kafka_bootstrap, schema_registry_url, ts)
-    leds = LedLog()
-    with Wan() as wan:
-        site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic, period="500ms", lease=f"{lease}s")], suffix=run)
-        create_topics(kafka_bootstrap, topic)
+    with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease=f"{lease}s") as bed:
+        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
+                                                        bed.site, bed.config)
         with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
                 fleet(site, ts, leds) as robots, running_uplink(config), \
                 Repeater(repeater_config(site, tmp_path / "state")) as rep:
@@ -305,16 +285,9 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
 def test_wan_cut_dead_man_stops_a_long_lease_early(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
-    ts = irobot_store()
-    run = uid()
-    topic = f"cmd.lightring.{run}"
-    producer = CommandProducer(kafka_bootstrap, schema_registry_url, ts)
-    leds = LedLog()
-    with Wan() as wan:
-        site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic, period="500ms", lease="60s")], suffix=run)
-        create_topics(kafka_bootstrap, topic)
+    with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease="60s") as bed:
+        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
+                                                        bed.site, bed.config)
         with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
                 fleet(site, ts, leds) as robots, running_uplink(config), \
                 Repeater(repeater_config(site, tmp_path / "state", dead_man="2s")) as rep:

@@ -268,6 +268,33 @@ def lightring_mapping(topic: str, *, period: str = "1s", lease: str = "10s", **e
             "repeat": {"period": period, "lease": lease}} | extra
 
 
+@dataclass
+class LightringBed:
+    """One site on a WAN, an uplink config with one light-ring command mapping, its topic made."""
+
+    ts: Typestore
+    run: str
+    topic: str
+    producer: CommandProducer
+    leds: LedLog
+    site: Site
+    config: UplinkConfig
+
+
+@contextmanager
+def lightring_bed(bootstrap: str, registry_url: str, *, period: str = "1s",
+                  lease: str = "10s") -> Iterator[LightringBed]:
+    ts, run = irobot_store(), uid()
+    topic = f"cmd.lightring.{run}"
+    producer = CommandProducer(bootstrap, registry_url, ts)
+    with Wan() as wan:
+        site = wan.add_site("site-a")
+        config = uplink_config(bootstrap, registry_url, wan.cloud.endpoint,
+                               [lightring_mapping(topic, period=period, lease=lease)], suffix=run)
+        create_topics(bootstrap, topic)
+        yield LightringBed(ts, run, topic, producer, LedLog(), site, config)
+
+
 def repeater_config(site: Site, state_dir: Path, **repeater: Any) -> RepeaterConfig:
     return RepeaterConfig.model_validate({
         "repeater": {"site": site.name, "state_dir": str(state_dir), "id": f"rep-{site.name}",

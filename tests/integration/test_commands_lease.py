@@ -10,19 +10,12 @@ from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
     GREEN,
     RED,
-    CommandProducer,
-    LedLog,
     TopicLog,
-    Wan,
-    create_topics,
     distinct,
     fleet,
-    irobot_store,
-    lightring_mapping,
+    lightring_bed,
     repeater_config,
     running_uplink,
-    uid,
-    uplink_config,
     wait_repeater_sees,
 )
 
@@ -33,16 +26,9 @@ TOLERANCE_S = 0.3  # a sample already on its way when the lease ended
 def test_late_joiner_lease_end_and_supersede_with_statuses(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
-    ts = irobot_store()
-    run = uid()
-    commands = f"cmd.lightring.{run}"
-    producer = CommandProducer(kafka_bootstrap, schema_registry_url, ts)
-    leds = LedLog()
-    with Wan() as wan:
-        site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(commands, period="1s", lease=f"{LEASE_S}s")], suffix=run)
-        create_topics(kafka_bootstrap, commands)
+    with lightring_bed(kafka_bootstrap, schema_registry_url, period="1s", lease=f"{LEASE_S}s") as bed:
+        ts, run, commands, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
+                                                           bed.site, bed.config)
         with Repeater(repeater_config(site, tmp_path / "state")) as rep, fleet(site, ts, leds) as robots, \
                 TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
                 running_uplink(config) as uplink:
