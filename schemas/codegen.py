@@ -9,10 +9,12 @@ into the text, so no input data ever becomes code.
 from __future__ import annotations
 
 import struct
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Hashable
 from typing import Any
 
 from schemas import wire
+from schemas.layout import Array, Node, Prim, Record, Text
 
 # Names every generated function may use.
 BASE_NAMESPACE: dict[str, Any] = {
@@ -101,3 +103,38 @@ def known_alignment(base_alignment: int, offset: int) -> int:
     """Alignment of ``base + offset`` when ``base`` is ``base_alignment``-aligned (max 8)."""
     low = offset & -offset if offset else 8
     return min(base_alignment, low, 8)
+
+
+class NodeWalker(ABC):
+    """A generator's walk over a type's layout: one method per kind of node, in wire order."""
+
+    def node(self, node: Node) -> None:
+        if isinstance(node, Prim):
+            self.prim(node)
+        elif isinstance(node, Text):
+            self.text(node)
+        elif isinstance(node, Record):
+            for field in node.fields:
+                self.node(field)
+        elif isinstance(node.elem, Prim):
+            if node.fixed:
+                self.prim_array(node.elem.kind, node.size, node.path)
+            else:
+                self.prim_sequence(node.elem.kind, node.size, node.path)
+        else:
+            self.repeated(node)
+
+    @abstractmethod
+    def prim(self, node: Prim) -> None: ...
+
+    @abstractmethod
+    def text(self, node: Text) -> None: ...
+
+    @abstractmethod
+    def prim_array(self, kind: str, size: int, path: str) -> None: ...
+
+    @abstractmethod
+    def prim_sequence(self, kind: str, bound: int, path: str) -> None: ...
+
+    @abstractmethod
+    def repeated(self, node: Array) -> None: ...

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from struct import Struct
 from typing import Any
 
-from schemas.codegen import HANDLERS, Source, known_alignment
+from schemas.codegen import HANDLERS, NodeWalker, Source, known_alignment
 from schemas.layout import (
     BYTES_KINDS,
     FLOATS,
@@ -22,7 +22,6 @@ from schemas.layout import (
     RANGES,
     SIZES,
     Array,
-    Node,
     Prim,
     Record,
     Text,
@@ -33,7 +32,7 @@ Piece = tuple[str, Any]
 _NO_PIECE: Piece = ("", ("", 0, 0))
 
 
-class AvroToCdr:
+class AvroToCdr(NodeWalker):
     """Writes ``def convert(buf) -> bytes`` (Avro body in, CDR with header out) for one type."""
 
     def __init__(self, root: Record) -> None:
@@ -173,22 +172,6 @@ class AvroToCdr:
         self.set_output(name, alignment)
 
     # --- nodes -----------------------------------------------------------------------------
-    def node(self, node: Node) -> None:
-        if isinstance(node, Prim):
-            self.prim(node)
-        elif isinstance(node, Text):
-            self.text(node)
-        elif isinstance(node, Record):
-            for field in node.fields:
-                self.node(field)
-        elif isinstance(node.elem, Prim):
-            if node.fixed:
-                self.prim_array(node.elem.kind, node.size, node.path)
-            else:
-                self.prim_sequence(node.elem.kind, node.size, node.path)
-        else:
-            self.repeated(node)
-
     def range_check(self, kind: str, value: str, path: str, at: str) -> None:
         lo, hi = RANGES[kind]
         self.src.line(f"if not {lo} <= {value} <= {hi}:")

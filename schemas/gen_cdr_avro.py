@@ -16,15 +16,15 @@ from collections.abc import Callable
 from struct import Struct
 from typing import Any
 
-from schemas.codegen import HANDLERS, Source, known_alignment, round_up
-from schemas.layout import BYTES_KINDS, FLOATS, FORMATS, SIZES, Array, Node, Prim, Record, Text, min_cdr_size
+from schemas.codegen import HANDLERS, NodeWalker, Source, known_alignment, round_up
+from schemas.layout import BYTES_KINDS, FLOATS, FORMATS, SIZES, Array, Prim, Record, Text, min_cdr_size
 from schemas.wire import count, zz
 
 Piece = tuple[str, Any]
 _UINT64_MAX_LONG = 0x7FFF_FFFF_FFFF_FFFF
 
 
-class CdrToAvro:
+class CdrToAvro(NodeWalker):
     """Writes ``def convert(buf) -> bytes`` for one type and byte order."""
 
     def __init__(self, root: Record, *, little_endian: bool) -> None:
@@ -145,22 +145,6 @@ class CdrToAvro:
             self.pieces = []
 
     # --- nodes -----------------------------------------------------------------------------
-    def node(self, node: Node) -> None:
-        if isinstance(node, Prim):
-            self.prim(node)
-        elif isinstance(node, Text):
-            self.text(node)
-        elif isinstance(node, Record):
-            for field in node.fields:
-                self.node(field)
-        elif isinstance(node.elem, Prim):
-            if node.fixed:
-                self.prim_array(node.elem.kind, node.size, node.path)
-            else:
-                self.prim_sequence(node.elem.kind, node.size, node.path)
-        else:
-            self.repeated(node)
-
     def prim(self, node: Prim) -> None:
         kind, size = node.kind, SIZES[node.kind]
         self.align_to(size)
@@ -180,26 +164,34 @@ class CdrToAvro:
             )
         self.expr(f"_zz({name})")
 
-    def text(self, node: Text) -> None:
+    def text_span(self, node: Text) -> tuple[str, str, str]:
+        """Emit the reading and checks of a CDR string's length, terminator and bound; returns
+        the expressions ``(start, end, length)`` of its bytes (``buf[start:end - 1]`` without the
+        NUL). The caller emits the text itself, then ``set_base(end, 1)``."""
         src = self.src
         self.align_to(4)
         lpos = self.off
         length = self.read("uint32", node.path)
         self.flush_segment()
-        start, end, text = self.at(lpos + 4), src.var("e"), src.var("s")
+        start, end = self.at(lpos + 4), src.var("e")
         src.line(f"{end} = {start} + {length}")
         src.line(
             f"if {length} == 0 or {end} > n: raise _WireError({self.at(lpos)}, "
             f"'string length ' + str({length}) + ' does not fit in ' + str(n) + ' bytes')"
         )
         src.line(f"if buf[{end} - 1]: raise _WireError({end} - 1, 'string is not NUL-terminated')")
-        src.line(f"{text} = buf[{start}:{end} - 1]")
-        src.line(f"if not {text}.isascii(): _check_utf8({text}, {start})")
         if node.bound:
             src.line(
                 f"if {length} > {node.bound + 1}: raise _WireError({self.at(lpos)}, "
                 f"'string longer than its bound {node.bound}')"
             )
+        return start, end, length
+
+    def text(self, node: Text) -> None:
+        start, end, length = self.text_span(node)
+        text = self.src.var("s")
+        self.src.line(f"{text} = buf[{start}:{end} - 1]")
+        self.src.line(f"if not {text}.isascii(): _check_utf8({text}, {start})")
         self.expr(f"_zz({length} - 1)")
         self.expr(text)
         self.set_base(end, 1)

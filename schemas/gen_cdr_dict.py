@@ -56,24 +56,9 @@ class CdrToDict(CdrToAvro):
         return name
 
     def text_value(self, node: Text) -> str:
-        src = self.src
-        self.align_to(4)
-        lpos = self.off
-        length = self.read("uint32", node.path)
-        self.flush_segment()
-        start, end, text = self.at(lpos + 4), src.var("e"), src.var("s")
-        src.line(f"{end} = {start} + {length}")
-        src.line(
-            f"if {length} == 0 or {end} > n: raise _WireError({self.at(lpos)}, "
-            f"'string length ' + str({length}) + ' does not fit in ' + str(n) + ' bytes')"
-        )
-        src.line(f"if buf[{end} - 1]: raise _WireError({end} - 1, 'string is not NUL-terminated')")
-        if node.bound:
-            src.line(
-                f"if {length} > {node.bound + 1}: raise _WireError({self.at(lpos)}, "
-                f"'string longer than its bound {node.bound}')"
-            )
-        src.line(f"{text} = _utf8(buf[{start}:{end} - 1], {start})")
+        start, end, _length = self.text_span(node)
+        text = self.src.var("s")
+        self.src.line(f"{text} = _utf8(buf[{start}:{end} - 1], {start})")
         self.set_base(end, 1)
         return text
 
