@@ -234,7 +234,9 @@ class CdrToAvro(NodeWalker):
             )
         return name, cpos
 
-    def prim_sequence(self, kind: str, bound: int, path: str) -> None:
+    def sequence_span(self, kind: str, bound: int, path: str) -> tuple[str, str, str]:
+        """Emit the reading of a sequence's count, the alignment of its items and the check that
+        they fit; returns the expressions ``(count, start, end)``."""
         src, itemsize = self.src, SIZES[kind]
         n_items, cpos = self.sequence_count(bound, path)
         after = self.at(cpos + 4)
@@ -248,6 +250,11 @@ class CdrToAvro(NodeWalker):
             f"if {end} > n: raise _WireError({self.at(cpos)}, 'sequence of ' + str({n_items}) + "
             f"' items does not fit in ' + str(n) + ' bytes')"
         )
+        return n_items, start, end
+
+    def prim_sequence(self, kind: str, bound: int, path: str) -> None:
+        src, itemsize = self.src, SIZES[kind]
+        n_items, start, end = self.sequence_span(kind, bound, path)
         self.uses_view = True
         data = (
             f"mv[{start}:{end}]"

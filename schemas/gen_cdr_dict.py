@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from schemas.codegen import HANDLERS, known_alignment
+from schemas.codegen import HANDLERS
 from schemas.gen_cdr_avro import CdrToAvro
 from schemas.layout import BYTES_KINDS, FORMATS, SIZES, Array, Node, Prim, Record, Text, min_cdr_size
 
@@ -86,18 +86,7 @@ class CdrToDict(CdrToAvro):
 
     def prim_sequence_value(self, kind: str, bound: int, path: str) -> str:
         src, itemsize = self.src, SIZES[kind]
-        n_items, cpos = self.sequence_count(bound, path)
-        after = self.at(cpos + 4)
-        start, end = src.var("d"), src.var("e")
-        if itemsize <= known_alignment(self.align, cpos + 4):
-            src.line(f"{start} = {after}")
-        else:
-            src.line(f"{start} = (({after} + 3) & -8) + 4 if {n_items} else {after}")
-        src.line(f"{end} = {start} + {n_items}" + (f" * {itemsize}" if itemsize > 1 else ""))
-        src.line(
-            f"if {end} > n: raise _WireError({self.at(cpos)}, 'sequence of ' + str({n_items}) + "
-            f"' items does not fit in ' + str(n) + ' bytes')"
-        )
+        n_items, start, end = self.sequence_span(kind, bound, path)
         self.set_base(end, min(itemsize, 4))
         if kind in BYTES_KINDS:
             return f"buf[{start}:{end}]"
