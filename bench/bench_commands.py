@@ -51,6 +51,7 @@ from confluent_kafka.serialization import MessageField, SerializationContext
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.relay import TcpRelay  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 from fleetlink.localstack.zenoh_router import ZenohRouter  # noqa: E402
@@ -167,6 +168,7 @@ def uplink_process(config: UplinkConfig, path: Path) -> Iterator[subprocess.Pope
 
 
 def main(argv: list[str] | None = None) -> int:
+    exit_on_sigterm()  # stopped with SIGTERM: the stack and the processes started here stop too
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robots", type=int, default=50)

@@ -25,10 +25,12 @@ sys.path.insert(0, str(ROOT))
 
 from fleetlink.demo.runner import Demo, DemoOptions  # noqa: E402
 from fleetlink.durations import parse_duration_ms  # noqa: E402
+from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 
 
 def main() -> None:
+    exit_on_sigterm()  # stopped with SIGTERM: the stack and the processes started here stop too
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--window", default="2s")

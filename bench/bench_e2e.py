@@ -51,7 +51,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.e2e_publisher import IMU, imu_payloads  # noqa: E402
-from fleetlink.localstack.process import ServerProcess, free_port  # noqa: E402
+from fleetlink.localstack.process import (  # noqa: E402
+    ServerProcess,
+    exit_on_sigterm,
+    free_port,
+)
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 from schemas.codec import get_codec  # noqa: E402
 from schemas.registry import SchemaRegistry  # noqa: E402
@@ -280,6 +284,7 @@ def run_latency(work: Path, bootstrap: str, registry: str, robots: int, rate: fl
 
 
 def main() -> None:
+    exit_on_sigterm()  # stopped with SIGTERM: the stack and the processes started here stop too
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robots", type=int, default=8)
     ap.add_argument("--records", type=int, default=40_000, help="total records for the throughput run")

@@ -53,6 +53,7 @@ sys.path.insert(0, str(ROOT))
 from edge.agent import EdgeAgent  # noqa: E402
 from edge.config import EdgeConfig  # noqa: E402
 from edge.runtime.registration import EVENT_FINGERPRINT  # noqa: E402
+from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.relay import TcpRelay  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 from fleetlink.localstack.zenoh_router import ZenohRouter  # noqa: E402
@@ -349,6 +350,7 @@ def table(results: Sequence[Result]) -> str:
 
 
 def main() -> None:
+    exit_on_sigterm()  # stopped with SIGTERM: the stack and the processes started here stop too
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--slice", type=float, default=150.0, help="replay the first SECONDS of the bag (0: all)")
     ap.add_argument("--speed", type=float, default=1.0, help="replay speed-up (1 = real time)")

@@ -15,6 +15,17 @@ from pathlib import Path
 from fleetlink.localstack.errors import StackError
 
 
+def exit_on_sigterm() -> None:
+    """Make SIGTERM end this process like Ctrl-C does: ``SystemExit(143)`` in the main thread,
+    so ``with`` blocks and ``finally`` clauses stop what it started (Kafka, the registry, child
+    processes) instead of leaving them running. For scripts; services handle SIGTERM themselves."""
+
+    def handler(signum: int, _frame: object) -> None:
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, handler)
+
+
 def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))

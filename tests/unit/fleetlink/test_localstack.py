@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -74,3 +77,26 @@ def test_suitable_java_is_picked_from_jvm_root(tmp_path: Path, monkeypatch: pyte
     new = _fake_java(tmp_path / "jvm", "b-jdk-25", 'openjdk version "25"')
     monkeypatch.setattr(java, "JVM_ROOT", tmp_path / "jvm")
     assert java.find_java(21, "the registry") == new
+
+
+SCRIPT = """
+import sys, time
+from fleetlink.localstack.process import exit_on_sigterm
+exit_on_sigterm()
+try:
+    print("ready", flush=True)
+    time.sleep(30)
+finally:
+    open(sys.argv[1], "w").write("stopped what it started")
+"""
+
+
+def test_sigterm_runs_the_cleanup_of_a_script_that_asked_for_it(tmp_path: Path) -> None:
+    marker = tmp_path / "cleanup"
+    with subprocess.Popen([sys.executable, "-c", SCRIPT, str(marker)], stdout=subprocess.PIPE, text=True,
+                          cwd=Path(__file__).resolve().parents[3]) as proc:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().strip() == "ready"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(10) == 128 + signal.SIGTERM
+    assert marker.read_text() == "stopped what it started"
