@@ -72,11 +72,11 @@ def test_flapping_wan(kafka_bootstrap: str, schema_registry_url: str, tmp_path: 
     with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="1s") as (b, gen):
         generate(b, gen, 400)
         began = time.monotonic()
-        for _ in range(4):  # 1.5 s cut, 1.5 s up, four times
+        for _ in range(4):  # cut for 600 records (1.5 s at 400 msg/s), up for as many, four times
             b.relay.set_mode("blackhole")
-            time.sleep(1.5)
+            generate(b, gen, 600)
             b.relay.set_mode("pass")
-            time.sleep(1.5)
+            generate(b, gen, 600)
         flapped_s = time.monotonic() - began
         generate(b, gen, 200)
         sent = gen.pause()
@@ -156,7 +156,7 @@ def test_a_stalled_edge_loses_nothing_silently(kafka_bootstrap: str, schema_regi
         assert edge is not None
         edge.pause()
         try:
-            time.sleep(2.0)  # the robot goes on publishing (or its publisher blocks: congestion "block")
+            generate(b, gen, 800)  # 2 s of publishing at 400 msg/s into a stopped edge
         finally:
             edge.resume()
         generate(b, gen, 400)

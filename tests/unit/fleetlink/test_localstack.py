@@ -80,12 +80,12 @@ def test_suitable_java_is_picked_from_jvm_root(tmp_path: Path, monkeypatch: pyte
 
 
 SCRIPT = """
-import sys, time
+import signal, sys
 from fleetlink.localstack.process import exit_on_sigterm
 exit_on_sigterm()
 try:
     print("ready", flush=True)
-    time.sleep(30)
+    signal.pause()  # until a signal: SIGTERM ends it through the handler
 finally:
     open(sys.argv[1], "w").write("stopped what it started")
 """
