@@ -157,7 +157,8 @@ class EdgeAgent:
         }
         senders = self._senders
         self._processor = Processor(self.intake, self._maker, buffers,
-                                    on_appended=lambda delivery, linger: senders[delivery].pump(linger))
+                                    on_appended=lambda delivery, linger: senders[delivery].pump(linger),
+                                    default_linger_s=options.linger_s)
         attachment: AttachmentVersion = 1 if config.ros.attachment == "v1" else 2
         self._node = RosNode("fleetlink_edge", "/", domain_id=config.ros.domain_id, session=session,
                              typestore=typestore, distro=distro, attachment_version=attachment).start()

@@ -3,10 +3,10 @@
 The edge names each value's schema by its 64-bit fingerprint and ships the schema text in the
 batch until an uplink has acknowledged it; the uplink keeps every text it read (``learn``),
 registers it under the record's topic subject (TopicNameStrategy) and reuses the id for every
-later record of that pair. ``unknown`` names the left-out schemas it has no text for: the batch
-is then answered ``need_schemas`` before anything is produced. A registry that cannot be reached is retriable
-(the batch goes back to the edge's spool); a registry that refuses the schema is not (the
-records go to the dead-letter topic with the registry's reason).
+later record of that pair. ``unknown`` names the left-out schemas it has no text for: the
+batch is then answered ``need_schemas`` before anything is produced. A registry that cannot be
+reached is retriable (the batch goes back to the edge's spool); a registry that refuses the
+schema is not (the records go to the dead-letter topic with the registry's reason).
 """
 
 from __future__ import annotations

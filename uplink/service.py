@@ -188,37 +188,27 @@ class Uplink:
         try:
             batch = decode_batch(data)
         except WireError as exc:
-            self._slots.release()
             self._limiter.log(logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s",
                               str(query.key_expr), exc)
             self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
-            query.reply_err(f"malformed batch: {exc}".encode())
-            query.drop()
+            self._finish(query, error=f"malformed batch: {exc}")
             return
         sink, ids = self._sink, self._ids
         if sink is None or ids is None:
-            self._slots.release()
-            query.reply_err(b"uplink stopping")
-            query.drop()
+            self._finish(query, error="uplink stopping")
             return
         ids.learn(batch.schemas)
         missing = ids.unknown(batch.elided) if batch.elided else ()
         if missing:  # before anything is produced: the edge sends the batch again, with them
-            self._slots.release()
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
             log.info("batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
                      batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, len(missing))
-            try:
-                query.reply(query.key_expr, encode_ack(Ack(
-                    edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
-                    last_seq=batch.last_seq, status="need_schemas", missing_schemas=missing,
-                    detail="send the batch again with these schemas")))
-            finally:
-                query.drop()
+            self._finish(query, Ack(edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
+                                    last_seq=batch.last_seq, status="need_schemas", missing_schemas=missing,
+                                    detail="send the batch again with these schemas"))
             return
 
         def done(ack: Ack) -> None:
-            self._slots.release()
             self.metrics.on_ingested(batch.site, ack.status, len(batch.records),
                                      sum(f.dead_lettered for f in ack.failures))
             if ack.status == "ok":
@@ -227,15 +217,24 @@ class Uplink:
                 self._limiter.log(logging.WARNING, "batch-error",
                                   "batch %s/%s %d..%d not fully delivered: %s",
                                   ack.edge_id, ack.stream, ack.first_seq, ack.last_seq, ack.detail)
-            try:
-                query.reply(query.key_expr, encode_ack(ack))
-            finally:
-                query.drop()
+            self._finish(query, ack)
 
         metered = not isinstance(self.metrics, NullMetrics)
         BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
                  on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max,
                  on_delivery=self.metrics.on_delivered if metered else None).run()
+
+
+    def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:
+        """Answer a batch taken by ``_on_query`` (its ack, or ``error``) and free its slot."""
+        self._slots.release()
+        try:
+            if ack is not None:
+                query.reply(query.key_expr, encode_ack(ack))
+            else:
+                query.reply_err(error.encode())
+        finally:
+            query.drop()
 
 
 def site_of(key: str) -> str:

@@ -69,7 +69,8 @@ class Processor:
         maker: RecordMaker,
         buffers: Mapping[Delivery, RecordBuffer],
         *,
-        on_appended: Callable[[Delivery, float | None], object] | None = None,
+        on_appended: Callable[[Delivery, float], object] | None = None,
+        default_linger_s: float = 0.0,
         tick_interval_s: float = 0.1,
         chunk: int = 512,
         clock_ns: Callable[[], int] = time.time_ns,
@@ -78,6 +79,8 @@ class Processor:
         self.maker = maker
         self.buffers = buffers
         self._on_appended = on_appended or _nothing
+        self.default_linger_s = default_linger_s
+        """The linger of records that bring none (the edge passes its ``wan.linger``)."""
         self.tick_interval_s = tick_interval_s
         self.chunk = chunk
         self._clock_ns = clock_ns
@@ -157,14 +160,16 @@ class Processor:
             return
         self.stats.records += len(out)
         groups: dict[Delivery, list[bytes]] = {}
-        lingers: dict[Delivery, float | None] = {}
-        for delivery, payload, linger in out:
+        lingers: dict[Delivery, float] = {}  # per buffer, the shortest linger of what it got
+        default = self.default_linger_s
+        for delivery, payload, own in out:
+            linger = default if own is None else own
             group = groups.get(delivery)
             if group is None:
                 group = groups[delivery] = []
                 lingers[delivery] = linger
-            elif linger != lingers[delivery]:
-                lingers[delivery] = _shorter(lingers[delivery], linger)
+            elif linger < lingers[delivery]:
+                lingers[delivery] = linger
             group.append(payload)
         for delivery, payloads in groups.items():
             self._append_to(delivery, self.buffers[delivery], payloads)
@@ -196,10 +201,5 @@ class Processor:
         stats.spool_dropped += len(results) - taken
 
 
-def _shorter(a: float | None, b: float | None) -> float | None:
-    """The shorter of two lingers, ``None`` (the stream's default) counting as the shortest."""
-    return None if a is None or b is None else min(a, b)
-
-
-def _nothing(_delivery: Delivery, _linger_s: float | None) -> None:
+def _nothing(_delivery: Delivery, _linger_s: float) -> None:
     """Default ``on_appended``."""

@@ -42,6 +42,7 @@ def maker() -> RecordMaker:
         MappingSpec(name="fast", source="/{robot}/fast", topic="fleet.fast", delivery="best_effort"),
         MappingSpec(name="slow", source="/{robot}/slow", topic="fleet.slow", linger_ns=1_500_000_000),
         MappingSpec(name="slower", source="/{robot}/slower", topic="fleet.slower", linger_ns=3_000_000_000),
+        MappingSpec(name="now", source="/{robot}/now", topic="fleet.now", linger_ns=0),
     ])
     return RecordMaker(site="s", edge_id="e", match=table.match, types=codecs(), dead_letter_topic="dlq")
 
@@ -102,15 +103,17 @@ def test_order_and_delivery_classes() -> None:
 @pytest.mark.parametrize(("topics", "expected"), [
     (["/r1/slow"], 1.5),
     (["/r1/slower", "/r1/slow", "/r1/slower"], 1.5),
-    (["/r1/slow", "/r1/chat"], None),  # a record with the stream's default: the default applies
-    (["/r1/chat"], None),
+    (["/r1/slow", "/r1/chat"], 0.02),  # a record with no linger of its own: the edge's default
+    (["/r1/chat"], 0.02),
+    (["/r1/now", "/r1/chat"], 0.0),  # a mapping may also be in more of a hurry than the default
 ])
-def test_each_append_says_how_long_its_records_may_wait(topics: list[str], expected: float | None) -> None:
+def test_each_append_says_how_long_its_records_may_wait(topics: list[str], expected: float) -> None:
     intake: Intake[Item] = Intake()
     durable = MemoryBuffer(stream="durable", first_seq=1)
-    lingers: list[tuple[str, float | None]] = []
+    lingers: list[tuple[str, float]] = []
     processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": MemoryBuffer()},
-                          on_appended=lambda delivery, linger: lingers.append((delivery, linger)))
+                          on_appended=lambda delivery, linger: lingers.append((delivery, linger)),
+                          default_linger_s=0.02)
     intake.offer_many([(string_sample(topic, "x", n + 1), 1) for n, topic in enumerate(topics)])
     with processor:
         wait_until(lambda: processor.stats.appended == len(topics), 5)
