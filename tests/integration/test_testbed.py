@@ -13,6 +13,7 @@ from confluent_kafka.schema_registry.avro import AvroDeserializer, AvroSerialize
 from confluent_kafka.serialization import MessageField, SerializationContext
 
 from fleetlink.localstack.zenoh_router import ZenohRouter
+from tests.helpers import wait_until
 
 SCHEMA = """
 {"type": "record", "name": "Reading", "namespace": "fleetlink.test",
@@ -72,9 +73,9 @@ def test_topic_created_and_listed_with_admin_client(kafka_bootstrap: str) -> Non
     topic = f"testbed.admin.{uuid.uuid4().hex[:8]}"
     futures = admin.create_topics([NewTopic(topic, num_partitions=3, replication_factor=1)])
     futures[topic].result(timeout=30)
-    metadata = admin.list_topics(timeout=10)
-    assert topic in metadata.topics
-    assert len(metadata.topics[topic].partitions) == 3
+    # the broker learns of the new topic from the controller moments after create_topics returns
+    wait_until(lambda: topic in admin.list_topics(timeout=10).topics, 10, message=f"{topic} listed")
+    assert len(admin.list_topics(topic, timeout=10).topics[topic].partitions) == 3
 
 
 def test_zenoh_put_through_router_reaches_subscriber(zenoh_router: str) -> None:
