@@ -62,10 +62,10 @@ from roswire.subscriber import RosSample  # noqa: E402
 from schemas.avro_schema import avro_schema  # noqa: E402
 from schemas.codec import get_codec  # noqa: E402
 from schemas.typestore import load_typestore  # noqa: E402
+from tests.paths import IROBOT  # noqa: E402
 from uplink.config import UplinkConfig  # noqa: E402
 from uplink.service import Uplink  # noqa: E402
 
-IROBOT = Path(os.environ.get("FLEETLINK_DATA", "/work/shared/data")) / "msgs" / "irobot_create_msgs"
 LIGHTRING = "irobot_create_msgs/msg/LightringLeds"
 NO_GOSSIP = {"scouting/gossip/enabled": False}
 REGISTRATION = {  # what the edge agents write to the registrations topic (the fields the uplink reads)

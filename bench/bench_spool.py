@@ -29,9 +29,9 @@ from pathlib import Path
 
 from edge.spool import MemoryBuffer, Spool, SpoolOptions
 from fleetlink.wan import Codec, Record, decode_batch, encode_batch_payloads, encode_payload
+from tests.paths import HUSKY
 
 ROOT = Path(__file__).resolve().parents[1]
-HUSKY = Path("/work/shared/data/bags/robot_localization_husky")
 
 
 def rate(count: int, seconds: float) -> str:

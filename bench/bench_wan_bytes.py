@@ -61,10 +61,11 @@ from fleetlink.wan import encode_batch_payloads  # noqa: E402
 from roswire.node import RosNode  # noqa: E402
 from roswire.publisher import RosPublisher  # noqa: E402
 from schemas.typestore import load_typestore  # noqa: E402
+from tests.paths import HUSKY  # noqa: E402
 from uplink.config import UplinkConfig  # noqa: E402
 from uplink.service import Uplink  # noqa: E402
 
-BAG = Path(os.environ.get("FLEETLINK_DATA", "/work/shared/data")) / "bags" / "robot_localization_husky"
+BAG = HUSKY
 ROBOT = "husky_1"
 IMU, ODOM, FIX = "/imu/data", "/husky_velocity_controller/odom", "/fix"
 TYPES = {IMU: "sensor_msgs/msg/Imu", ODOM: "nav_msgs/msg/Odometry", FIX: "sensor_msgs/msg/NavSatFix"}

@@ -12,7 +12,6 @@ import argparse
 import gc
 import sys
 import time
-from pathlib import Path
 
 from rosbags.rosbag2 import Reader
 
@@ -21,8 +20,8 @@ from roswire.node import RosNode
 from roswire.qos import History, QoS
 from roswire.session import ros_session_config
 from schemas.typestore import load_typestore
+from tests.paths import HUSKY
 
-HUSKY = Path(__file__).resolve().parents[2] / "shared/data/bags/robot_localization_husky"
 IMU = "sensor_msgs/msg/Imu"
 
 

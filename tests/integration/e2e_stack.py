@@ -28,10 +28,10 @@ from edge.config import EdgeConfig
 from fleetlink.localstack.zenoh_router import ZenohRouter
 from roswire.replay import BagReplayer
 from tests.helpers import wait_until, zenoh_peer_config
+from tests.paths import BAGS
 from uplink.config import UplinkConfig
 from uplink.service import Uplink
 
-BAGS = Path(__file__).resolve().parents[3] / "shared" / "data" / "bags"
 HUSKY = BAGS / "robot_localization_husky"
 TB3 = BAGS / "fuse_turtlebot3_sim"
 

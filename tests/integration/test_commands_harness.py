@@ -37,13 +37,13 @@ from roswire.sim.model import LedState
 from schemas.avro_schema import avro_schema
 from schemas.typestore import load_typestore
 from tests.helpers import free_port, wait_until, zenoh_peer_config
+from tests.paths import IROBOT
 from uplink.config import UplinkConfig
 from uplink.service import Uplink
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-IROBOT = Path("/work/shared/data/msgs/irobot_create_msgs")
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
 LIGHTRING = "irobot_create_msgs/msg/LightringLeds"
 RED, GREEN, BLUE, YELLOW = (255, 0, 0), (0, 255, 0), (0, 0, 255), (255, 255, 0)

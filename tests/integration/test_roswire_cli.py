@@ -19,9 +19,9 @@ from roswire.robot_watcher import RobotWatcher
 from roswire.robots import RobotEvent, RobotEventKind, RobotType
 from roswire.subscriber import RosSample
 from tests.helpers import wait_until, zenoh_peer_config
+from tests.paths import BAGS, IROBOT
 
-CREATE3 = "/work/shared/data/msgs/irobot_create_msgs"
-BAGS = Path("/work/shared/data/bags")
+CREATE3 = str(IROBOT)
 _domains = itertools.count(501)
 
 

@@ -21,8 +21,8 @@ from roswire.replay import BagReplayer, robot_topic
 from roswire.subscriber import RosSample
 from schemas.typestore import load_typestore, register_types, types_from_bag
 from tests.helpers import wait_until, zenoh_peer_config
+from tests.paths import BAGS
 
-BAGS = Path("/work/shared/data/bags")
 _domains = itertools.count(301)
 
 

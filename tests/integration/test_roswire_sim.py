@@ -6,7 +6,6 @@ from __future__ import annotations
 import itertools
 import threading
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -22,8 +21,9 @@ from roswire.sim.model import IR_PICKED_UP_MIN, LedState
 from roswire.subscriber import RosSample
 from schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
+from tests.paths import IROBOT
 
-CREATE3 = Path("/work/shared/data/msgs/irobot_create_msgs")
+CREATE3 = IROBOT
 _domains = itertools.count(401)
 
 

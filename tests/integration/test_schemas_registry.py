@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import uuid
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -24,9 +23,10 @@ from schemas.registry import RegistryUnavailableError, SchemaRegistry, subject_f
 from schemas.single_object import confluent_frame
 from schemas.typestore import load_typestore, types_from_msg
 from tests.helpers import free_port, wait_until
+from tests.paths import HUSKY
 from tests.unit.schemas.ros_values import avro_shaped, same
 
-BAG = Path(__file__).resolve().parents[3] / "shared" / "data" / "bags" / "robot_localization_husky"
+BAG = HUSKY
 PER_TYPE = 40
 
 

@@ -6,7 +6,6 @@ import hashlib
 import json
 import uuid
 from collections.abc import Iterator
-from pathlib import Path
 
 import httpx
 import pytest
@@ -24,10 +23,9 @@ from schemas.codec import get_codec
 from schemas.single_object import fingerprint
 from schemas.typestore import load_typestore
 from tests.helpers import zenoh_peer_config
+from tests.paths import HUSKY
 from uplink.config import UplinkConfig
 from uplink.service import Uplink
-
-HUSKY = Path(__file__).resolve().parents[3] / "shared/data/bags/robot_localization_husky"
 
 
 @pytest.fixture(scope="module")

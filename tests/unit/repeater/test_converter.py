@@ -6,7 +6,6 @@ import copy
 import io
 import json
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import fastavro
@@ -19,8 +18,8 @@ from roswire.sim.messages import LIGHTRING, MessageFactory
 from schemas.codec import get_codec
 from schemas.single_object import fingerprint
 from schemas.typestore import load_typestore
+from tests.paths import IROBOT
 
-IROBOT = Path("/work/shared/data/msgs/irobot_create_msgs")
 TS = load_typestore("jazzy", [IROBOT])
 CODEC = get_codec(TS, LIGHTRING, "jazzy")
 MESSAGE = MessageFactory(TS, "tb4_01").lightring(((255, 0, 0),) * 6, True, 12.5)

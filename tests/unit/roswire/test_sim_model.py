@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -32,8 +31,9 @@ from roswire.sim.model import (
     colour_name,
 )
 from schemas.typestore import load_typestore
+from tests.paths import IROBOT
 
-CREATE3 = Path("/work/shared/data/msgs/irobot_create_msgs")
+CREATE3 = IROBOT
 
 
 @pytest.fixture(scope="module")

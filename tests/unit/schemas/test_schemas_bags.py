@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 from collections import Counter
-from pathlib import Path
 
 import pytest
 from rosbags.rosbag2 import Reader
 
 from schemas.codec import get_codec
 from schemas.typestore import load_typestore
+from tests.paths import BAGS
 from tests.unit.schemas.ros_values import avro_shaped, same
-
-BAGS = Path(__file__).resolve().parents[4] / "shared" / "data" / "bags"
 
 EXPECTED = {
     "robot_localization_husky": {

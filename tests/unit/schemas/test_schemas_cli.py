@@ -9,8 +9,7 @@ import avro.schema
 import pytest
 
 from fleetlink.cli import main
-
-IROBOT = Path(__file__).resolve().parents[4] / "shared" / "data" / "msgs" / "irobot_create_msgs"
+from tests.paths import IROBOT
 
 
 @pytest.mark.parametrize(

@@ -6,17 +6,15 @@ iRobot Create 3 package), serialised with rosbags, converted and compared byte f
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from schemas.codec import get_codec
 from schemas.typestore import load_typestore, message_types, types_from_msg
+from tests.paths import IROBOT
 from tests.unit.schemas.ros_values import avro_shaped, message, same
 
-IROBOT = Path(__file__).resolve().parents[4] / "shared" / "data" / "msgs" / "irobot_create_msgs"
 TS = load_typestore("jazzy", msg_paths=[IROBOT])
 # Layouts the standard types rarely combine: alignment after variable parts inside loops,
 # fixed arrays of records with strings, bounded everything, sequences first and last.

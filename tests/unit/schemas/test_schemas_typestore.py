@@ -16,8 +16,8 @@ from schemas.typestore import (
     types_from_msg,
     types_from_srv,
 )
+from tests.paths import DATA
 
-DATA = Path(__file__).resolve().parents[4] / "shared" / "data"
 IROBOT = DATA / "msgs" / "irobot_create_msgs"
 BAGS = DATA / "bags"
 

@@ -6,7 +6,6 @@ import hashlib
 import io
 from collections.abc import Sequence
 from functools import cache
-from pathlib import Path
 from typing import Any
 
 import fastavro
@@ -24,8 +23,9 @@ from roswire.errors import AttachmentError, KeyParseError, PayloadError, Roswire
 from roswire.subscriber import RosSample
 from schemas.single_object import fingerprint
 from schemas.typestore import load_typestore
+from tests.paths import HUSKY
 
-BAG = Path("/work/shared/data/bags/robot_localization_husky")
+BAG = HUSKY
 IMU = "sensor_msgs/msg/Imu"
 STRING = "std_msgs/msg/String"
 IMU_HASH = "RIHS01_" + "7d" * 32

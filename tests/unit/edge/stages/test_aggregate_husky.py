@@ -7,7 +7,6 @@ import dataclasses
 import io
 import random
 import statistics
-from pathlib import Path
 from typing import Any
 
 import fastavro
@@ -18,9 +17,10 @@ from rosbags.typesys import Stores, get_typestore
 
 from edge.stages import Sample, build_pipeline
 from edge.stages.spec import AggregateSpec
+from tests.paths import HUSKY
 from tests.unit.edge.stages.messages import IMU_SCHEMA, schema
 
-BAG = Path("/work/shared/data/bags/robot_localization_husky")
+BAG = HUSKY
 S = 1_000_000_000
 FIELDS = ["linear_acceleration.x", "angular_velocity.z", "orientation_covariance[0]"]
 OPS = ["count", "mean", "min", "max", "last", "stddev"]
