@@ -55,16 +55,16 @@ from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.relay import TcpRelay  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 from fleetlink.localstack.zenoh_router import ZenohRouter  # noqa: E402
-from repeater.config import RepeaterConfig  # noqa: E402
-from repeater.service import Repeater  # noqa: E402
-from roswire.node import RosNode  # noqa: E402
-from roswire.subscriber import RosSample  # noqa: E402
-from schemas.avro_schema import avro_schema  # noqa: E402
-from schemas.codec import get_codec  # noqa: E402
-from schemas.typestore import load_typestore  # noqa: E402
+from fleetlink.repeater.config import RepeaterConfig  # noqa: E402
+from fleetlink.repeater.service import Repeater  # noqa: E402
+from fleetlink.roswire.node import RosNode  # noqa: E402
+from fleetlink.roswire.subscriber import RosSample  # noqa: E402
+from fleetlink.schemas.avro_schema import avro_schema  # noqa: E402
+from fleetlink.schemas.codec import get_codec  # noqa: E402
+from fleetlink.schemas.typestore import load_typestore  # noqa: E402
+from fleetlink.uplink.config import UplinkConfig  # noqa: E402
+from fleetlink.uplink.service import Uplink  # noqa: E402
 from tests.paths import IROBOT  # noqa: E402
-from uplink.config import UplinkConfig  # noqa: E402
-from uplink.service import Uplink  # noqa: E402
 
 LIGHTRING = "irobot_create_msgs/msg/LightringLeds"
 NO_GOSSIP = {"scouting/gossip/enabled": False}

@@ -23,8 +23,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fleetlink.common.durations import parse_duration_ms  # noqa: E402
 from fleetlink.demo.runner import Demo, DemoOptions  # noqa: E402
-from fleetlink.durations import parse_duration_ms  # noqa: E402
 from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 

@@ -57,10 +57,10 @@ from fleetlink.localstack.process import (  # noqa: E402
     free_port,
 )
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
-from schemas.codec import get_codec  # noqa: E402
-from schemas.registry import SchemaRegistry  # noqa: E402
-from schemas.single_object import confluent_frame  # noqa: E402
-from schemas.typestore import load_typestore  # noqa: E402
+from fleetlink.schemas.codec import get_codec  # noqa: E402
+from fleetlink.schemas.registry import SchemaRegistry  # noqa: E402
+from fleetlink.schemas.single_object import confluent_frame  # noqa: E402
+from fleetlink.schemas.typestore import load_typestore  # noqa: E402
 
 CLK = os.sysconf("SC_CLK_TCK")
 

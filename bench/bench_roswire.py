@@ -54,7 +54,7 @@ def client_config(endpoint: str) -> Any:
 
 
 def imu_payload() -> bytes:
-    from schemas.typestore import load_typestore
+    from fleetlink.schemas.typestore import load_typestore
 
     ts = load_typestore("jazzy")
     t = ts.types
@@ -77,11 +77,11 @@ def imu_payload() -> bytes:
 
 
 def run_publisher(endpoint: str, topic: str, mode: str, count: int, rate: float, seconds: float) -> None:
-    from roswire.node import RosNode
+    from fleetlink.roswire.node import RosNode
 
     payload = imu_payload()
     with RosNode("imu_pub", "/bench_bot", domain_id=DOMAIN, config=client_config(endpoint)) as node:
-        from schemas.typestore import load_typestore
+        from fleetlink.schemas.typestore import load_typestore
 
         node.typestore = load_typestore("jazzy")
         pub = node.create_publisher(topic, IMU, congestion="block" if mode == "flood" else None)
@@ -164,9 +164,9 @@ def run_subscriber(endpoint: str, kind: str) -> None:
                            for name in ("imu_raw", "imu_both")]
         closer: Any = session
     else:
-        from roswire.node import RosNode
-        from roswire.subscriber import RosSample
-        from schemas.typestore import load_typestore
+        from fleetlink.roswire.node import RosNode
+        from fleetlink.roswire.subscriber import RosSample
+        from fleetlink.schemas.typestore import load_typestore
 
         node = RosNode("imu_sub", domain_id=DOMAIN, config=client_config(endpoint),
                        typestore=load_typestore("jazzy")).start()

@@ -27,8 +27,8 @@ import numpy as np
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
-from schemas.codec import Codec, get_codec
-from schemas.typestore import load_typestore
+from fleetlink.schemas.codec import Codec, get_codec
+from fleetlink.schemas.typestore import load_typestore
 
 BYTES_KINDS = ("uint8", "byte", "char")
 

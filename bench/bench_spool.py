@@ -11,7 +11,7 @@ Spool (300-byte records, a fresh spool in a temp dir on the same disk as the rep
 * ``reopen``: recovery time of a spool holding ``--reopen-mb`` of unacked records.
 
 WAN batches: 500 records of the real Husky IMU bag (``/imu/data``), converted to Avro
-single-object values, encoded with ``fleetlink.wan.encode_batch_payloads`` per codec.
+single-object values, encoded with ``fleetlink.wire.encode_batch_payloads`` per codec.
 
 Run: ``.venv/bin/python bench/bench_spool.py`` (``--quick`` for a short run).
 """
@@ -27,8 +27,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from edge.spool import MemoryBuffer, Spool, SpoolOptions
-from fleetlink.wan import Codec, Record, decode_batch, encode_batch_payloads, encode_payload
+from fleetlink.edge.spool import MemoryBuffer, Spool, SpoolOptions
+from fleetlink.wire import Codec, Record, decode_batch, encode_batch_payloads, encode_payload
 from tests.paths import HUSKY
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -179,9 +179,9 @@ def imu_payloads(limit: int) -> tuple[list[bytes], dict[bytes, str]]:
 
     from rosbags.rosbag2 import Reader
 
-    from schemas.codec import get_codec
-    from schemas.single_object import fingerprint
-    from schemas.typestore import load_typestore
+    from fleetlink.schemas.codec import get_codec
+    from fleetlink.schemas.single_object import fingerprint
+    from fleetlink.schemas.typestore import load_typestore
 
     ts = load_typestore("humble", bags=[HUSKY])
     codec = get_codec(ts, "sensor_msgs/msg/Imu", "humble")

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 from pydantic import TypeAdapter
 
-from edge.stages import FilterStage, Sample, Stage, ThrottleStage, build_stage
-from edge.stages.spec import StageSpec
+from fleetlink.edge.stages import FilterStage, Sample, Stage, ThrottleStage, build_stage
+from fleetlink.edge.stages.spec import StageSpec
 
 N = 20_000
 

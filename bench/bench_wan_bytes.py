@@ -50,20 +50,20 @@ from rosbags.rosbag2 import Reader
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from edge.agent import EdgeAgent  # noqa: E402
-from edge.config import EdgeConfig  # noqa: E402
-from edge.runtime.registration import EVENT_FINGERPRINT  # noqa: E402
+from fleetlink.edge.agent import EdgeAgent  # noqa: E402
+from fleetlink.edge.config import EdgeConfig  # noqa: E402
+from fleetlink.edge.runtime.registration import EVENT_FINGERPRINT  # noqa: E402
 from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.relay import TcpRelay  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
 from fleetlink.localstack.zenoh_router import ZenohRouter  # noqa: E402
-from fleetlink.wan import encode_batch_payloads  # noqa: E402
-from roswire.node import RosNode  # noqa: E402
-from roswire.publisher import RosPublisher  # noqa: E402
-from schemas.typestore import load_typestore  # noqa: E402
+from fleetlink.roswire.node import RosNode  # noqa: E402
+from fleetlink.roswire.publisher import RosPublisher  # noqa: E402
+from fleetlink.schemas.typestore import load_typestore  # noqa: E402
+from fleetlink.uplink.config import UplinkConfig  # noqa: E402
+from fleetlink.uplink.service import Uplink  # noqa: E402
+from fleetlink.wire import encode_batch_payloads  # noqa: E402
 from tests.paths import HUSKY  # noqa: E402
-from uplink.config import UplinkConfig  # noqa: E402
-from uplink.service import Uplink  # noqa: E402
 
 BAG = HUSKY
 ROBOT = "husky_1"

@@ -15,11 +15,11 @@ import time
 
 from rosbags.rosbag2 import Reader
 
-from fleetlink.zenoh_options import ZenohOptions
-from roswire.node import RosNode
-from roswire.qos import History, QoS
-from roswire.session import ros_session_config
-from schemas.typestore import load_typestore
+from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.qos import History, QoS
+from fleetlink.roswire.session import ros_session_config
+from fleetlink.schemas.typestore import load_typestore
 from tests.paths import HUSKY
 
 IMU = "sensor_msgs/msg/Imu"

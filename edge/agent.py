@@ -25,37 +25,37 @@ from typing import Any
 
 import zenoh
 
-from edge.config import EdgeConfig
-from edge.errors import MappingError
-from edge.mapping import Delivery, MappingSpec, MappingTable
-from edge.runtime.errors import RuntimeSetupError
-from edge.runtime.intake import Intake
-from edge.runtime.outgoing import Outgoing
-from edge.runtime.processor import Emit, Item, Processor
-from edge.runtime.records import RecordMaker
-from edge.runtime.registration import (
+from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.errors import MappingError
+from fleetlink.edge.mapping import Delivery, MappingSpec, MappingTable
+from fleetlink.edge.runtime.errors import RuntimeSetupError
+from fleetlink.edge.runtime.intake import Intake
+from fleetlink.edge.runtime.outgoing import Outgoing
+from fleetlink.edge.runtime.processor import Emit, Item, Processor
+from fleetlink.edge.runtime.records import RecordMaker
+from fleetlink.edge.runtime.registration import (
     EVENT_FINGERPRINT,
     EVENT_SCHEMA_JSON,
     Registrar,
     RobotChange,
     event_record,
 )
-from edge.runtime.schema_book import SchemaBook
-from edge.runtime.sender import SenderOptions, WanSender
-from edge.runtime.subscriptions import SubscriptionManager
-from edge.runtime.transport import ZenohTransport
-from edge.runtime.types import TypeStoreCodecs, schema_distro
-from edge.spool import MemoryBuffer, RecordBuffer, Spool
-from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
-from fleetlink.wan import ingest_key
-from fleetlink.zenoh_options import ZenohOptions
-from roswire.attachment import AttachmentVersion
-from roswire.errors import RobotError
-from roswire.node import RosNode
-from roswire.robots import RobotType
-from roswire.session import DEFAULT_ROUTER, open_session
-from schemas.errors import SchemaError
-from schemas.typestore import load_typestore
+from fleetlink.edge.runtime.schema_book import SchemaBook
+from fleetlink.edge.runtime.sender import SenderOptions, WanSender
+from fleetlink.edge.runtime.subscriptions import SubscriptionManager
+from fleetlink.edge.runtime.transport import ZenohTransport
+from fleetlink.edge.runtime.types import TypeStoreCodecs, schema_distro
+from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, Spool
+from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
+from fleetlink.roswire.attachment import AttachmentVersion
+from fleetlink.roswire.errors import RobotError
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.robots import RobotType
+from fleetlink.roswire.session import DEFAULT_ROUTER, open_session
+from fleetlink.schemas.errors import SchemaError
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire import ingest_key
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """The edge agent's one config model (``fleetlink edge run -c edge.yaml``).
 
-Load it with ``fleetlink.configfile.load_config(EdgeConfig, path)``: every problem is reported
+Load it with ``fleetlink.common.configfile.load_config(EdgeConfig, path)``: every problem is reported
 with its YAML path (``robot_types.turtlebot4.mappings[1].to (line 14): ...``) and no socket
 is opened. Durations are text with a unit (``250ms``, ``5s``) or seconds, held as nanoseconds;
 sizes are bytes or text (``64MiB``, ``1GiB``). See deploy/edge.example.yaml.
@@ -24,8 +24,9 @@ from pydantic import (
     model_validator,
 )
 
-from edge.errors import EdgeError, MappingError
-from edge.mapping import (
+from fleetlink.common.zenoh_options import ZenohSection
+from fleetlink.edge.errors import EdgeError, MappingError
+from fleetlink.edge.mapping import (
     Delivery,
     MappingSpec,
     MappingTable,
@@ -34,12 +35,11 @@ from edge.mapping import (
     TopicPattern,
     check_ros_type,
 )
-from edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
-from edge.mapping.templates import kafka_topic_problem
-from edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
-from edge.stages import AggregateSpec, DurationNs, StageSpec
-from fleetlink.wan import Codec, WireError, check_key_name
-from fleetlink.zenoh_options import ZenohSection
+from fleetlink.edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
+from fleetlink.edge.mapping.templates import kafka_topic_problem
+from fleetlink.edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
+from fleetlink.edge.stages import AggregateSpec, DurationNs, StageSpec
+from fleetlink.wire import Codec, WireError, check_key_name
 
 _NS = 1_000_000_000
 Name = Annotated[str, StringConstraints(pattern=f"^{NAME_PATTERN.pattern}$", max_length=128)]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fleetlink.errors import ConfigError, FleetlinkError
+from fleetlink.common.errors import ConfigError, FleetlinkError
 
 
 class EdgeError(FleetlinkError):

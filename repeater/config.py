@@ -10,7 +10,7 @@
     zenoh: {mode: peer, connect: [tcp/127.0.0.1:7447]}   # the site router
 
 Durations are ``"250ms"``, ``"1s"``, ``"2m"``, ``"1h"`` or a number of seconds
-(:mod:`fleetlink.durations`).
+(:mod:`fleetlink.common.durations`).
 """
 
 from __future__ import annotations
@@ -18,19 +18,14 @@ from __future__ import annotations
 import re
 import socket
 from pathlib import Path
-from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from fleetlink.durations import Seconds
-from fleetlink.zenoh_options import ZenohSection
-from schemas.typestore import Distro
+from fleetlink.common.durations import PositiveSeconds
+from fleetlink.common.zenoh_options import ZenohSection
+from fleetlink.schemas.typestore import Distro
 
 _CHUNK = re.compile(r"[A-Za-z0-9_.-]+")
-
-PositiveSeconds = Annotated[Seconds, Field(gt=0)]
-"""A positive duration in seconds, written as ``"1s"``, ``"500ms"`` … in YAML."""
-
 
 def default_repeater_id() -> str:
     host = re.sub(r"[^A-Za-z0-9_.-]", "_", socket.gethostname()) or "repeater"

@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 import fastavro
 from fastavro.read import SchemaResolutionError
 
-from repeater.envelope import CommandEnvelope
-from repeater.errors import ConversionError
-from schemas.codec import Codec, get_codec
-from schemas.errors import SchemaError
-from schemas.single_object import fingerprint
-from schemas.typestore import Distro
+from fleetlink.repeater.errors import ConversionError
+from fleetlink.schemas.codec import Codec, get_codec
+from fleetlink.schemas.errors import SchemaError
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.schemas.typestore import Distro
+from fleetlink.wire.commands import CommandEnvelope
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

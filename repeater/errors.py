@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fleetlink.errors import ConfigError, FleetlinkError
+from fleetlink.common.errors import ConfigError, FleetlinkError
 
 
 class RepeaterError(FleetlinkError):
@@ -11,19 +11,6 @@ class RepeaterError(FleetlinkError):
 
 class RepeaterConfigError(ConfigError, RepeaterError):
     """The repeater cannot start with this configuration (state dir, type store)."""
-
-
-class EnvelopeError(RepeaterError):
-    """Bytes that are not a valid command envelope, reply or status batch.
-
-    ``data`` keeps (a prefix of) the raw bytes for the log or a dead letter.
-    """
-
-    def __init__(self, what: str, reason: str, data: bytes = b"") -> None:
-        self.what = what
-        self.reason = reason
-        self.data = data[:256]
-        super().__init__(f"malformed {what}: {reason}")
 
 
 class ConversionError(RepeaterError):

@@ -27,7 +27,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
-from repeater.envelope import (
+from fleetlink.repeater.errors import JournalError
+from fleetlink.wire.commands import (
     CommandEnvelope,
     StatusEvent,
     decode_envelope,
@@ -35,7 +36,7 @@ from repeater.envelope import (
     status_from_json,
     status_to_json,
 )
-from repeater.errors import EnvelopeError, JournalError
+from fleetlink.wire.errors import EnvelopeError
 
 log = logging.getLogger(__name__)
 

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from roswire.errors import QosParseError
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from roswire.qos import DEFAULT, QoS
+from fleetlink.roswire.errors import QosParseError
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.qos import DEFAULT, QoS
 
 IDLE_TTL_S = 300.0
 

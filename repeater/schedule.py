@@ -23,7 +23,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from repeater.envelope import Status
+from fleetlink.wire.commands import Status
 
 
 class Offer(Enum):

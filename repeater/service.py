@@ -29,12 +29,24 @@ from typing import Any
 
 import zenoh
 
-from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan.keys import command_key, site_prefix
-from fleetlink.zenoh_options import ZenohOptions
-from repeater.config import RepeaterConfig
-from repeater.converter import Converter
-from repeater.envelope import (
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.repeater.config import RepeaterConfig
+from fleetlink.repeater.converter import Converter
+from fleetlink.repeater.errors import ConversionError, JournalError, RepeaterConfigError
+from fleetlink.repeater.publishers import Publishers
+from fleetlink.repeater.schedule import Change, Command, Offer, Publish, Schedule
+from fleetlink.repeater.state import CommandStore
+from fleetlink.repeater.status_link import StatusLink
+from fleetlink.roswire.discovery import GraphWatcher
+from fleetlink.roswire.errors import QosParseError, RoswireError
+from fleetlink.roswire.graph import EventKind, GraphEvent
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.session import open_session, ros_session_config
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind
+from fleetlink.schemas.errors import SchemaError
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire.commands import (
     CommandEnvelope,
     CommandReply,
     Result,
@@ -42,19 +54,8 @@ from repeater.envelope import (
     decode_envelope,
     encode_reply,
 )
-from repeater.errors import ConversionError, EnvelopeError, JournalError, RepeaterConfigError
-from repeater.publishers import Publishers
-from repeater.schedule import Change, Command, Offer, Publish, Schedule
-from repeater.state import CommandStore
-from repeater.status_link import StatusLink
-from roswire.discovery import GraphWatcher
-from roswire.errors import QosParseError, RoswireError
-from roswire.graph import EventKind, GraphEvent
-from roswire.node import RosNode
-from roswire.session import open_session, ros_session_config
-from roswire.tokens import EndpointInfo, EntityKind
-from schemas.errors import SchemaError
-from schemas.typestore import load_typestore
+from fleetlink.wire.errors import EnvelopeError
+from fleetlink.wire.keys import command_key, site_prefix
 
 log = logging.getLogger(__name__)
 

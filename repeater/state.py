@@ -12,10 +12,9 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from fleetlink.ratelimit import LogLimiter
-from repeater.envelope import CommandEnvelope, StatusEvent
-from repeater.errors import JournalError
-from repeater.journal import (
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.repeater.errors import JournalError
+from fleetlink.repeater.journal import (
     Journal,
     JournalState,
     StoredCommand,
@@ -25,6 +24,7 @@ from repeater.journal import (
     schema_line,
     status_line,
 )
+from fleetlink.wire.commands import CommandEnvelope, StatusEvent
 
 log = logging.getLogger(__name__)
 

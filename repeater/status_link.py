@@ -18,10 +18,10 @@ from types import TracebackType
 
 import zenoh
 
-from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan.keys import site_prefix
-from repeater.envelope import StatusBatch, StatusEvent, decode_status_ack, encode_status_batch
-from repeater.errors import EnvelopeError
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.wire.commands import StatusBatch, StatusEvent, decode_status_ack, encode_status_batch
+from fleetlink.wire.errors import EnvelopeError
+from fleetlink.wire.keys import site_prefix
 
 log = logging.getLogger(__name__)
 

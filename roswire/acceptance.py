@@ -16,11 +16,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from roswire import cdr
-from roswire.attachment import decode as decode_attachment
-from roswire.errors import AttachmentError, KeyParseError, PayloadError
-from roswire.names import DataKey, parse_data_key
-from roswire.sequence import SeqStatus, SequenceTracker
+from fleetlink.roswire import cdr
+from fleetlink.roswire.attachment import decode as decode_attachment
+from fleetlink.roswire.errors import AttachmentError, KeyParseError, PayloadError
+from fleetlink.roswire.names import DataKey, parse_data_key
+from fleetlink.roswire.sequence import SeqStatus, SequenceTracker
 
 _KEY_CACHE_SIZE = 1024  # parsed data keys remembered per subscription (one per publisher type/hash)
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 import struct
 from typing import Literal, NamedTuple
 
-from roswire.errors import AttachmentError
-from roswire.gid import GID_SIZE
+from fleetlink.roswire.errors import AttachmentError
+from fleetlink.roswire.gid import GID_SIZE
 
 AttachmentVersion = Literal[1, 2]
 

@@ -16,9 +16,9 @@ from types import TracebackType
 
 import zenoh
 
-from roswire.errors import TokenError
-from roswire.graph import Graph, GraphEvent, TopicInfo
-from roswire.tokens import EndpointInfo, NodeInfo, liveliness_prefix
+from fleetlink.roswire.errors import TokenError
+from fleetlink.roswire.graph import Graph, GraphEvent, TopicInfo
+from fleetlink.roswire.tokens import EndpointInfo, NodeInfo, liveliness_prefix
 
 log = logging.getLogger(__name__)
 

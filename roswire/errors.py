@@ -1,4 +1,4 @@
-"""Errors raised by roswire, all rooted at :class:`fleetlink.errors.FleetlinkError`.
+"""Errors raised by roswire, all rooted at :class:`fleetlink.common.errors.FleetlinkError`.
 
 Each error carries the context a dead-letter record or a log line needs: the offending name,
 key expression or raw bytes.
@@ -6,7 +6,7 @@ key expression or raw bytes.
 
 from __future__ import annotations
 
-from fleetlink.errors import FleetlinkError
+from fleetlink.common.errors import FleetlinkError
 
 
 class RoswireError(FleetlinkError):

@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from roswire.tokens import EndpointInfo, Entity, EntityKind, NodeInfo, node_token, parse_token
+from fleetlink.roswire.tokens import EndpointInfo, Entity, EntityKind, NodeInfo, node_token, parse_token
 
 
 class EventKind(Enum):

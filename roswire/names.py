@@ -9,12 +9,12 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from roswire.errors import InvalidNameError, KeyParseError
+from fleetlink.common.names import ros_segments_problem, ros_topic_problem
+from fleetlink.roswire.errors import InvalidNameError, KeyParseError
 
 HASH_NOT_SUPPORTED = "TypeHashNotSupported"
 """The hash chunk Humble's rmw_zenoh writes (Humble has no type hashes)."""
 
-_TOKEN_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _HASH_RE = re.compile(r"RIHS[0-9]{2}_[0-9a-f]+")
 _RIHS01_RE = re.compile(r"RIHS01_[0-9a-f]{64}")
 _IDENT_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -32,22 +32,16 @@ def unmangle(chunk: str) -> str:
 
 
 def _check_tokens(name: str, tokens: list[str]) -> None:
-    for token in tokens:
-        if not token:
-            raise InvalidNameError(name, "empty path segment ('//' or trailing '/')")
-        if not _TOKEN_RE.fullmatch(token):
-            if token[0].isdigit():
-                raise InvalidNameError(name, f"segment {token!r} starts with a digit")
-            raise InvalidNameError(name, f"segment {token!r} has characters other than [A-Za-z0-9_]")
+    problem = ros_segments_problem(tokens)
+    if problem is not None:
+        raise InvalidNameError(name, problem)
 
 
 def validate_topic(name: str) -> str:
     """Check a fully qualified topic or service name (``/a/b``); return it unchanged."""
-    if not name.startswith("/"):
-        raise InvalidNameError(name, "not fully qualified (must start with '/')")
-    if name == "/":
-        raise InvalidNameError(name, "a topic needs at least one segment")
-    _check_tokens(name, name[1:].split("/"))
+    problem = ros_topic_problem(name)
+    if problem is not None:
+        raise InvalidNameError(name, problem)
     return name
 
 

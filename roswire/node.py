@@ -16,20 +16,20 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import zenoh
 
-from roswire.attachment import AttachmentVersion
-from roswire.errors import RoswireError
-from roswire.names import resolve_topic, validate_namespace, validate_node_name
-from roswire.qos import DEFAULT, QoS
-from roswire.session import open_session
-from roswire.tokens import node_token
-from schemas.typehash import type_hash as compute_type_hash
-from schemas.typestore import Distro
+from fleetlink.roswire.attachment import AttachmentVersion
+from fleetlink.roswire.errors import RoswireError
+from fleetlink.roswire.names import resolve_topic, validate_namespace, validate_node_name
+from fleetlink.roswire.qos import DEFAULT, QoS
+from fleetlink.roswire.session import open_session
+from fleetlink.roswire.tokens import node_token
+from fleetlink.schemas.typehash import type_hash as compute_type_hash
+from fleetlink.schemas.typestore import Distro
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-    from roswire.publisher import RosPublisher
-    from roswire.subscriber import RosSample, RosSubscriber
+    from fleetlink.roswire.publisher import RosPublisher
+    from fleetlink.roswire.subscriber import RosSample, RosSubscriber
 
 log = logging.getLogger(__name__)
 
@@ -169,7 +169,7 @@ class RosNode:
     def create_publisher(
         self, topic: str, typename: str, qos: QoS = DEFAULT, **kwargs: Any
     ) -> RosPublisher:
-        from roswire.publisher import RosPublisher
+        from fleetlink.roswire.publisher import RosPublisher
 
         return RosPublisher(self, topic, typename, qos, **kwargs).start()
 
@@ -181,6 +181,6 @@ class RosNode:
         qos: QoS = DEFAULT,
         **kwargs: Any,
     ) -> RosSubscriber:
-        from roswire.subscriber import RosSubscriber
+        from fleetlink.roswire.subscriber import RosSubscriber
 
         return RosSubscriber(self, topic, typename, callback, qos, **kwargs).start()

@@ -17,15 +17,15 @@ from typing import TYPE_CHECKING, Any, Literal
 import zenoh
 import zenoh.ext
 
-from roswire.attachment import AttachmentVersion, encode
-from roswire.errors import RoswireError
-from roswire.gid import entity_gid
-from roswire.names import data_key, mangle
-from roswire.qos import DEFAULT, History, QoS, Reliability
-from roswire.tokens import EntityKind, endpoint_token
+from fleetlink.roswire.attachment import AttachmentVersion, encode
+from fleetlink.roswire.errors import RoswireError
+from fleetlink.roswire.gid import entity_gid
+from fleetlink.roswire.names import data_key, mangle
+from fleetlink.roswire.qos import DEFAULT, History, QoS, Reliability
+from fleetlink.roswire.tokens import EntityKind, endpoint_token
 
 if TYPE_CHECKING:
-    from roswire.node import RosNode
+    from fleetlink.roswire.node import RosNode
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ class RosPublisher:
     def start(self) -> RosPublisher:
         if self._publisher is not None:
             return self
-        from roswire.node import next_entity_id
+        from fleetlink.roswire.node import next_entity_id
 
         session = self.node.session
         self.key = data_key(self.node.domain_id, self.topic, self.typename, self.type_hash)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 from enum import IntEnum
 from typing import TypeVar
 
-from roswire.errors import QosParseError
+from fleetlink.roswire.errors import QosParseError
 
 E = TypeVar("E", bound=IntEnum)
 

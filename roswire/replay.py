@@ -21,12 +21,12 @@ from typing import Any
 
 import zenoh
 
-from roswire.errors import BagError
-from roswire.names import join_namespace, validate_node_name, validate_topic
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from roswire.qos import DEFAULT, Durability, History, QoS, Reliability
-from schemas.typestore import Distro, load_typestore
+from fleetlink.roswire.errors import BagError
+from fleetlink.roswire.names import join_namespace, validate_node_name, validate_topic
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.qos import DEFAULT, Durability, History, QoS, Reliability
+from fleetlink.schemas.typestore import Distro, load_typestore
 
 log = logging.getLogger(__name__)
 

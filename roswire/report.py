@@ -7,11 +7,11 @@ from collections import Counter
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from roswire.errors import KeyParseError
-from roswire.graph import TopicInfo
-from roswire.names import parse_data_key
-from roswire.robots import Robot
-from roswire.tokens import EndpointInfo, NodeInfo
+from fleetlink.roswire.errors import KeyParseError
+from fleetlink.roswire.graph import TopicInfo
+from fleetlink.roswire.names import parse_data_key
+from fleetlink.roswire.robots import Robot
+from fleetlink.roswire.tokens import EndpointInfo, NodeInfo
 
 
 class RateMeter:

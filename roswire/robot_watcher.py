@@ -18,15 +18,15 @@ import time
 from collections.abc import Callable, Iterable
 from types import TracebackType
 
-from roswire import cdr
-from roswire.discovery import GraphWatcher
-from roswire.errors import RobotError
-from roswire.graph import GraphEvent
-from roswire.names import HASH_NOT_SUPPORTED
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from roswire.robots import Robot, RobotEvent, RobotRegistry, RobotType, parse_registration
-from roswire.subscriber import RosSample, RosSubscriber
+from fleetlink.roswire import cdr
+from fleetlink.roswire.discovery import GraphWatcher
+from fleetlink.roswire.errors import RobotError
+from fleetlink.roswire.graph import GraphEvent
+from fleetlink.roswire.names import HASH_NOT_SUPPORTED
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.robots import Robot, RobotEvent, RobotRegistry, RobotType, parse_registration
+from fleetlink.roswire.subscriber import RosSample, RosSubscriber
 
 log = logging.getLogger(__name__)
 

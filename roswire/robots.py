@@ -15,9 +15,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from roswire.errors import RobotError
-from roswire.graph import EventKind, GraphEvent
-from roswire.names import first_segment
+from fleetlink.roswire.errors import RobotError
+from fleetlink.roswire.graph import EventKind, GraphEvent
+from fleetlink.roswire.names import first_segment
 
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 

@@ -12,8 +12,8 @@ import json
 
 import zenoh
 
-from fleetlink.errors import ConfigError
-from fleetlink.zenoh_options import ZenohOptions
+from fleetlink.common.errors import ConfigError
+from fleetlink.common.zenoh_options import ZenohOptions
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 

@@ -36,15 +36,15 @@ import zenoh
 import zenoh.ext
 from rosbags.serde import SerdeError
 
-from roswire.acceptance import RosSample, SampleAcceptor, SubscriberStats
-from roswire.errors import PayloadError, RoswireError
-from roswire.names import data_key_expr
-from roswire.qos import DEFAULT, QoS
-from roswire.sequence import SequenceTracker
-from roswire.tokens import EntityKind, endpoint_token
+from fleetlink.roswire.acceptance import RosSample, SampleAcceptor, SubscriberStats
+from fleetlink.roswire.errors import PayloadError, RoswireError
+from fleetlink.roswire.names import data_key_expr
+from fleetlink.roswire.qos import DEFAULT, QoS
+from fleetlink.roswire.sequence import SequenceTracker
+from fleetlink.roswire.tokens import EntityKind, endpoint_token
 
 if TYPE_CHECKING:
-    from roswire.node import RosNode
+    from fleetlink.roswire.node import RosNode
 
 __all__ = ["ErrorHandler", "RosSample", "RosSubscriber", "SubscriberStats"]
 
@@ -130,7 +130,7 @@ class RosSubscriber:
         if self.declare_token and self.typename is not None and token_hash is None and self.node.typestore:
             token_hash = self.node.type_hash(self.typename)
         if self.declare_token and self.typename is not None and token_hash is not None:
-            from roswire.node import next_entity_id
+            from fleetlink.roswire.node import next_entity_id
 
             self.token_key = endpoint_token(
                 domain=self.node.domain_id, zid=self.node.zid, nid=self.node.nid, eid=next_entity_id(),

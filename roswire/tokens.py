@@ -16,9 +16,9 @@ import re
 from dataclasses import dataclass, field
 from enum import Enum
 
-from roswire.errors import InvalidNameError, QosParseError, TokenError
-from roswire.gid import entity_gid
-from roswire.names import (
+from fleetlink.roswire.errors import InvalidNameError, QosParseError, TokenError
+from fleetlink.roswire.gid import entity_gid
+from fleetlink.roswire.names import (
     dds_type_name,
     is_valid_type_hash,
     join_namespace,
@@ -29,7 +29,7 @@ from roswire.names import (
     validate_node_name,
     validate_topic,
 )
-from roswire.qos import QoS
+from fleetlink.roswire.qos import QoS
 
 PREFIX = "@ros2_lv"
 NODE_CHUNKS = 9

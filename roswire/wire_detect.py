@@ -16,10 +16,10 @@ from typing import Literal
 
 import zenoh
 
-from roswire.attachment import AttachmentVersion, detect_version
-from roswire.errors import TokenError
-from roswire.names import HASH_NOT_SUPPORTED
-from roswire.tokens import EndpointInfo, liveliness_prefix, parse_token
+from fleetlink.roswire.attachment import AttachmentVersion, detect_version
+from fleetlink.roswire.errors import TokenError
+from fleetlink.roswire.names import HASH_NOT_SUPPORTED
+from fleetlink.roswire.tokens import EndpointInfo, liveliness_prefix, parse_token
 
 HashStyle = Literal["humble", "rihs01"]
 

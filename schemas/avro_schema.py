@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, Any
 
 from rosbags.interfaces import Nodetype
 
-from schemas.errors import TypeDefinitionError
-from schemas.typehash import type_hash
-from schemas.typestore import Distro, fields_of
+from fleetlink.schemas.errors import TypeDefinitionError
+from fleetlink.schemas.typehash import type_hash
+from fleetlink.schemas.typestore import Distro, fields_of
 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import FieldDesc

@@ -18,13 +18,13 @@ from typing import TYPE_CHECKING, Any
 
 import fastavro
 
-from schemas.avro_schema import avro_schema
-from schemas.errors import DecodeError, EncodeError, ValueRangeError
-from schemas.gen_avro_cdr import AvroToCdr
-from schemas.gen_cdr_avro import CdrToAvro
-from schemas.gen_cdr_dict import CdrToDict
-from schemas.layout import Record, build
-from schemas.typestore import Distro, normalize_typename
+from fleetlink.schemas.avro_schema import avro_schema
+from fleetlink.schemas.errors import DecodeError, EncodeError, ValueRangeError
+from fleetlink.schemas.gen_avro_cdr import AvroToCdr
+from fleetlink.schemas.gen_cdr_avro import CdrToAvro
+from fleetlink.schemas.gen_cdr_dict import CdrToDict
+from fleetlink.schemas.layout import Record, build
+from fleetlink.schemas.typestore import Distro, normalize_typename
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

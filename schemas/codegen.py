@@ -13,8 +13,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Hashable
 from typing import Any
 
-from schemas import wire
-from schemas.layout import Array, Node, Prim, Record, Text
+from fleetlink.schemas import wire
+from fleetlink.schemas.layout import Array, Node, Prim, Record, Text
 
 # Names every generated function may use.
 BASE_NAMESPACE: dict[str, Any] = {

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fleetlink.errors import FleetlinkError
+from fleetlink.common.errors import FleetlinkError
 
 
 class SchemaError(FleetlinkError):

@@ -14,8 +14,8 @@ from collections.abc import Callable
 from struct import Struct
 from typing import Any
 
-from schemas.codegen import HANDLERS, NodeWalker, Source, known_alignment
-from schemas.layout import (
+from fleetlink.schemas.codegen import HANDLERS, NodeWalker, Source, known_alignment
+from fleetlink.schemas.layout import (
     BYTES_KINDS,
     FLOATS,
     FORMATS,
@@ -26,7 +26,7 @@ from schemas.layout import (
     Record,
     Text,
 )
-from schemas.wire import count, zz
+from fleetlink.schemas.wire import count, zz
 
 Piece = tuple[str, Any]
 _NO_PIECE: Piece = ("", ("", 0, 0))

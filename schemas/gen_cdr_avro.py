@@ -16,9 +16,19 @@ from collections.abc import Callable
 from struct import Struct
 from typing import Any
 
-from schemas.codegen import HANDLERS, NodeWalker, Source, known_alignment, round_up
-from schemas.layout import BYTES_KINDS, FLOATS, FORMATS, SIZES, Array, Prim, Record, Text, min_cdr_size
-from schemas.wire import count, zz
+from fleetlink.schemas.codegen import HANDLERS, NodeWalker, Source, known_alignment, round_up
+from fleetlink.schemas.layout import (
+    BYTES_KINDS,
+    FLOATS,
+    FORMATS,
+    SIZES,
+    Array,
+    Prim,
+    Record,
+    Text,
+    min_cdr_size,
+)
+from fleetlink.schemas.wire import count, zz
 
 Piece = tuple[str, Any]
 _UINT64_MAX_LONG = 0x7FFF_FFFF_FFFF_FFFF

@@ -12,9 +12,19 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from schemas.codegen import HANDLERS
-from schemas.gen_cdr_avro import CdrToAvro
-from schemas.layout import BYTES_KINDS, FORMATS, SIZES, Array, Node, Prim, Record, Text, min_cdr_size
+from fleetlink.schemas.codegen import HANDLERS
+from fleetlink.schemas.gen_cdr_avro import CdrToAvro
+from fleetlink.schemas.layout import (
+    BYTES_KINDS,
+    FORMATS,
+    SIZES,
+    Array,
+    Node,
+    Prim,
+    Record,
+    Text,
+    min_cdr_size,
+)
 
 _UINT64_MAX_LONG = 0x7FFF_FFFF_FFFF_FFFF
 

@@ -11,8 +11,8 @@ from typing import TYPE_CHECKING
 
 from rosbags.interfaces import Nodetype
 
-from schemas.errors import TypeDefinitionError
-from schemas.typestore import fields_of
+from fleetlink.schemas.errors import TypeDefinitionError
+from fleetlink.schemas.typestore import fields_of
 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import FieldDesc

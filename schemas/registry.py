@@ -25,8 +25,8 @@ import httpx
 from confluent_kafka.schema_registry import Schema, SchemaRegistryClient
 from confluent_kafka.schema_registry.error import SchemaRegistryError
 
-from schemas.errors import IncompatibleSchemaError, RegistryError
-from schemas.single_object import fingerprint
+from fleetlink.schemas.errors import IncompatibleSchemaError, RegistryError
+from fleetlink.schemas.single_object import fingerprint
 
 _CONFLICT = 409
 _NOT_FOUND = 404

@@ -14,7 +14,7 @@ from typing import Any
 
 from fastavro.schema import to_parsing_canonical_form
 
-from schemas.errors import DecodeError
+from fleetlink.schemas.errors import DecodeError
 
 MARKER = b"\xc3\x01"
 CONFLUENT_MAGIC = 0

@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 from rosbags.interfaces import Nodetype
 
-from schemas.errors import TypeDefinitionError, UnknownTypeError
-from schemas.typestore import EMPTY_MEMBER, Distro
+from fleetlink.schemas.errors import TypeDefinitionError, UnknownTypeError
+from fleetlink.schemas.typestore import EMPTY_MEMBER, Distro
 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Fielddefs, FieldDesc

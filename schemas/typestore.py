@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Literal, get_args
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
 
-from schemas.errors import TypeDefinitionError, UnknownTypeError
+from fleetlink.schemas.errors import TypeDefinitionError, UnknownTypeError
 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Fielddefs, FieldDesc, Typesdict

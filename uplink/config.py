@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from fleetlink.console.settings import ConsoleSettings
-from fleetlink.zenoh_options import ZenohSection
-from uplink.commands.mapping import CommandMapping, unique_names
-from uplink.kafka_settings import KafkaSettings
+from fleetlink.common.console_settings import ConsoleSettings
+from fleetlink.common.zenoh_options import ZenohSection
+from fleetlink.uplink.commands.mapping import CommandMapping, unique_names
+from fleetlink.uplink.kafka_settings import KafkaSettings
 
 
 class RegistrySettings(BaseModel):

@@ -22,7 +22,12 @@ from typing import Literal, Protocol
 
 from confluent_kafka import KafkaError, Message
 
-from fleetlink.wan import (
+from fleetlink.schemas.single_object import confluent_frame
+from fleetlink.uplink.dead_letter import dead_letter
+from fleetlink.uplink.errors import ProduceError
+from fleetlink.uplink.producer import Delivery, RawCallback
+from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
+from fleetlink.wire import (
     SINGLE_OBJECT_MAGIC,
     Ack,
     Batch,
@@ -31,11 +36,6 @@ from fleetlink.wan import (
     WireError,
     split_single_object,
 )
-from schemas.single_object import confluent_frame
-from uplink.dead_letter import dead_letter
-from uplink.errors import ProduceError
-from uplink.producer import Delivery, RawCallback
-from uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
 
 log = logging.getLogger(__name__)
 

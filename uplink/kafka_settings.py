@@ -13,7 +13,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
 
-from uplink.errors import UnsafeKafkaSettingError
+from fleetlink.uplink.errors import UnsafeKafkaSettingError
 
 # What the producer always runs with; none of it can be overridden to something weaker.
 PINNED_PRODUCER: dict[str, str | int | float | bool] = {

@@ -17,9 +17,9 @@ from typing import Any
 
 from confluent_kafka import KafkaError, KafkaException, Message, Producer
 
-from fleetlink.ratelimit import LogLimiter
-from uplink.errors import ProduceError
-from uplink.kafka_settings import KafkaSettings, redacted
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.uplink.errors import ProduceError
+from fleetlink.uplink.kafka_settings import KafkaSettings, redacted
 
 log = logging.getLogger(__name__)
 

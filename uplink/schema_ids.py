@@ -16,8 +16,8 @@ import threading
 from collections.abc import Iterable, Mapping
 from typing import Any, Protocol
 
-from schemas.errors import IncompatibleSchemaError, RegistryError
-from schemas.registry import RegistryUnavailableError, subject_for_topic
+from fleetlink.schemas.errors import IncompatibleSchemaError, RegistryError
+from fleetlink.schemas.registry import RegistryUnavailableError, subject_for_topic
 
 
 class Registry(Protocol):

@@ -12,32 +12,38 @@ import gc
 import logging
 import threading
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import zenoh
 
-from fleetlink.console import DeliveryLatency
-from fleetlink.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
-from fleetlink.metrics.server import HttpServer
-from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan import Ack, WireError, decode_batch, encode_ack
-from fleetlink.zenoh_options import ZenohOptions
-from schemas.registry import SchemaRegistry
-from uplink.commands.router import CommandRouter
-from uplink.config import UplinkConfig
-from uplink.ingest import BatchJob, IngestStats
-from uplink.ordered import KeyedSerialExecutor
-from uplink.producer import KafkaSink
-from uplink.schema_ids import SchemaIds
-from uplink.topics import ensure_topics
-
-if TYPE_CHECKING:
-    from fleetlink.console.uplink import UplinkConsole
+from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
+from fleetlink.common.metrics.server import HttpServer
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.schemas.registry import SchemaRegistry
+from fleetlink.uplink.commands.router import CommandRouter
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.ingest import BatchJob, IngestStats
+from fleetlink.uplink.latency import DeliveryLatency
+from fleetlink.uplink.ordered import KeyedSerialExecutor
+from fleetlink.uplink.producer import KafkaSink
+from fleetlink.uplink.schema_ids import SchemaIds
+from fleetlink.uplink.topics import ensure_topics
+from fleetlink.wire import Ack, WireError, decode_batch, encode_ack
 
 log = logging.getLogger(__name__)
+
+
+class UplinkExtension(Protocol):
+    """Something run beside the uplink on its session (the fleet console), started and stopped with it."""
+
+    def start(self) -> object: ...
+
+    def stop(self) -> None: ...
 
 
 class Uplink:
@@ -47,6 +53,7 @@ class Uplink:
         zenoh_options: ZenohOptions | None = None,
         *,
         metrics: PrometheusMetrics | None = None,
+        extensions: Sequence[Callable[[Uplink], UplinkExtension]] = (),
     ) -> None:
         self.config = config
         # Without a metrics endpoint nobody can read them: counting every delivery report would
@@ -69,7 +76,9 @@ class Uplink:
         self._commands: CommandRouter | None = None
         self.delivery_latency = DeliveryLatency()
         """Per site: from a batch's arrival to Kafka's last delivery report (shown by the console)."""
-        self.console: UplinkConsole | None = None
+        self.extension_factories = tuple(extensions)
+        """Made and started at the end of ``start`` (the layer above passes the fleet console)."""
+        self.extensions: list[UplinkExtension] = []
         self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
@@ -97,11 +106,10 @@ class Uplink:
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
             self._metrics_server = serve_metrics(host, port, self.metrics)
-        if cfg.console is not None:
-            from fleetlink.console.uplink import UplinkConsole
-
-            self.console = UplinkConsole(cfg.console, session=self._session, router=lambda: self._commands,
-                                         latency=self.delivery_latency).start()
+        for make in self.extension_factories:
+            extension = make(self)
+            extension.start()
+            self.extensions.append(extension)
         # what start made lives as long as the service: out of full collections; young ones rarer
         # (deliveries and records never form cycles): 90 ms of collections for 60,000 records before
         self._gc_before = gc.get_threshold()
@@ -117,9 +125,9 @@ class Uplink:
         if self._metrics_server is not None:
             self._metrics_server.stop()
             self._metrics_server = None
-        if self.console is not None:
-            self.console.stop()
-            self.console = None
+        for extension in self.extensions:
+            extension.stop()
+        self.extensions = []
         for queryable in self._queryables:
             queryable.undeclare()
         self._queryables.clear()
@@ -153,6 +161,13 @@ class Uplink:
     def metrics_url(self) -> str | None:
         """Where ``/metrics`` and ``/health`` are served, when configured."""
         return self._metrics_server.url if self._metrics_server is not None else None
+
+    @property
+    def session(self) -> zenoh.Session:
+        """The uplink's Zenoh session (once started)."""
+        if self._session is None:
+            raise RuntimeError("the uplink is not started")
+        return self._session
 
     @property
     def commands(self) -> CommandRouter | None:

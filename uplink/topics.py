@@ -7,8 +7,8 @@ import logging
 from confluent_kafka import KafkaException
 from confluent_kafka.admin import AdminClient, NewTopic
 
-from uplink.config import TopicSettings
-from uplink.kafka_settings import KafkaSettings
+from fleetlink.uplink.config import TopicSettings
+from fleetlink.uplink.kafka_settings import KafkaSettings
 
 log = logging.getLogger(__name__)
 

@@ -10,13 +10,13 @@
 See docs/admin.md.
 """
 
-from edge.admin.auth import load_token
-from edge.admin.backend import AdminBackend, EdgeSnapshot, MappingCounts, RobotStatus
-from edge.admin.errors import AdminError, FieldProblem, InvalidChangeError, OverlayError
-from edge.admin.overlay import Overlay
-from edge.admin.server import EdgeAdmin
-from edge.admin.service import AdminService
-from edge.admin.store import OverlayStore, default_overlay_path
+from fleetlink.edge.admin.auth import load_token
+from fleetlink.edge.admin.backend import AdminBackend, EdgeSnapshot, MappingCounts, RobotStatus
+from fleetlink.edge.admin.errors import AdminError, FieldProblem, InvalidChangeError, OverlayError
+from fleetlink.edge.admin.overlay import Overlay
+from fleetlink.edge.admin.server import EdgeAdmin
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.store import OverlayStore, default_overlay_path
 
 __all__ = [
     "AdminBackend",

@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
-from edge.admin.backend import (
+from fleetlink.edge.admin.backend import (
     BufferState,
     EdgeSnapshot,
     MappingCounts,
@@ -22,14 +22,14 @@ from edge.admin.backend import (
     RobotStatus,
     WanTotals,
 )
-from edge.config import EdgeConfig
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
-from edge.spool import SpoolStats
-from roswire.discovery import GraphWatcher
-from roswire.graph import TopicInfo
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.edge.spool import SpoolStats
+from fleetlink.roswire.discovery import GraphWatcher
+from fleetlink.roswire.graph import TopicInfo
 
 if TYPE_CHECKING:
-    from edge.agent import EdgeAgent
+    from fleetlink.edge.agent import EdgeAgent
 
 _COUNTS = ("received", "emitted", "dropped", "dead_lettered", "type_mismatch")
 _WAN = ("batches_sent", "records_sent", "bytes_sent", "batches_acked", "records_acked", "batches_retried",

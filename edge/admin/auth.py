@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pydantic import SecretStr
 
-from edge.admin.errors import TokenError
+from fleetlink.edge.admin.errors import TokenError
 
 ENV_TOKEN = "FLEETLINK_ADMIN_TOKEN"  # noqa: S105 - the variable's name, not a secret
 ENV_TOKEN_FILE = "FLEETLINK_ADMIN_TOKEN_FILE"  # noqa: S105 - a variable name

@@ -11,10 +11,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
-from edge.config import EdgeConfig
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
-from edge.spool import SpoolStats
-from roswire.graph import TopicInfo
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.edge.spool import SpoolStats
+from fleetlink.roswire.graph import TopicInfo
 
 RobotState = Literal["registered", "lost"]
 

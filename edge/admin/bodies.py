@@ -11,7 +11,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from edge.config import MappingConfig, Name, RobotMappingConfig
+from fleetlink.edge.config import MappingConfig, Name, RobotMappingConfig
 
 
 class MappingBody(MappingConfig):

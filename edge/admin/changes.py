@@ -16,12 +16,18 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from edge.admin.errors import ConflictError, FieldProblem, InvalidChangeError, NotFoundError, OverlayError
-from edge.admin.overlay import Overlay, apply_overlay, locate_mapping, owner_of
-from edge.admin.problems import problems_from
-from edge.config import EdgeConfig, MappingConfig
-from edge.stages import StageConfigError, build_pipeline
-from fleetlink.configfile import PathPart, format_path
+from fleetlink.common.configfile import PathPart, format_path
+from fleetlink.edge.admin.errors import (
+    ConflictError,
+    FieldProblem,
+    InvalidChangeError,
+    NotFoundError,
+    OverlayError,
+)
+from fleetlink.edge.admin.overlay import Overlay, apply_overlay, locate_mapping, owner_of
+from fleetlink.edge.admin.problems import problems_from
+from fleetlink.edge.config import EdgeConfig, MappingConfig
+from fleetlink.edge.stages import StageConfigError, build_pipeline
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from edge.errors import EdgeError
-from fleetlink.errors import ConfigError
+from fleetlink.common.errors import ConfigError
+from fleetlink.edge.errors import EdgeError
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,8 +15,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from edge.admin.backend import EdgeSnapshot
-from fleetlink.metrics.health import Health, Problem
+from fleetlink.common.metrics.health import Health, Problem
+from fleetlink.edge.admin.backend import EdgeSnapshot
 
 
 @dataclass(frozen=True, slots=True)

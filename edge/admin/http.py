@@ -16,13 +16,16 @@ from fastapi.responses import JSONResponse
 from pydantic import SecretStr
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from edge.admin.auth import authorized
-from edge.admin.bodies import DryRunBody, MappingBody, MappingChangeBody, RobotTypeBody, raw
-from edge.admin.errors import AdminError, FieldProblem, InvalidChangeError, UnauthorizedError
-from edge.admin.overlay import Overlay
-from edge.admin.problems import document_path, message_of
-from edge.admin.service import AdminService
-from edge.admin.views import (
+from fleetlink import __version__
+from fleetlink.common.configfile import format_path
+from fleetlink.common.metrics import PrometheusMetrics, add_metrics_routes
+from fleetlink.edge.admin.auth import authorized
+from fleetlink.edge.admin.bodies import DryRunBody, MappingBody, MappingChangeBody, RobotTypeBody, raw
+from fleetlink.edge.admin.errors import AdminError, FieldProblem, InvalidChangeError, UnauthorizedError
+from fleetlink.edge.admin.overlay import Overlay
+from fleetlink.edge.admin.problems import document_path, message_of
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.views import (
     ChangeView,
     DryRunView,
     ErrorView,
@@ -32,9 +35,6 @@ from edge.admin.views import (
     RobotView,
     TopicView,
 )
-from fleetlink import __version__
-from fleetlink.configfile import format_path
-from fleetlink.metrics import PrometheusMetrics, add_metrics_routes
 
 NameParam = Annotated[str, Path(pattern=r"^[A-Za-z0-9_.-]+$", max_length=128)]
 _ERRORS: dict[int | str, dict[str, Any]] = {

@@ -5,9 +5,9 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Iterable, Mapping, Sequence
 
-from edge.admin.backend import EdgeSnapshot, MappingCounts, RobotStatus
-from edge.admin.overlay import Overlay
-from edge.admin.views import (
+from fleetlink.edge.admin.backend import EdgeSnapshot, MappingCounts, RobotStatus
+from fleetlink.edge.admin.overlay import Overlay
+from fleetlink.edge.admin.views import (
     DryRunMatchView,
     DryRunView,
     IssueView,
@@ -19,11 +19,11 @@ from edge.admin.views import (
     TopicMatchView,
     TopicView,
 )
-from edge.config import EdgeConfig, MappingConfig
-from edge.errors import MappingError
-from edge.mapping import BoundMapping, MappingTable, RobotTypeSpec
-from edge.stages import StageConfigError, StageSpec, build_pipeline
-from roswire.graph import TopicInfo
+from fleetlink.edge.config import EdgeConfig, MappingConfig
+from fleetlink.edge.errors import MappingError
+from fleetlink.edge.mapping import BoundMapping, MappingTable, RobotTypeSpec
+from fleetlink.edge.stages import StageConfigError, StageSpec, build_pipeline
+from fleetlink.roswire.graph import TopicInfo
 
 _STAGE_KEYS = ("received", "passed", "dropped", "late", "errors", "emitted")
 

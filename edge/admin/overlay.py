@@ -20,7 +20,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from fleetlink.configfile import PathPart
+from fleetlink.common.configfile import PathPart
 
 
 class RobotTypeOverlay(BaseModel):

@@ -1,6 +1,6 @@
 """pydantic validation errors -> ``FieldProblem`` lists with config-file style paths.
 
-Paths are written like ``fleetlink validate`` writes them (``fleetlink.configfile.format_path``:
+Paths are written like ``fleetlink validate`` writes them (``fleetlink.common.configfile.format_path``:
 ``mappings[0].stages[1].hz``); the tag pydantic adds for a discriminated union (the stage
 ``type``) is left out, so the path names keys of the document only.
 """
@@ -12,8 +12,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from edge.admin.errors import FieldProblem
-from fleetlink.configfile import PathPart, format_path
+from fleetlink.common.configfile import PathPart, format_path
+from fleetlink.edge.admin.errors import FieldProblem
 
 _PREFIXES = ("Value error, ", "Assertion failed, ")
 

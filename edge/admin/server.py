@@ -8,33 +8,53 @@
 
 The HTTP server runs when a listen address is given (default: the config's ``admin.listen``);
 the Zenoh admin space runs on the session given to ``start`` (``attach`` uses the agent's).
+
+Parts served beside the API (the web console) are *extensions*: the layer that assembles the
+edge process passes factories for them, so the admin never imports what is built on top of it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import zenoh
+from fastapi import FastAPI
 from pydantic import SecretStr
 
-from edge.admin.agent_backend import AgentBackend
-from edge.admin.backend import AdminBackend
-from edge.admin.changes import effective
-from edge.admin.errors import AdminError
-from edge.admin.http import create_app
-from edge.admin.overlay import Overlay, config_data
-from edge.admin.service import AdminService
-from edge.admin.store import OverlayStore, default_overlay_path
-from edge.admin.telemetry import EdgeTelemetry
-from edge.admin.zenoh_admin import ZenohAdmin
-from edge.config import EdgeConfig
-from fleetlink.console.edge import EdgeConsole
-from fleetlink.metrics import HttpServer, PrometheusMetrics
+from fleetlink.common.metrics import HttpServer, PrometheusMetrics
+from fleetlink.edge.admin.agent_backend import AgentBackend
+from fleetlink.edge.admin.backend import AdminBackend, EdgeSnapshot
+from fleetlink.edge.admin.changes import effective
+from fleetlink.edge.admin.errors import AdminError
+from fleetlink.edge.admin.http import create_app
+from fleetlink.edge.admin.overlay import Overlay, config_data
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.store import OverlayStore, default_overlay_path
+from fleetlink.edge.admin.telemetry import EdgeTelemetry
+from fleetlink.edge.admin.zenoh_admin import ZenohAdmin
+from fleetlink.edge.config import EdgeConfig
 
 if TYPE_CHECKING:
-    from edge.agent import EdgeAgent
+    from fleetlink.edge.agent import EdgeAgent
+
+
+class AdminExtension(Protocol):
+    """Something served beside the admin API: routes on its HTTP app, keys on its Zenoh session."""
+
+    def mount(self, app: FastAPI) -> None: ...
+
+    def start(self, session: zenoh.Session) -> object: ...
+
+    def stop(self) -> None: ...
+
+
+ExtensionFactory = Callable[
+    [AdminService, Callable[[], EdgeSnapshot], Callable[[], Mapping[str, Any]] | None], AdminExtension
+]
+"""Makes an extension from the admin service, the snapshot of the edge and its raw counters."""
 
 
 class EdgeAdmin:
@@ -46,6 +66,7 @@ class EdgeAdmin:
         token: SecretStr | None = None,
         listen: str | None = None,
         metrics: PrometheusMetrics | None = None,
+        extensions: Sequence[ExtensionFactory] = (),
     ) -> None:
         self.base = base
         self.store = OverlayStore(overlay_path or default_overlay_path(Path(base.spool.dir)))
@@ -56,7 +77,8 @@ class EdgeAdmin:
         self.service: AdminService | None = None
         self.http: HttpServer | None = None
         self.zenoh: ZenohAdmin | None = None
-        self.console: EdgeConsole | None = None
+        self.extension_factories = tuple(extensions)
+        self.extensions: list[AdminExtension] = []
         self._overlay: Overlay | None = None
         self._agent_backend: AgentBackend | None = None
 
@@ -72,16 +94,17 @@ class EdgeAdmin:
         service = AdminService(self.base, backend, overlay=overlay, store=self.store,
                                telemetry=EdgeTelemetry(self.metrics))
         raw = self._agent_backend.agent.snapshot if self._agent_backend is not None else None
-        self.console = EdgeConsole(service, edge_id=self.base.edge_id, token=self.token,
-                                   snapshot=backend.snapshot, raw_snapshot=raw)
+        self.extensions = [make(service, backend.snapshot, raw) for make in self.extension_factories]
         try:
             if self.listen:
                 app = create_app(service, token=self.token, metrics=self.metrics)
-                self.console.mount(app)  # the web console under /console/
+                for extension in self.extensions:
+                    extension.mount(app)  # e.g. the web console under /console/
                 self.http = HttpServer(app, self.listen, name="edge-admin").start()
             if session is not None:
                 self.zenoh = ZenohAdmin(session, service, edge_id=self.base.edge_id, token=self.token).start()
-                self.console.start(session)  # fleetlink/<site>/console/status for the fleet console
+                for extension in self.extensions:
+                    extension.start(session)  # e.g. fleetlink/<site>/console/status
         except BaseException:
             self.stop()
             raise
@@ -99,9 +122,9 @@ class EdgeAdmin:
             raise
 
     def stop(self) -> None:
-        if self.console is not None:
-            self.console.stop()
-            self.console = None
+        for extension in self.extensions:
+            extension.stop()
+        self.extensions = []
         if self.zenoh is not None:
             self.zenoh.stop()
             self.zenoh = None

@@ -13,18 +13,25 @@ import logging
 import threading
 from typing import Any, Literal
 
-from edge.admin import changes
-from edge.admin.backend import AdminBackend, EdgeSnapshot
-from edge.admin.errors import FieldProblem, InvalidChangeError, NotFoundError
-from edge.admin.listing import dry_run_matches, mapping_views, robot_views, topic_views
-from edge.admin.overlay import Overlay, config_data
-from edge.admin.specs import declarations
-from edge.admin.store import OverlayStore
-from edge.admin.telemetry import EdgeTelemetry
-from edge.admin.views import ChangeView, DryRunView, MappingView, RobotTypeView, RobotView, TopicView
-from edge.config import EdgeConfig
-from edge.errors import MappingError
-from fleetlink.metrics import Health, NullMetrics
+from fleetlink.common.metrics import Health, NullMetrics
+from fleetlink.edge.admin import changes
+from fleetlink.edge.admin.backend import AdminBackend, EdgeSnapshot
+from fleetlink.edge.admin.errors import FieldProblem, InvalidChangeError, NotFoundError
+from fleetlink.edge.admin.listing import dry_run_matches, mapping_views, robot_views, topic_views
+from fleetlink.edge.admin.overlay import Overlay, config_data
+from fleetlink.edge.admin.specs import declarations
+from fleetlink.edge.admin.store import OverlayStore
+from fleetlink.edge.admin.telemetry import EdgeTelemetry
+from fleetlink.edge.admin.views import (
+    ChangeView,
+    DryRunView,
+    MappingView,
+    RobotTypeView,
+    RobotView,
+    TopicView,
+)
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.errors import MappingError
 
 log = logging.getLogger(__name__)
 

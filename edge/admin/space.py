@@ -25,8 +25,8 @@ from typing import Any
 import zenoh
 from pydantic import BaseModel
 
-from edge.admin.errors import AdminError, InvalidChangeError
-from edge.admin.service import AdminService
+from fleetlink.edge.admin.errors import AdminError, InvalidChangeError
+from fleetlink.edge.admin.service import AdminService
 
 COLLECTIONS = ("robots", "topics", "mappings", "robot_types", "health", "overlay")
 ITEMS = ("mappings", "robot_types")

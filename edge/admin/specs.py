@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from edge.config import EdgeConfig, MappingConfig
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.edge.config import EdgeConfig, MappingConfig
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
 
 
 def declarations(

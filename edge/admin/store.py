@@ -15,9 +15,9 @@ from pathlib import Path
 import yaml
 from pydantic import ValidationError
 
-from edge.admin.errors import OverlayError, PersistError
-from edge.admin.overlay import Overlay
-from edge.admin.problems import problems_from
+from fleetlink.edge.admin.errors import OverlayError, PersistError
+from fleetlink.edge.admin.overlay import Overlay
+from fleetlink.edge.admin.problems import problems_from
 
 OVERLAY_NAME = "admin-overlay.yaml"
 _HEADER = (

@@ -11,11 +11,11 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from typing import Protocol
 
-from edge.admin.backend import EdgeSnapshot, RobotStatus
-from edge.config import EdgeConfig
-from edge.errors import MappingError
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
-from roswire.graph import TopicInfo
+from fleetlink.edge.admin.backend import EdgeSnapshot, RobotStatus
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.errors import MappingError
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.roswire.graph import TopicInfo
 
 
 class GraphSource(Protocol):

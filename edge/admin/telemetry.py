@@ -11,9 +11,9 @@ import threading
 import time
 from collections.abc import Callable
 
-from edge.admin.backend import EdgeSnapshot
-from edge.admin.health import HealthRules, assess
-from fleetlink.metrics import CounterDeltas, Health, Metrics, RecentIncrease
+from fleetlink.common.metrics import CounterDeltas, Health, Metrics, RecentIncrease
+from fleetlink.edge.admin.backend import EdgeSnapshot
+from fleetlink.edge.admin.health import HealthRules, assess
 
 _STAGE_DROPS = (("dropped", "dropped"), ("late", "late"), ("errors", "error"))
 _SPOOL_DROPS = (("dropped_oldest", "dropped_oldest"), ("dropped_newest", "dropped_newest"),

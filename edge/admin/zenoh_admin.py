@@ -14,12 +14,12 @@ from typing import Any
 import zenoh
 from pydantic import SecretStr
 
-from edge.admin.auth import authorized
-from edge.admin.listing import declared
-from edge.admin.service import AdminService
-from edge.admin.space import Target, envelope, execute, parse_body, targets
-from fleetlink.pooled_queryable import PooledQueryable
-from fleetlink.wan.keys import admin_key
+from fleetlink.common.pooled_queryable import PooledQueryable
+from fleetlink.edge.admin.auth import authorized
+from fleetlink.edge.admin.listing import declared
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.space import Target, envelope, execute, parse_body, targets
+from fleetlink.wire.keys import admin_key
 
 log = logging.getLogger(__name__)
 

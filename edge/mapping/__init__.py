@@ -11,8 +11,8 @@ Pattern syntax: ``edge.mapping.patterns``; template syntax and Kafka topic rules
 ``edge.mapping.table``. ``edge.config.EdgeConfig.mapping_table()`` builds a table from the YAML.
 """
 
-from edge.mapping.patterns import Capture, TopicPattern, check_robot_name
-from edge.mapping.spec import (
+from fleetlink.edge.mapping.patterns import Capture, TopicPattern, check_robot_name
+from fleetlink.edge.mapping.spec import (
     DELIVERIES,
     CompiledMapping,
     Delivery,
@@ -23,8 +23,8 @@ from edge.mapping.spec import (
     check_unique_names,
     compile_mapping,
 )
-from edge.mapping.table import BoundMapping, MappingInfo, MappingTable
-from edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
+from fleetlink.edge.mapping.table import BoundMapping, MappingInfo, MappingTable
+from fleetlink.edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
 
 __all__ = [
     "DELIVERIES",

@@ -12,7 +12,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from edge.errors import MappingError
+from fleetlink.edge.errors import MappingError
 
 IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _LITERAL_SEGMENT = re.compile(r"[A-Za-z0-9_]+")

@@ -12,9 +12,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
 
-from edge.errors import MappingError
-from edge.mapping.patterns import TopicPattern
-from edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
+from fleetlink.edge.errors import MappingError
+from fleetlink.edge.mapping.patterns import TopicPattern
+from fleetlink.edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
 
 Delivery = Literal["at_least_once", "best_effort"]
 DELIVERIES: tuple[str, ...] = get_args(Delivery)

@@ -18,9 +18,9 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from edge.errors import MappingError, RenderError
-from edge.mapping.patterns import TopicPattern, check_robot_name
-from edge.mapping.spec import (
+from fleetlink.edge.errors import MappingError, RenderError
+from fleetlink.edge.mapping.patterns import TopicPattern, check_robot_name
+from fleetlink.edge.mapping.spec import (
     CompiledMapping,
     Delivery,
     MappingSpec,
@@ -28,7 +28,7 @@ from edge.mapping.spec import (
     check_unique_names,
     compile_mapping,
 )
-from edge.mapping.templates import Template, kafka_topic_problem
+from fleetlink.edge.mapping.templates import Template, kafka_topic_problem
 
 
 @dataclass(frozen=True, slots=True)

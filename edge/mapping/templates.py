@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from edge.errors import MappingError, RenderError
+from fleetlink.edge.errors import MappingError, RenderError
 
 KAFKA_TOPIC_MAX = 249
 _KAFKA_TOPIC_CHARS = re.compile(r"[A-Za-z0-9._-]+")

@@ -16,8 +16,8 @@ from typing import Any
 
 import fastavro
 
-from edge.runtime.errors import EncodingError
-from schemas.single_object import fingerprint
+from fleetlink.edge.runtime.errors import EncodingError
+from fleetlink.schemas.single_object import fingerprint
 
 
 def schema_json(schema: dict[str, Any]) -> str:

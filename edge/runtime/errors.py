@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from edge.errors import EdgeError
+from fleetlink.edge.errors import EdgeError
 
 
 class RuntimeSetupError(EdgeError):

@@ -14,11 +14,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from edge.mapping import BoundMapping, Delivery
-from edge.runtime.outgoing import MappingCounters, Outgoing
-from fleetlink.wan import PayloadTemplate
-from roswire.subscriber import RosSample
-from schemas.errors import SchemaError
+from fleetlink.edge.mapping import BoundMapping, Delivery
+from fleetlink.edge.runtime.outgoing import MappingCounters, Outgoing
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.errors import SchemaError
+from fleetlink.wire import PayloadTemplate
 
 
 @dataclass(frozen=True, slots=True)

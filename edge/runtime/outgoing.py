@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import NamedTuple
 
-from edge.mapping import Delivery
-from fleetlink.wan import Record, decode_payload, encode_payload
+from fleetlink.edge.mapping import Delivery
+from fleetlink.wire import Record, decode_payload, encode_payload
 
 
 class Outgoing(NamedTuple):

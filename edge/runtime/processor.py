@@ -15,15 +15,15 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 
-from edge.errors import SpoolError, SpoolFullError
-from edge.mapping import Delivery
-from edge.runtime.intake import Intake
-from edge.runtime.outgoing import Outgoing
-from edge.runtime.records import RecordMaker
-from edge.spool import RecordBuffer
-from fleetlink.ratelimit import LogLimiter
-from roswire.errors import RoswireError
-from roswire.subscriber import RosSample
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.edge.errors import SpoolError, SpoolFullError
+from fleetlink.edge.mapping import Delivery
+from fleetlink.edge.runtime.intake import Intake
+from fleetlink.edge.runtime.outgoing import Outgoing
+from fleetlink.edge.runtime.records import RecordMaker
+from fleetlink.edge.spool import RecordBuffer
+from fleetlink.roswire.errors import RoswireError
+from fleetlink.roswire.subscriber import RosSample
 
 log = logging.getLogger(__name__)
 

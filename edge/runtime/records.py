@@ -20,18 +20,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from edge.errors import RenderError
-from edge.mapping import BoundMapping, Delivery
-from edge.runtime.encoding import AvroWriter, SchemaIdentity, identity_of
-from edge.runtime.errors import EncodingError
-from edge.runtime.fastpath import FastPlan, Lane, run_plan
-from edge.runtime.outgoing import MappingCounters, Outgoing
-from edge.stages import Pipeline, Sample, StageConfigError, build_pipeline
-from fleetlink.wan import SINGLE_OBJECT_MAGIC, PayloadTemplate, Record, single_object
-from roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
-from roswire.subscriber import RosSample
-from schemas.codec import Codec
-from schemas.errors import SchemaError
+from fleetlink.edge.errors import RenderError
+from fleetlink.edge.mapping import BoundMapping, Delivery
+from fleetlink.edge.runtime.encoding import AvroWriter, SchemaIdentity, identity_of
+from fleetlink.edge.runtime.errors import EncodingError
+from fleetlink.edge.runtime.fastpath import FastPlan, Lane, run_plan
+from fleetlink.edge.runtime.outgoing import MappingCounters, Outgoing
+from fleetlink.edge.stages import Pipeline, Sample, StageConfigError, build_pipeline
+from fleetlink.roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.codec import Codec
+from fleetlink.schemas.errors import SchemaError
+from fleetlink.wire import SINGLE_OBJECT_MAGIC, PayloadTemplate, Record, single_object
 
 H_SOURCE_TOPIC = "fleetlink.source_topic"
 H_ROS_TYPE = "fleetlink.ros_type"

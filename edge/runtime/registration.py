@@ -21,17 +21,17 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
-from edge.runtime.encoding import AvroWriter
-from edge.runtime.records import H_EDGE, H_ROBOT, H_SITE
-from fleetlink.wan import Record, single_object
-from roswire import cdr
-from roswire.errors import RobotError
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from roswire.qos import DEFAULT, Durability, QoS
-from roswire.robot_watcher import STRING_HASHES, STRING_TYPE, RobotWatcher
-from roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType, parse_registration
-from roswire.subscriber import RosSample, RosSubscriber
+from fleetlink.edge.runtime.encoding import AvroWriter
+from fleetlink.edge.runtime.records import H_EDGE, H_ROBOT, H_SITE
+from fleetlink.roswire import cdr
+from fleetlink.roswire.errors import RobotError
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.qos import DEFAULT, Durability, QoS
+from fleetlink.roswire.robot_watcher import STRING_HASHES, STRING_TYPE, RobotWatcher
+from fleetlink.roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType, parse_registration
+from fleetlink.roswire.subscriber import RosSample, RosSubscriber
+from fleetlink.wire import Record, single_object
 
 log = logging.getLogger(__name__)
 

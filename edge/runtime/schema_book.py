@@ -16,8 +16,8 @@ import threading
 from collections.abc import Iterable
 from pathlib import Path
 
-from edge.runtime.errors import RuntimeSetupError
-from schemas.single_object import fingerprint
+from fleetlink.edge.runtime.errors import RuntimeSetupError
+from fleetlink.schemas.single_object import fingerprint
 
 log = logging.getLogger(__name__)
 

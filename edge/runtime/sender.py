@@ -30,14 +30,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
-from edge.config import WanSection
-from edge.errors import SpoolError
-from edge.runtime.backoff import Backoff
-from edge.runtime.schema_book import SchemaBook
-from edge.runtime.transport import Transport
-from edge.spool import RecordBuffer, SpoolBatch
-from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan import Codec, WireError, decode_ack, encode_batch_payloads, payload_fingerprints
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.edge.config import WanSection
+from fleetlink.edge.errors import SpoolError
+from fleetlink.edge.runtime.backoff import Backoff
+from fleetlink.edge.runtime.schema_book import SchemaBook
+from fleetlink.edge.runtime.transport import Transport
+from fleetlink.edge.spool import RecordBuffer, SpoolBatch
+from fleetlink.wire import Codec, WireError, decode_ack, encode_batch_payloads, payload_fingerprints
 
 log = logging.getLogger(__name__)
 _NS = 1_000_000_000

@@ -27,17 +27,17 @@ from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from types import TracebackType
 
-from edge.errors import MappingError
-from edge.mapping import MappingTable, TopicPattern
-from edge.runtime.intake import Intake
-from edge.runtime.processor import Item, Rejected
-from roswire.discovery import GraphWatcher
-from roswire.errors import RoswireError
-from roswire.graph import EventKind, GraphEvent
-from roswire.node import RosNode
-from roswire.subscriber import RosSample, RosSubscriber
-from roswire.tokens import EndpointInfo, EntityKind
-from schemas.errors import SchemaError
+from fleetlink.edge.errors import MappingError
+from fleetlink.edge.mapping import MappingTable, TopicPattern
+from fleetlink.edge.runtime.intake import Intake
+from fleetlink.edge.runtime.processor import Item, Rejected
+from fleetlink.roswire.discovery import GraphWatcher
+from fleetlink.roswire.errors import RoswireError
+from fleetlink.roswire.graph import EventKind, GraphEvent
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.subscriber import RosSample, RosSubscriber
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind
+from fleetlink.schemas.errors import SchemaError
 
 log = logging.getLogger(__name__)
 

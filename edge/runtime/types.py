@@ -5,9 +5,9 @@ from __future__ import annotations
 import threading
 from typing import TYPE_CHECKING, Literal
 
-from schemas.codec import Codec, get_codec
-from schemas.errors import SchemaError, UnknownTypeError
-from schemas.typestore import Distro
+from fleetlink.schemas.codec import Codec, get_codec
+from fleetlink.schemas.errors import SchemaError, UnknownTypeError
+from fleetlink.schemas.typestore import Distro
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

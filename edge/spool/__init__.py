@@ -6,7 +6,7 @@
 Both implement ``RecordBuffer`` (see ``edge.spool.api`` for the sender's loop).
 """
 
-from edge.spool.api import (
+from fleetlink.edge.spool.api import (
     FSYNC_POLICIES,
     FULL_POLICIES,
     FsyncPolicy,
@@ -17,8 +17,8 @@ from edge.spool.api import (
     SpoolRecord,
     SpoolStats,
 )
-from edge.spool.memory import MemoryBuffer
-from edge.spool.spool import Spool
+from fleetlink.edge.spool.memory import MemoryBuffer
+from fleetlink.edge.spool.spool import Spool
 
 __all__ = [
     "FSYNC_POLICIES",

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple, Protocol, get_args
 
-from edge.errors import SpoolError
+from fleetlink.edge.errors import SpoolError
 
 FullPolicy = Literal["block", "drop_oldest", "drop_newest"]
 FsyncPolicy = Literal["always", "batch", "interval"]

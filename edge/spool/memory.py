@@ -14,9 +14,9 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 
-from edge.errors import SpoolClosedError, SpoolError
-from edge.spool.api import SpoolBatch, SpoolRecord, SpoolStats
-from edge.spool.spool import wall_ms
+from fleetlink.edge.errors import SpoolClosedError, SpoolError
+from fleetlink.edge.spool.api import SpoolBatch, SpoolRecord, SpoolStats
+from fleetlink.edge.spool.spool import wall_ms
 
 
 class MemoryBuffer:

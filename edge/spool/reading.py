@@ -6,8 +6,8 @@ import logging
 import os
 from dataclasses import dataclass
 
-from edge.spool.frames import HEADER_SIZE, Damage, Frame, scan
-from edge.spool.segments import Segment
+from fleetlink.edge.spool.frames import HEADER_SIZE, Damage, Frame, scan
+from fleetlink.edge.spool.segments import Segment
 
 log = logging.getLogger(__name__)
 

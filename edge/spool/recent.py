@@ -14,9 +14,9 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 
-from edge.spool.api import SpoolRecord
-from edge.spool.frames import HEADER_SIZE
-from edge.spool.segments import Segment
+from fleetlink.edge.spool.api import SpoolRecord
+from fleetlink.edge.spool.frames import HEADER_SIZE
+from fleetlink.edge.spool.segments import Segment
 
 Item = tuple[int, int, bytes]
 """``(seq, append time ms, frame)``, as the spool writes them."""

@@ -15,7 +15,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from edge.spool.frames import SEGMENT_HEADER_SIZE, Damage, Frame, decode_segment_header, scan
+from fleetlink.edge.spool.frames import SEGMENT_HEADER_SIZE, Damage, Frame, decode_segment_header, scan
 
 log = logging.getLogger(__name__)
 

@@ -20,15 +20,15 @@ import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from edge.errors import SpoolClosedError, SpoolError, SpoolFullError, SpoolLockedError
-from edge.spool.api import SpoolBatch, SpoolOptions, SpoolRecord, SpoolStats, check_payloads
-from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, Frame, encode_frame, peek_timestamp
-from edge.spool.ledger import Ledger
-from edge.spool.reading import read_frames
-from edge.spool.recent import RecentFrames
-from edge.spool.segments import Cursor, Segment, recover
-from edge.spool.tracking import SendTracker, Slice
-from edge.spool.writer import DiskFull, SegmentWriter
+from fleetlink.edge.errors import SpoolClosedError, SpoolError, SpoolFullError, SpoolLockedError
+from fleetlink.edge.spool.api import SpoolBatch, SpoolOptions, SpoolRecord, SpoolStats, check_payloads
+from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, Frame, encode_frame, peek_timestamp
+from fleetlink.edge.spool.ledger import Ledger
+from fleetlink.edge.spool.reading import read_frames
+from fleetlink.edge.spool.recent import RecentFrames
+from fleetlink.edge.spool.segments import Cursor, Segment, recover
+from fleetlink.edge.spool.tracking import SendTracker, Slice
+from fleetlink.edge.spool.writer import DiskFull, SegmentWriter
 
 log = logging.getLogger(__name__)
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from edge.spool.frames import SEGMENT_HEADER_SIZE
-from edge.spool.segments import Cursor, Segment
+from fleetlink.edge.spool.frames import SEGMENT_HEADER_SIZE
+from fleetlink.edge.spool.segments import Cursor, Segment
 
 
 @dataclass(slots=True)

@@ -10,10 +10,10 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from edge.errors import SpoolError
-from edge.spool.frames import encode_segment_header
-from edge.spool.ledger import SPACE_ERRORS, fsync_dir
-from edge.spool.segments import Segment, segment_name
+from fleetlink.edge.errors import SpoolError
+from fleetlink.edge.spool.frames import encode_segment_header
+from fleetlink.edge.spool.ledger import SPACE_ERRORS, fsync_dir
+from fleetlink.edge.spool.segments import Segment, segment_name
 
 
 class DiskFull(Exception):  # noqa: N818 - internal signal between writer and spool

@@ -4,14 +4,15 @@
 list of ``StageSpec`` and built with ``build_pipeline``. See docs/stages.md.
 """
 
-from edge.stages.aggregate import AggregateStage
-from edge.stages.base import Sample, Stage, StageCounters
-from edge.stages.errors import EvaluationError, ExpressionError, FieldPathError, StageConfigError
-from edge.stages.filter import FilterStage
-from edge.stages.on_change import OnChangeStage
-from edge.stages.pipeline import Pipeline, build_pipeline, build_stage
-from edge.stages.project import ProjectStage
-from edge.stages.spec import (
+from fleetlink.common.durations import DurationNs, format_duration, parse_duration
+from fleetlink.edge.stages.aggregate import AggregateStage
+from fleetlink.edge.stages.base import Sample, Stage, StageCounters
+from fleetlink.edge.stages.errors import EvaluationError, ExpressionError, FieldPathError, StageConfigError
+from fleetlink.edge.stages.filter import FilterStage
+from fleetlink.edge.stages.on_change import OnChangeStage
+from fleetlink.edge.stages.pipeline import Pipeline, build_pipeline, build_stage
+from fleetlink.edge.stages.project import ProjectStage
+from fleetlink.edge.stages.spec import (
     AggregateSpec,
     FilterSpec,
     OnChangeSpec,
@@ -19,8 +20,7 @@ from edge.stages.spec import (
     StageSpec,
     ThrottleSpec,
 )
-from edge.stages.throttle import ThrottleStage
-from fleetlink.durations import DurationNs, format_duration, parse_duration
+from fleetlink.edge.stages.throttle import ThrottleStage
 
 __all__ = [
     "AggregateSpec",

@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from edge.stages.avro import kind_of, resolve_path, root_node, short_hash
-from edge.stages.base import Sample, StageCounters
-from edge.stages.errors import StageConfigError
-from edge.stages.paths import Getter, field_name, make_getter, parse_path
-from edge.stages.windows import OPS, Window, window_starts
+from fleetlink.edge.stages.avro import kind_of, resolve_path, root_node, short_hash
+from fleetlink.edge.stages.base import Sample, StageCounters
+from fleetlink.edge.stages.errors import StageConfigError
+from fleetlink.edge.stages.paths import Getter, field_name, make_getter, parse_path
+from fleetlink.edge.stages.windows import OPS, Window, window_starts
 
 AGG_NAMESPACE = "fleetlink.agg"
 _NO_WATERMARK = -(2**63)

@@ -13,8 +13,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from edge.stages.errors import FieldPathError, StageConfigError
-from edge.stages.paths import Step, path_text
+from fleetlink.edge.stages.errors import FieldPathError, StageConfigError
+from fleetlink.edge.stages.paths import Step, path_text
 
 PRIMITIVES = frozenset({"null", "boolean", "int", "long", "float", "double", "bytes", "string"})
 NUMERIC = frozenset({"int", "long", "float", "double"})

@@ -1,15 +1,15 @@
 """Errors raised by the edge pipeline stages.
 
 Configuration problems (a bad expression, a field path that the message type does not have,
-an unusable stage option) are ``StageConfigError``: a ``fleetlink.errors.ConfigError``, so the
+an unusable stage option) are ``StageConfigError``: a ``fleetlink.common.errors.ConfigError``, so the
 config loader and the admin API report them like any other config mistake. Per-sample problems
 never raise out of ``Stage.process``: they are counted (``errors``) and the sample is dropped.
 """
 
 from __future__ import annotations
 
-from edge.errors import EdgeError
-from fleetlink.errors import ConfigError
+from fleetlink.common.errors import ConfigError
+from fleetlink.edge.errors import EdgeError
 
 
 class StageConfigError(ConfigError, EdgeError):

@@ -10,11 +10,11 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from edge.stages.avro import kind_of, resolve_path, root_node
-from edge.stages.base import Sample, StageCounters
-from edge.stages.errors import EvaluationError
-from edge.stages.expr import check_predicate, compile_predicate, parse_expression
-from edge.stages.paths import Steps
+from fleetlink.edge.stages.avro import kind_of, resolve_path, root_node
+from fleetlink.edge.stages.base import Sample, StageCounters
+from fleetlink.edge.stages.errors import EvaluationError
+from fleetlink.edge.stages.expr import check_predicate, compile_predicate, parse_expression
+from fleetlink.edge.stages.paths import Steps
 
 log = logging.getLogger(__name__)
 

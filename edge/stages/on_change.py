@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from edge.stages.avro import resolve_path, root_node
-from edge.stages.base import Sample, StageCounters
-from edge.stages.paths import Getter, Steps, make_getter, parse_path
+from fleetlink.edge.stages.avro import resolve_path, root_node
+from fleetlink.edge.stages.base import Sample, StageCounters
+from fleetlink.edge.stages.paths import Getter, Steps, make_getter, parse_path
 
 _SAMPLE_ERRORS = (LookupError, TypeError, ValueError)
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from edge.stages.errors import FieldPathError
+from fleetlink.edge.stages.errors import FieldPathError
 
 Step = str | int
 Steps = tuple[Step, ...]

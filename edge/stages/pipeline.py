@@ -11,14 +11,21 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from edge.stages.aggregate import AggregateStage
-from edge.stages.base import Sample, Stage, StageCounters
-from edge.stages.errors import StageConfigError
-from edge.stages.filter import FilterStage
-from edge.stages.on_change import OnChangeStage
-from edge.stages.project import ProjectStage
-from edge.stages.spec import AggregateSpec, FilterSpec, OnChangeSpec, ProjectSpec, StageSpec, ThrottleSpec
-from edge.stages.throttle import ThrottleStage
+from fleetlink.edge.stages.aggregate import AggregateStage
+from fleetlink.edge.stages.base import Sample, Stage, StageCounters
+from fleetlink.edge.stages.errors import StageConfigError
+from fleetlink.edge.stages.filter import FilterStage
+from fleetlink.edge.stages.on_change import OnChangeStage
+from fleetlink.edge.stages.project import ProjectStage
+from fleetlink.edge.stages.spec import (
+    AggregateSpec,
+    FilterSpec,
+    OnChangeSpec,
+    ProjectSpec,
+    StageSpec,
+    ThrottleSpec,
+)
+from fleetlink.edge.stages.throttle import ThrottleStage
 
 
 def build_stage(spec: StageSpec) -> Stage:

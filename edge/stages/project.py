@@ -19,10 +19,17 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from edge.stages.avro import Node, SchemaIndex, copy_self_contained, resolve_path, root_node, short_hash
-from edge.stages.base import Sample, StageCounters
-from edge.stages.errors import FieldPathError, StageConfigError
-from edge.stages.paths import Getter, Steps, field_name, make_getter, parse_path, path_text
+from fleetlink.edge.stages.avro import (
+    Node,
+    SchemaIndex,
+    copy_self_contained,
+    resolve_path,
+    root_node,
+    short_hash,
+)
+from fleetlink.edge.stages.base import Sample, StageCounters
+from fleetlink.edge.stages.errors import FieldPathError, StageConfigError
+from fleetlink.edge.stages.paths import Getter, Steps, field_name, make_getter, parse_path, path_text
 
 _SAMPLE_ERRORS = (LookupError, TypeError)
 

@@ -11,10 +11,10 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from edge.stages.errors import StageConfigError
-from edge.stages.expr import check_predicate, parse_expression
-from edge.stages.paths import parse_path
-from fleetlink.durations import DurationNs
+from fleetlink.common.durations import DurationNs
+from fleetlink.edge.stages.errors import StageConfigError
+from fleetlink.edge.stages.expr import check_predicate, parse_expression
+from fleetlink.edge.stages.paths import parse_path
 
 Op = Literal["count", "mean", "min", "max", "last", "stddev"]
 StageName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from edge.stages.base import Sample, StageCounters
+from fleetlink.edge.stages.base import Sample, StageCounters
 
 Keep = Literal["first", "latest"]
 

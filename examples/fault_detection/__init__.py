@@ -4,8 +4,8 @@ Public API: ``build_app(settings) -> quixstreams.Application``, ``run(settings, 
 and ``FaultDetectionSettings``; the pure rules are in ``rules``. See docs/fault_detection.md.
 """
 
-from examples.fault_detection.app import build_app, run
-from examples.fault_detection.rules import LightCommand, RobotState
-from examples.fault_detection.settings import FaultDetectionSettings, Topics
+from fleetlink.examples.fault_detection.app import build_app, run
+from fleetlink.examples.fault_detection.rules import LightCommand, RobotState
+from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, Topics
 
 __all__ = ["FaultDetectionSettings", "LightCommand", "RobotState", "Topics", "build_app", "run"]

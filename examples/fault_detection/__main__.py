@@ -2,6 +2,6 @@
 
 import sys
 
-from examples.fault_detection.cli import main
+from fleetlink.examples.fault_detection.cli import main
 
 sys.exit(main())

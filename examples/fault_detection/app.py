@@ -28,8 +28,8 @@ from quixstreams.models import Row, SchemaRegistryClientConfig
 from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
 from quixstreams.models.serializers.exceptions import SerializationError
 
-from examples.fault_detection.errors import BadRecordError, FaultDetectionError, SettingsError
-from examples.fault_detection.rules import (
+from fleetlink.examples.fault_detection.errors import BadRecordError, FaultDetectionError, SettingsError
+from fleetlink.examples.fault_detection.rules import (
     INITIAL_MEMORY,
     LightCommand,
     RobotMemory,
@@ -40,7 +40,7 @@ from examples.fault_detection.rules import (
     window_complete,
     window_verdict,
 )
-from examples.fault_detection.settings import FaultDetectionSettings, check_copartitioned
+from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, check_copartitioned
 
 __all__ = ["COMMAND_ID_HEADER", "LIGHTRING_TYPE", "build_app", "lightring_schema", "run"]
 
@@ -84,10 +84,10 @@ class _RateLimitedLog:
 
 def lightring_schema(settings: FaultDetectionSettings) -> dict[str, Any]:
     """The Avro schema of LightringLeds, from ``msg_paths`` or else the packages fleetlink ships."""
-    from schemas.avro_schema import avro_schema
-    from schemas.bundled import bundled_message_paths
-    from schemas.errors import SchemaError
-    from schemas.typestore import load_typestore
+    from fleetlink.schemas.avro_schema import avro_schema
+    from fleetlink.schemas.bundled import bundled_message_paths
+    from fleetlink.schemas.errors import SchemaError
+    from fleetlink.schemas.typestore import load_typestore
 
     paths = settings.msg_paths or tuple(bundled_message_paths())
     try:

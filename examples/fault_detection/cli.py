@@ -10,14 +10,14 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from examples.fault_detection.errors import FaultDetectionError
-from examples.fault_detection.settings import (
+from fleetlink.common.errors import FleetlinkError
+from fleetlink.examples.fault_detection.errors import FaultDetectionError
+from fleetlink.examples.fault_detection.settings import (
     DEFAULT_STATE_DIR,
     FaultDetectionSettings,
     Topics,
     parse_duration_ms,
 )
-from fleetlink.errors import FleetlinkError
 
 __all__ = ["build_parser", "main", "settings_from_args"]
 
@@ -154,7 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValidationError as exc:
         print(f"invalid options:\n{exc}", file=sys.stderr)
         return 2
-    from examples.fault_detection.app import run
+    from fleetlink.examples.fault_detection.app import run
 
     try:
         run(settings)  # SIGINT / SIGTERM stop it cleanly

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fleetlink.errors import ConfigError, FleetlinkError
+from fleetlink.common.errors import ConfigError, FleetlinkError
 
 
 class FaultDetectionError(FleetlinkError):

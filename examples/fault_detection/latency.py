@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from examples.fault_detection.settings import FaultDetectionSettings, Topics, parse_duration_ms
+from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, Topics, parse_duration_ms
 
 PKG = "irobot_create_msgs/msg/"
 SENSOR_TYPES = {"ir": "IrIntensityVector", "hazard": "HazardDetectionVector", "kidnap": "KidnapStatus"}
@@ -155,10 +155,10 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
     from confluent_kafka.admin import AdminClient, NewTopic
     from confluent_kafka.schema_registry import Schema, SchemaRegistryClient
 
-    from examples.fault_detection.app import run
-    from schemas.bundled import bundled_message_paths
-    from schemas.codec import get_codec
-    from schemas.typestore import load_typestore
+    from fleetlink.examples.fault_detection.app import run
+    from fleetlink.schemas.bundled import bundled_message_paths
+    from fleetlink.schemas.codec import get_codec
+    from fleetlink.schemas.typestore import load_typestore
 
     run_id = uuid.uuid4().hex[:8]
     topics = Topics(

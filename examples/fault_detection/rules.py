@@ -34,7 +34,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from examples.fault_detection.errors import BadRecordError, CorruptStateError
+from fleetlink.examples.fault_detection.errors import BadRecordError, CorruptStateError
 
 __all__ = [
     "HAZARD_CLIFF",

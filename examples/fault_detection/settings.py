@@ -12,9 +12,9 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, PositiveFloat, PositiveInt
 
-from examples.fault_detection.errors import SettingsError
-from examples.fault_detection.rules import HAZARD_CLIFF, HAZARD_WHEEL_DROP, RuleConfig
-from fleetlink import durations
+from fleetlink.common import durations
+from fleetlink.examples.fault_detection.errors import SettingsError
+from fleetlink.examples.fault_detection.rules import HAZARD_CLIFF, HAZARD_WHEEL_DROP, RuleConfig
 
 __all__ = [
     "DEFAULT_STATE_DIR",

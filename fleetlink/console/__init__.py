@@ -12,11 +12,8 @@ polls JSON; every asset ships in the package (no network at run time).
 - sources: ``local.LocalSite`` (in process), ``remote.ZenohSites`` (over Zenoh);
 - adapters: ``app.create_console_app`` (FastAPI), ``edge.EdgeConsole``, ``uplink.UplinkConsole``.
 
-The package itself imports only the light parts (settings, latency), so config models can use
-``ConsoleSettings`` without loading the web stack. See docs/console.md.
+The console sits above the edge, the uplink and the repeater: it is served *by* their processes
+as an extension the command line attaches (``edge.console_extension``, ``uplink.uplink_console``);
+its settings model lives in ``fleetlink.common.console_settings`` so config files can name it.
+See docs/console.md.
 """
-
-from fleetlink.console.latency import DeliveryLatency
-from fleetlink.console.settings import ConsoleSettings
-
-__all__ = ["ConsoleSettings", "DeliveryLatency"]

@@ -24,15 +24,15 @@ import zenoh
 from fastapi import FastAPI
 from pydantic import SecretStr
 
-from edge.admin.auth import authorized
-from edge.admin.backend import EdgeSnapshot
-from edge.admin.service import AdminService
-from edge.admin.space import envelope
+from fleetlink.common.pooled_queryable import PooledQueryable
 from fleetlink.console.app import create_console_app
 from fleetlink.console.local import LocalSite
 from fleetlink.console.remote import status_key
 from fleetlink.console.status import site_status
-from fleetlink.pooled_queryable import PooledQueryable
+from fleetlink.edge.admin.auth import authorized
+from fleetlink.edge.admin.backend import EdgeSnapshot
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.space import envelope
 
 log = logging.getLogger(__name__)
 
@@ -104,3 +104,16 @@ class EdgeConsole:
             log.warning("console status query on %s failed: %r", query.key_expr, exc)
         finally:
             query.drop()
+
+
+def console_extension(token: SecretStr | None, edge_id: str, *, poll_interval_s: float = 1.0) -> Callable[
+    [AdminService, Callable[[], EdgeSnapshot], Callable[[], Mapping[str, Any]] | None], EdgeConsole
+]:
+    """The edge's console as an admin extension (``EdgeAdmin(..., extensions=[...])``)."""
+
+    def make(service: AdminService, snapshot: Callable[[], EdgeSnapshot],
+             raw: Callable[[], Mapping[str, Any]] | None) -> EdgeConsole:
+        return EdgeConsole(service, edge_id=edge_id, token=token, snapshot=snapshot, raw_snapshot=raw,
+                           poll_interval_s=poll_interval_s)
+
+    return make

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fleetlink.errors import ConfigError, FleetlinkError
+from fleetlink.common.errors import ConfigError, FleetlinkError
 
 
 class ConsoleError(FleetlinkError):

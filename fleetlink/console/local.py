@@ -10,11 +10,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from edge.admin.service import AdminService
-from edge.admin.space import execute, targets
 from fleetlink.console.envelope import Envelope, failure, from_parts
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.space import execute, targets
 
 NOT_HERE = "not available on this process: command status is kept by the uplink (see its console)"
 _READS = ("robots", "topics", "mappings", "robot_types", "health")

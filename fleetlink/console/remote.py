@@ -22,9 +22,9 @@ import zenoh
 from pydantic import SecretStr
 
 from fleetlink.console.envelope import Envelope, failure, parse
-from fleetlink.console.latency import DeliveryLatency
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
+from fleetlink.uplink.latency import DeliveryLatency
 
 SITE = re.compile(r"[A-Za-z0-9_.-]+")
 _PATH = re.compile(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)?")

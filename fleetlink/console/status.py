@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from edge.admin.backend import EdgeSnapshot
+from fleetlink.edge.admin.backend import EdgeSnapshot
 
 _TOPIC_KEYS = ("received", "delivered", "rejected", "gaps", "missing", "duplicates")
 

@@ -22,16 +22,18 @@ from fastapi import FastAPI
 from fastapi.responses import RedirectResponse
 from pydantic import SecretStr
 
+from fleetlink.common.console_settings import ConsoleSettings
+from fleetlink.common.metrics import HttpServer
 from fleetlink.console.app import create_console_app
 from fleetlink.console.auth import load_console_token
 from fleetlink.console.errors import ConsoleError
-from fleetlink.console.latency import DeliveryLatency
 from fleetlink.console.remote import ZenohSites
-from fleetlink.console.settings import ConsoleSettings
-from fleetlink.metrics import HttpServer
+from fleetlink.uplink.latency import DeliveryLatency
 
 if TYPE_CHECKING:
-    from uplink.commands.router import CommandRouter
+    from fleetlink.uplink.commands.router import CommandRouter
+    from fleetlink.uplink.config import UplinkConfig
+    from fleetlink.uplink.service import Uplink
 
 log = logging.getLogger(__name__)
 
@@ -115,3 +117,20 @@ class UplinkConsole:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
+
+
+def uplink_console(
+    settings: ConsoleSettings, *, token: SecretStr | None = None
+) -> Callable[[Uplink], UplinkConsole]:
+    """The fleet console as an uplink extension (``Uplink(..., extensions=[...])``)."""
+
+    def make(uplink: Uplink) -> UplinkConsole:
+        return UplinkConsole(settings, session=uplink.session, router=lambda: uplink.commands,
+                             latency=uplink.delivery_latency, token=token)
+
+    return make
+
+
+def console_extensions(config: UplinkConfig) -> list[Callable[[Uplink], UplinkConsole]]:
+    """The extensions an uplink process runs for ``config``: the fleet console when it has one."""
+    return [] if config.console is None else [uplink_console(config.console)]

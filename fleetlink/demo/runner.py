@@ -22,6 +22,8 @@ from typing import Any, TextIO
 
 import yaml
 
+from fleetlink.common.durations import parse_duration_ms
+from fleetlink.common.errors import FleetlinkError
 from fleetlink.demo.configs import (
     COMMAND_TOPIC,
     REGISTRATIONS_TOPIC,
@@ -33,8 +35,6 @@ from fleetlink.demo.configs import (
 )
 from fleetlink.demo.story import Story, led_colour
 from fleetlink.demo.watch import TopicWatcher, app_has_committed
-from fleetlink.durations import parse_duration_ms
-from fleetlink.errors import FleetlinkError
 from fleetlink.localstack.process import ServerProcess, log_tail
 from fleetlink.localstack.stack import LocalStack
 from fleetlink.localstack.zenoh_router import ZenohRouter
@@ -113,7 +113,7 @@ class Demo:
         cloud = self._exit.enter_context(ZenohRouter())
         site = self._exit.enter_context(ZenohRouter(connect=(cloud.endpoint,)))
         self.say(f"Zenoh routers: cloud {cloud.endpoint}, site warehouse-a {site.endpoint} (linked)")
-        from schemas.bundled import bundled_message_paths
+        from fleetlink.schemas.bundled import bundled_message_paths
 
         return DemoPlaces(bootstrap, registry, cloud.endpoint, site.endpoint, work,
                           tuple(bundled_message_paths()))
@@ -183,9 +183,9 @@ class Demo:
                 self.say("records/s in Kafka: " + ", ".join(f"{t} {r:.0f}" for t, r in rates.items()))
 
     def _start_app(self, places: DemoPlaces) -> None:
-        from examples.fault_detection.app import run as run_app
-        from examples.fault_detection.rules import LightCommand
-        from examples.fault_detection.settings import FaultDetectionSettings, parse_duration_ms
+        from fleetlink.examples.fault_detection.app import run as run_app
+        from fleetlink.examples.fault_detection.rules import LightCommand
+        from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, parse_duration_ms
 
         settings = FaultDetectionSettings(
             bootstrap=places.bootstrap, registry_url=places.registry_url,
@@ -214,10 +214,10 @@ class Demo:
     # -- the scenario ----------------------------------------------------------------------
 
     def _scenario(self, places: DemoPlaces) -> dict[str, Any]:
-        from fleetlink.zenoh_options import ZenohOptions
-        from roswire.session import ros_session_config
-        from roswire.sim.fleet import Fleet
-        from schemas.typestore import load_typestore
+        from fleetlink.common.zenoh_options import ZenohOptions
+        from fleetlink.roswire.session import ros_session_config
+        from fleetlink.roswire.sim.fleet import Fleet
+        from fleetlink.schemas.typestore import load_typestore
 
         ts = load_typestore("jazzy", list(places.msg_paths))
 

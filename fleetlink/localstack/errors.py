@@ -1,6 +1,6 @@
 """Errors of the local stack: each says what went wrong and what to do."""
 
-from fleetlink.errors import FleetlinkError
+from fleetlink.common.errors import FleetlinkError
 
 
 class StackError(FleetlinkError):

@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING, Any
 
 import zenoh
 
-from roswire.errors import RoswireError
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from roswire.qos import DEFAULT, SENSOR_DATA, QoS
-from roswire.sim.messages import (
+from fleetlink.roswire.errors import RoswireError
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.qos import DEFAULT, SENSOR_DATA, QoS
+from fleetlink.roswire.sim.messages import (
     BATTERY,
     HAZARDS,
     IMU,
@@ -33,9 +33,9 @@ from roswire.sim.messages import (
     MessageFactory,
     lightring_colours,
 )
-from roswire.sim.model import LedState, RobotModel
-from roswire.subscriber import RosSample
-from schemas.typestore import Distro
+from fleetlink.roswire.sim.model import LedState, RobotModel
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.typestore import Distro
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roswire.sim.model import IR_SENSORS, RGB, Readings
+from fleetlink.roswire.sim.model import IR_SENSORS, RGB, Readings
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

@@ -21,16 +21,18 @@ from typing import Any
 import httpx
 from pydantic import SecretStr
 
-from edge.admin import EdgeAdmin
-from edge.agent import EdgeAgent
-from fleetlink.console.settings import ConsoleSettings
+from fleetlink.common.console_settings import ConsoleSettings
+from fleetlink.console.edge import console_extension
+from fleetlink.console.uplink import UplinkConsole, console_extensions
+from fleetlink.edge.admin import EdgeAdmin
+from fleetlink.edge.agent import EdgeAgent
 from fleetlink.localstack.zenoh_router import ZenohRouter
-from roswire.sim.fleet import Fleet
-from schemas.bundled import bundled_message_paths
+from fleetlink.roswire.sim.fleet import Fleet
+from fleetlink.schemas.bundled import bundled_message_paths
+from fleetlink.uplink.service import Uplink
 from tests.helpers import wait_until
 from tests.integration.e2e_stack import Cloud, edge_config, unique_site, uplink_config
 from tests.integration.test_admin_api import fleet, next_domain
-from uplink.service import Uplink
 
 IR_TYPE = "irobot_create_msgs/msg/IrIntensityVector"
 IR_MAPPING = {
@@ -84,7 +86,7 @@ def console_stack(
         )
         config = uplink_config(cloud_router.endpoint, bootstrap, registry_url, suffix=suffix)
         config = config.model_copy(update={"console": settings})
-        uplink = stack.enter_context(Uplink(config))
+        uplink = stack.enter_context(Uplink(config, extensions=console_extensions(config)))
         cloud = Cloud(
             cloud_router.endpoint,
             bootstrap,
@@ -105,15 +107,16 @@ def console_stack(
             robot_types={"tb4": {"match": "/tb4_*", "mappings": [IR_MAPPING]}},
         )
         sim = stack.enter_context(fleet(site_router.endpoint, domain, robots=robots, rate=rate))
-        admin = EdgeAdmin(edge, token=SecretStr(token), listen="127.0.0.1:0")
+        admin = EdgeAdmin(edge, token=SecretStr(token), listen="127.0.0.1:0",
+                          extensions=[console_extension(SecretStr(token), edge.edge_id)])
         agent = stack.enter_context(EdgeAgent(admin.load(), stop_timeout_s=0.5))
         admin.attach(agent)
         stack.callback(admin.stop)
         names = sim.names()
         wait_until(lambda: sorted(agent.robots()) == names, 15, message=f"robots {names} registered")
-        console = uplink.console
-        if console is None:
+        if len(uplink.extensions) != 1 or not isinstance(uplink.extensions[0], UplinkConsole):
             raise AssertionError("the uplink started without its console")
+        console = uplink.extensions[0]
         yield Stack(
             site=site,
             token=token,

@@ -33,10 +33,10 @@ from confluent_kafka import Message
 
 from fleetlink.localstack.relay import TcpRelay
 from fleetlink.localstack.zenoh_router import ZenohRouter
-from roswire import cdr
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from schemas.typestore import load_typestore
+from fleetlink.roswire import cdr
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import TopicReader
 

@@ -30,7 +30,8 @@ from pathlib import Path
 import yaml
 from confluent_kafka import Consumer, TopicPartition
 
-from repeater.service import Repeater
+from fleetlink.repeater.service import Repeater
+from fleetlink.uplink.config import UplinkConfig
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
     GREEN,
@@ -51,7 +52,6 @@ from tests.integration.test_commands_harness import (
     uplink_config,
     wait_repeater_sees,
 )
-from uplink.config import UplinkConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 

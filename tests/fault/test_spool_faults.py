@@ -29,10 +29,10 @@ from typing import Any
 
 import pytest
 
-from edge.errors import SpoolFullError
-from edge.spool import Spool, SpoolOptions
-from edge.spool.frames import SEGMENT_HEADER_SIZE, Damage, scan
-from edge.spool.ledger import parse_ledger
+from fleetlink.edge.errors import SpoolFullError
+from fleetlink.edge.spool import Spool, SpoolOptions
+from fleetlink.edge.spool.frames import SEGMENT_HEADER_SIZE, Damage, scan
+from fleetlink.edge.spool.ledger import parse_ledger
 from tests.helpers import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]

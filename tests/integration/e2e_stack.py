@@ -23,14 +23,14 @@ from confluent_kafka.schema_registry.avro import AvroDeserializer
 from confluent_kafka.serialization import MessageField, SerializationContext
 from rosbags.rosbag2 import Reader
 
-from edge.agent import EdgeAgent
-from edge.config import EdgeConfig
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.edge.config import EdgeConfig
 from fleetlink.localstack.zenoh_router import ZenohRouter
-from roswire.replay import BagReplayer
+from fleetlink.roswire.replay import BagReplayer
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.service import Uplink
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.paths import BAGS
-from uplink.config import UplinkConfig
-from uplink.service import Uplink
 
 HUSKY = BAGS / "robot_localization_husky"
 TB3 = BAGS / "fuse_turtlebot3_sim"

@@ -26,13 +26,14 @@ from openapi_spec_validator import validate
 from prometheus_client.parser import text_string_to_metric_families
 from pydantic import SecretStr
 
-from edge.admin import EdgeAdmin
-from edge.admin.store import default_overlay_path
-from edge.agent import EdgeAgent
-from edge.config import EdgeConfig
-from roswire.sim.fleet import Fleet
-from schemas.bundled import bundled_message_paths
-from schemas.typestore import load_typestore
+from fleetlink.console.edge import console_extension
+from fleetlink.edge.admin import EdgeAdmin
+from fleetlink.edge.admin.store import default_overlay_path
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.roswire.sim.fleet import Fleet
+from fleetlink.schemas.bundled import bundled_message_paths
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 
 TOKEN = "admin-" + uuid.uuid4().hex
@@ -97,7 +98,9 @@ class Edge:
 @contextmanager
 def running_edge(config: EdgeConfig, *, token: str | None = TOKEN) -> Iterator[Edge]:
     """The agent with its admin API (config file + saved admin changes), stopped at the end."""
-    admin = EdgeAdmin(config, token=SecretStr(token) if token else None, listen="127.0.0.1:0")
+    secret = SecretStr(token) if token else None
+    admin = EdgeAdmin(config, token=secret, listen="127.0.0.1:0",
+                      extensions=[console_extension(secret, config.edge_id)])
     agent = EdgeAgent(admin.load(), stop_timeout_s=0.5)
     with agent:
         admin.attach(agent)

@@ -10,9 +10,10 @@ import httpx
 from confluent_kafka import Consumer, TopicPartition
 from pydantic import SecretStr
 
-from edge.admin import EdgeAdmin
-from edge.agent import EdgeAgent
-from schemas.bundled import bundled_message_paths
+from fleetlink.console.edge import console_extension
+from fleetlink.edge.admin import EdgeAdmin
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.schemas.bundled import bundled_message_paths
 from tests.helpers import wait_until
 from tests.integration.e2e_stack import (
     TopicReader,
@@ -49,7 +50,8 @@ def test_runtime_mapping_reaches_kafka_and_stops(
             robot_types={"tb4": {"match": "/tb4_*", "mappings": []}},
             ros={"domain_id": domain, "message_paths": [str(p) for p in bundled_message_paths()]},
         )
-        admin = EdgeAdmin(config, token=SecretStr(TOKEN), listen="127.0.0.1:0")
+        admin = EdgeAdmin(config, token=SecretStr(TOKEN), listen="127.0.0.1:0",
+                          extensions=[console_extension(SecretStr(TOKEN), config.edge_id)])
         with fleet(router.endpoint, domain, rate=10) as sim, EdgeAgent(admin.load()) as agent:
             admin.attach(agent)
             http = httpx.Client(base_url=admin.url, headers=AUTH, timeout=10)

@@ -6,7 +6,7 @@ import httpx
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from fleetlink.metrics import Health, Problem, PrometheusMetrics, ServeError, serve_metrics
+from fleetlink.common.metrics import Health, Problem, PrometheusMetrics, ServeError, serve_metrics
 
 
 def test_serve_metrics_and_health_on_a_free_port() -> None:

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 
-from edge.agent import EdgeAgent
-from roswire.node import RosNode
-from schemas.typestore import load_typestore
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.roswire.node import RosNode
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import HUSKY, TopicReader, cloud, edge_config, site, unique_site
 

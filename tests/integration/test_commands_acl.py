@@ -13,13 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from fleetlink.certs import UPLINK_NAME
-from repeater.config import RepeaterConfig
-from repeater.service import Repeater
-from roswire.sim.fleet import Fleet
+from fleetlink.common.certs import UPLINK_NAME
+from fleetlink.repeater.config import RepeaterConfig
+from fleetlink.repeater.service import Repeater
+from fleetlink.roswire.sim.fleet import Fleet
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
-    IROBOT,
     RED,
     YELLOW,
     CommandProducer,
@@ -34,6 +33,7 @@ from tests.integration.test_commands_harness import (
 )
 from tests.integration.test_commands_harness import robot_config as site_client
 from tests.integration.zenoh_topology import make_bundle, tls_cloud, tls_edge
+from tests.paths import IROBOT
 
 
 def repeater_at(site: str, endpoint: str, state: Path) -> RepeaterConfig:

@@ -28,18 +28,18 @@ from confluent_kafka.schema_registry import SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer, AvroSerializer
 from confluent_kafka.serialization import MessageField, SerializationContext
 
+from fleetlink.common.zenoh_configs import render_router_config
 from fleetlink.localstack.relay import TcpRelay
-from fleetlink.zenoh_configs import render_router_config
-from repeater.config import RepeaterConfig
-from repeater.service import Repeater
-from roswire.sim.fleet import Fleet
-from roswire.sim.model import LedState
-from schemas.avro_schema import avro_schema
-from schemas.typestore import load_typestore
+from fleetlink.repeater.config import RepeaterConfig
+from fleetlink.repeater.service import Repeater
+from fleetlink.roswire.sim.fleet import Fleet
+from fleetlink.roswire.sim.model import LedState
+from fleetlink.schemas.avro_schema import avro_schema
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.service import Uplink
 from tests.helpers import free_port, wait_until, zenoh_peer_config
 from tests.paths import IROBOT
-from uplink.config import UplinkConfig
-from uplink.service import Uplink
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

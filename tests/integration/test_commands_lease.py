@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from repeater.service import Repeater
+from fleetlink.repeater.service import Repeater
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
     GREEN,

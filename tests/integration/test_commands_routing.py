@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from repeater.service import Repeater
+from fleetlink.repeater.service import Repeater
+from fleetlink.uplink.commands.mapping import CommandMapping
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
     BLUE,
@@ -28,7 +29,6 @@ from tests.integration.test_commands_harness import (
     uplink_config,
     wait_repeater_sees,
 )
-from uplink.commands.mapping import CommandMapping
 
 
 def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every_site(

@@ -19,15 +19,15 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from edge.agent import EdgeAgent
-from fleetlink.wan import single_object
-from roswire import attachment, cdr
-from roswire.names import data_key
-from roswire.node import RosNode
-from roswire.robot_watcher import STRING_HASHES
-from schemas.codec import get_codec
-from schemas.single_object import fingerprint
-from schemas.typestore import load_typestore
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.roswire import attachment, cdr
+from fleetlink.roswire.names import data_key
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.robot_watcher import STRING_HASHES
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire import single_object
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import (
     Cloud,

@@ -14,8 +14,8 @@ from pathlib import Path
 
 from rosbags.typesys.store import Typestore
 
-from edge.agent import EdgeAgent
-from schemas.typestore import load_typestore
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.schemas.typestore import load_typestore
 from tests.integration.e2e_stack import (
     HUSKY,
     TB3,

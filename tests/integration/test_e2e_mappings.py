@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from edge.agent import EdgeAgent
-from roswire import cdr
-from roswire.node import RosNode
-from schemas.typestore import load_typestore
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.roswire import cdr
+from fleetlink.roswire.node import RosNode
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import (
     HUSKY,

@@ -19,13 +19,13 @@ from typing import Any
 import pytest
 from confluent_kafka import Message
 
-from edge.agent import EdgeAgent
-from roswire import cdr
-from roswire.node import RosNode
-from roswire.publisher import RosPublisher
-from roswire.qos import Durability, QoS
-from roswire.subscriber import RosSample
-from schemas.typestore import load_typestore
+from fleetlink.edge.agent import EdgeAgent
+from fleetlink.roswire import cdr
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.qos import Durability, QoS
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import (
     Cloud,

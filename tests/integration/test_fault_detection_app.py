@@ -33,12 +33,12 @@ from confluent_kafka.schema_registry import Schema, SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer
 from confluent_kafka.serialization import MessageField, SerializationContext
 
-from examples.fault_detection.app import COMMAND_ID_HEADER, run
-from examples.fault_detection.rules import HAZARD_WHEEL_DROP, LightCommand
-from examples.fault_detection.settings import FaultDetectionSettings, Topics
-from schemas.bundled import BUNDLED
-from schemas.codec import get_codec
-from schemas.typestore import load_typestore
+from fleetlink.examples.fault_detection.app import COMMAND_ID_HEADER, run
+from fleetlink.examples.fault_detection.rules import HAZARD_WHEEL_DROP, LightCommand
+from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, Topics
+from fleetlink.schemas.bundled import BUNDLED
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until
 
 if TYPE_CHECKING:
@@ -325,7 +325,7 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
     running_app: RunningApp,
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    caplog.set_level(logging.WARNING, logger="examples.fault_detection")
+    caplog.set_level(logging.WARNING, logger="fleetlink.examples.fault_detection")
     settings, seen = running_app.settings, running_app.seen
     produced = produce_scenario(kafka_bootstrap, schema_registry_url, topics, SCENARIO)
     assert produced == 3 * 3 * (DURATION_MS // PERIOD_MS)
@@ -369,7 +369,8 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
     assert [(c.key, colours(c), c.timestamp) for c in new_commands] == [("tb4_04", {RED}, joined_red_at)]
 
     # every record counted: none skipped as late, undecodable or malformed
-    skipped = [r.getMessage() for r in caplog.records if r.name.startswith("examples.fault_detection")]
+    skipped = [r.getMessage() for r in caplog.records
+               if r.name.startswith("fleetlink.examples.fault_detection")]
     assert skipped == []
 
     # a stop request ends the app promptly (finish the record in hand, commit, close)
@@ -392,7 +393,7 @@ def test_cli_subprocess_detects_a_fault_and_stops_on_sigterm(
     [(state, red_at)] = expected_changes(events, 1500)
     assert state == "failed"
     argv = [
-        sys.executable, "-m", "examples.fault_detection",
+        sys.executable, "-m", "fleetlink.examples.fault_detection",
         "--bootstrap", kafka_bootstrap, "--registry", schema_registry_url,
         "--window", "1500ms", "--group", f"fd-cli-{uuid.uuid4().hex[:8]}",
         "--state-dir", str(tmp_path / "state"), "--from-beginning",
@@ -464,7 +465,7 @@ def test_state_survives_a_restart_on_a_fresh_disk(
 def test_latency_tool_measures_window_and_app_parts(kafka_bootstrap: str, schema_registry_url: str) -> None:
     """The measurement tool runs (examples are tested artefacts) and its figures add up."""
     argv = [
-        sys.executable, "-m", "examples.fault_detection.latency",
+        sys.executable, "-m", "fleetlink.examples.fault_detection.latency",
         "--bootstrap", kafka_bootstrap, "--registry", schema_registry_url, "--msg-path", str(IROBOT),
         "--window", "500ms", "--rate", "20", "--runs", "1",
     ]  # fmt: skip

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from roswire.node import RosNode
-from roswire.robot_watcher import RobotWatcher
-from roswire.robots import RobotEvent, RobotEventKind, RobotType
-from roswire.subscriber import RosSample
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.robot_watcher import RobotWatcher
+from fleetlink.roswire.robots import RobotEvent, RobotEventKind, RobotType
+from fleetlink.roswire.subscriber import RosSample
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.paths import BAGS, IROBOT
 

@@ -15,15 +15,15 @@ import pytest
 import zenoh
 
 from fleetlink.localstack.zenoh_router import ZenohRouter
-from roswire import cdr
-from roswire.discovery import GraphWatcher
-from roswire.graph import EventKind, GraphEvent
-from roswire.node import RosNode
-from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
-from roswire.robot_watcher import EVENTS_TOPIC, REGISTER_TOPIC, RobotWatcher
-from roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType
-from roswire.subscriber import RosSample
-from roswire.tokens import EndpointInfo, EntityKind, NodeInfo
+from fleetlink.roswire import cdr
+from fleetlink.roswire.discovery import GraphWatcher
+from fleetlink.roswire.graph import EventKind, GraphEvent
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
+from fleetlink.roswire.robot_watcher import EVENTS_TOPIC, REGISTER_TOPIC, RobotWatcher
+from fleetlink.roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind, NodeInfo
 from tests.helpers import free_port, wait_until, zenoh_peer_config
 
 IMU = "sensor_msgs/msg/Imu"

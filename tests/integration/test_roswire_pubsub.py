@@ -11,16 +11,16 @@ import pytest
 import zenoh
 from rosbags.typesys.store import Typestore
 
-from roswire.attachment import decode, encode
-from roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
-from roswire.gid import entity_gid
-from roswire.names import data_key
-from roswire.node import RosNode
-from roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
-from roswire.subscriber import RosSample, RosSubscriber
-from roswire.tokens import EndpointInfo, parse_token
-from roswire.wire_detect import probe_wire
-from schemas.typestore import load_typestore
+from fleetlink.roswire.attachment import decode, encode
+from fleetlink.roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
+from fleetlink.roswire.gid import entity_gid
+from fleetlink.roswire.names import data_key
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.qos import SENSOR_DATA, TRANSIENT_LOCAL
+from fleetlink.roswire.subscriber import RosSample, RosSubscriber
+from fleetlink.roswire.tokens import EndpointInfo, parse_token
+from fleetlink.roswire.wire_detect import probe_wire
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 
 STRING = "std_msgs/msg/String"

@@ -16,10 +16,10 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from roswire.node import RosNode
-from roswire.replay import BagReplayer, robot_topic
-from roswire.subscriber import RosSample
-from schemas.typestore import load_typestore, register_types, types_from_bag
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.replay import BagReplayer, robot_topic
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.typestore import load_typestore, register_types, types_from_bag
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.paths import BAGS
 

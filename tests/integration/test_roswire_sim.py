@@ -11,15 +11,15 @@ from typing import Any
 import pytest
 from rosbags.typesys.store import Typestore
 
-from roswire.node import RosNode
-from roswire.qos import SENSOR_DATA
-from roswire.robot_watcher import RobotWatcher
-from roswire.robots import RobotEvent, RobotEventKind, RobotType
-from roswire.sim.fleet import Fleet
-from roswire.sim.messages import IR_VECTOR, KIDNAP, LIGHTRING, MessageFactory
-from roswire.sim.model import IR_PICKED_UP_MIN, LedState
-from roswire.subscriber import RosSample
-from schemas.typestore import load_typestore
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.qos import SENSOR_DATA
+from fleetlink.roswire.robot_watcher import RobotWatcher
+from fleetlink.roswire.robots import RobotEvent, RobotEventKind, RobotType
+from fleetlink.roswire.sim.fleet import Fleet
+from fleetlink.roswire.sim.messages import IR_VECTOR, KIDNAP, LIGHTRING, MessageFactory
+from fleetlink.roswire.sim.model import IR_PICKED_UP_MIN, LedState
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.paths import IROBOT
 

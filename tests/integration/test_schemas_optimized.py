@@ -11,9 +11,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 SCRIPT = r"""
 import json, struct
-from schemas.codec import get_codec
-from schemas.errors import SchemaError
-from schemas.typestore import load_typestore
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.errors import SchemaError
+from fleetlink.schemas.typestore import load_typestore
 
 ts = load_typestore("jazzy")
 cases = [

@@ -16,12 +16,12 @@ from confluent_kafka.serialization import MessageField, SerializationContext
 from rosbags.rosbag2 import Reader
 from rosbags.typesys.store import Typestore
 
-from schemas.avro_schema import avro_schema
-from schemas.codec import get_codec
-from schemas.errors import IncompatibleSchemaError
-from schemas.registry import RegistryUnavailableError, SchemaRegistry, subject_for_topic
-from schemas.single_object import confluent_frame
-from schemas.typestore import load_typestore, types_from_msg
+from fleetlink.schemas.avro_schema import avro_schema
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.errors import IncompatibleSchemaError
+from fleetlink.schemas.registry import RegistryUnavailableError, SchemaRegistry, subject_for_topic
+from fleetlink.schemas.single_object import confluent_frame
+from fleetlink.schemas.typestore import load_typestore, types_from_msg
 from tests.helpers import free_port, wait_until
 from tests.paths import HUSKY
 from tests.unit.schemas.ros_values import avro_shaped, same

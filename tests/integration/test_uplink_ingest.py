@@ -17,15 +17,15 @@ from confluent_kafka.serialization import MessageField, SerializationContext
 from prometheus_client.parser import text_string_to_metric_families
 from rosbags.rosbag2 import Reader
 
-from fleetlink.wan import Ack, Record, decode_ack, encode_batch, ingest_key, single_object
-from fleetlink.wan.batch import Batch
-from schemas.codec import get_codec
-from schemas.single_object import fingerprint
-from schemas.typestore import load_typestore
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.service import Uplink
+from fleetlink.wire import Ack, Record, decode_ack, encode_batch, ingest_key, single_object
+from fleetlink.wire.batch import Batch
 from tests.helpers import zenoh_peer_config
 from tests.paths import HUSKY
-from uplink.config import UplinkConfig
-from uplink.service import Uplink
 
 
 @pytest.fixture(scope="module")

@@ -5,12 +5,12 @@ from __future__ import annotations
 import threading
 import uuid
 
-from uplink.kafka_settings import KafkaSettings
-from uplink.producer import Delivery, KafkaSink
+from fleetlink.uplink.kafka_settings import KafkaSettings
+from fleetlink.uplink.producer import Delivery, KafkaSink
 
 
 def test_every_record_gets_one_successful_report(kafka_bootstrap: str) -> None:
-    topic = f"uplink.producer.{uuid.uuid4().hex[:8]}"
+    topic = f"fleetlink.uplink.producer.{uuid.uuid4().hex[:8]}"
     reports: list[Delivery] = []
     done = threading.Event()
 
@@ -29,7 +29,7 @@ def test_every_record_gets_one_successful_report(kafka_bootstrap: str) -> None:
 
 
 def test_oversized_record_is_reported_not_raised(kafka_bootstrap: str) -> None:
-    topic = f"uplink.producer.big.{uuid.uuid4().hex[:8]}"
+    topic = f"fleetlink.uplink.producer.big.{uuid.uuid4().hex[:8]}"
     reports: list[Delivery] = []
     got = threading.Event()
 

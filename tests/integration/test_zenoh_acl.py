@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleetlink.certs import CertBundle
-from fleetlink.zenoh_configs import render_router_config
+from fleetlink.common.certs import CertBundle
+from fleetlink.common.zenoh_configs import render_router_config
 from tests.helpers import free_port, wait_until
 from tests.integration.zenoh_topology import (
     DEPLOY,

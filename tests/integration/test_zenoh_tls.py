@@ -1,4 +1,4 @@
-"""Mutual TLS on the Zenoh WAN link (issue 9), with certificates made by fleetlink.certs.
+"""Mutual TLS on the Zenoh WAN link (issue 9), with certificates made by fleetlink.common.certs.
 
 The shipped templates are used as they are: the cloud router accepts TLS only and requires a
 client certificate from the fleet CA; the edge router connects with its site certificate and
@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleetlink.certs import CLOUD_NAME, CertBundle, edge_name
+from fleetlink.common.certs import CLOUD_NAME, CertBundle, edge_name
 from tests.helpers import wait_until
 from tests.integration.zenoh_topology import (
     Cloud,
@@ -195,7 +195,7 @@ def test_no_private_key_material_in_logs(tmp_path: Path) -> None:
     assert "exchange ok; refused ok" in proc.stdout
     # The logs were really on and cover the TLS links and the certificates' paths.
     assert "tls/127.0.0.1" in output
-    assert "fleetlink.certs" in output
+    assert "fleetlink.common.certs" in output
     needles = _key_material(tmp_path / "certs")
     assert len(needles) > 10
     leaked = [needle for needle in needles if needle in output]

@@ -1,7 +1,7 @@
 """A fleet's Zenoh topology on loopback for the router-config tests: cloud, edges, clients.
 
 Routers are opened from the shipped templates in ``deploy/zenoh/`` (rendered by
-fleetlink.zenoh_configs); clients (robots, edge agents, the uplink) are small client-mode
+fleetlink.common.zenoh_configs); clients (robots, edge agents, the uplink) are small client-mode
 sessions. Everything binds 127.0.0.1 on free ports.
 """
 
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import zenoh
 
-from fleetlink.certs import CLOUD_NAME, UPLINK_NAME, CertBundle, edge_name, generate_bundle
-from fleetlink.zenoh_configs import render_router_config
+from fleetlink.common.certs import CLOUD_NAME, UPLINK_NAME, CertBundle, edge_name, generate_bundle
+from fleetlink.common.zenoh_configs import render_router_config
 from tests.helpers import free_port
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"

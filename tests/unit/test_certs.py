@@ -1,4 +1,4 @@
-"""Test CA and certificates for the Zenoh WAN link (fleetlink.certs)."""
+"""Test CA and certificates for the Zenoh WAN link (fleetlink.common.certs)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from cryptography import x509
 from cryptography.exceptions import InvalidSignature
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from fleetlink.certs import (
+from fleetlink.cli import main
+from fleetlink.common.certs import (
     CLOUD_NAME,
     UPLINK_NAME,
     CertError,
@@ -22,7 +23,6 @@ from fleetlink.certs import (
     new_ca,
     write_identity,
 )
-from fleetlink.cli import main
 
 NOW = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
 SERVER = ExtendedKeyUsageOID.SERVER_AUTH

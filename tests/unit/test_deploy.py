@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from fleetlink.cli import build_parser
-from fleetlink.validate_cli import validate_file
+from fleetlink.cli.validate import validate_file
 
 ROOT = Path(__file__).resolve().parents[2]
 DEPLOY = ROOT / "deploy"

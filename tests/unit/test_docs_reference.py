@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fleetlink.docgen import render
+from fleetlink.cli.docgen import render
 
 REFERENCE = Path(__file__).resolve().parents[2] / "docs" / "reference" / "config.md"
 
 
 def test_config_reference_is_current() -> None:
     assert REFERENCE.read_text() == render(), (
-        "docs/reference/config.md is stale: run `python -m fleetlink.docgen > docs/reference/config.md`"
+        "docs/reference/config.md is stale: run `python -m fleetlink.cli.docgen > docs/reference/config.md`"
     )
 
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fleetlink.wan import (
+from fleetlink.wire import (
     BATCH_VERSION,
     FLAG_SOURCE_SEQ,
     SOURCE_SEQ_HEADER,

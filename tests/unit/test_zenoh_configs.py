@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 import zenoh
 
-from fleetlink.errors import ConfigError
-from fleetlink.zenoh_configs import (
+from fleetlink.common.errors import ConfigError
+from fleetlink.common.zenoh_configs import (
     ALL_MESSAGES,
     RouterConfigError,
     cloud_site_acl,

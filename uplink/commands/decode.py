@@ -17,10 +17,10 @@ from typing import Any, Protocol
 import fastavro
 from fastavro.read import SchemaResolutionError
 
-from schemas.errors import DecodeError, RegistryError
-from schemas.registry import RegistryUnavailableError
-from schemas.single_object import confluent_unframe, fingerprint
-from uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
+from fleetlink.schemas.errors import DecodeError, RegistryError
+from fleetlink.schemas.registry import RegistryUnavailableError
+from fleetlink.schemas.single_object import confluent_unframe, fingerprint
+from fleetlink.uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
 
 _READ_ERRORS = (EOFError, ValueError, TypeError, KeyError, IndexError, UnicodeDecodeError, OverflowError,
                 SchemaResolutionError)

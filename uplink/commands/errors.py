@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from uplink.errors import UplinkError
+from fleetlink.uplink.errors import UplinkError
 
 
 class CommandError(UplinkError):

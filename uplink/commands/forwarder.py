@@ -22,11 +22,11 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from fleetlink.ratelimit import LogLimiter
-from fleetlink.wan.keys import command_key
-from repeater.envelope import SETTLED, CommandReply, decode_reply, encode_envelope
-from repeater.errors import EnvelopeError
-from uplink.commands.plan import Forward
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.uplink.commands.plan import Forward
+from fleetlink.wire.commands import SETTLED, CommandReply, decode_reply, encode_envelope
+from fleetlink.wire.errors import EnvelopeError
+from fleetlink.wire.keys import command_key
 
 log = logging.getLogger(__name__)
 

@@ -35,13 +35,13 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fleetlink.wan.errors import WireError
-from fleetlink.wan.keys import check_key_name
-from repeater.config import PositiveSeconds
-from roswire.errors import InvalidNameError
-from roswire.names import validate_topic
-from roswire.qos import Durability, QoS, Reliability
-from uplink.commands.errors import RoutingError
+from fleetlink.common.durations import PositiveSeconds
+from fleetlink.roswire.errors import InvalidNameError
+from fleetlink.roswire.names import validate_topic
+from fleetlink.roswire.qos import Durability, QoS, Reliability
+from fleetlink.uplink.commands.errors import RoutingError
+from fleetlink.wire.errors import WireError
+from fleetlink.wire.keys import check_key_name
 
 _PLACEHOLDER = re.compile(r"\{([^{}]*)\}")
 _FIELD_PATH = re.compile(r"msg(?:\.[A-Za-z_][A-Za-z0-9_]*)+")

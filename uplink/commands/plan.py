@@ -13,10 +13,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from fleetlink.wan.keys import ROOT, check_key_name, command_key
-from repeater.envelope import CommandEnvelope
-from uplink.commands.decode import DecodedValue
-from uplink.commands.mapping import CommandMapping, targets
+from fleetlink.uplink.commands.decode import DecodedValue
+from fleetlink.uplink.commands.mapping import CommandMapping, targets
+from fleetlink.wire.commands import CommandEnvelope
+from fleetlink.wire.keys import ROOT, check_key_name, command_key
 
 COMMAND_ID_HEADER = "fleetlink-command-id"
 

@@ -18,11 +18,11 @@ from typing import Any
 
 from confluent_kafka import OFFSET_BEGINNING, Consumer, KafkaError, KafkaException, Message, TopicPartition
 
-from fleetlink.ratelimit import LogLimiter
-from uplink.commands.decode import CommandDecoder
-from uplink.commands.directory import RobotDirectory
-from uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
-from uplink.kafka_settings import KafkaSettings
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.uplink.commands.decode import CommandDecoder
+from fleetlink.uplink.commands.directory import RobotDirectory
+from fleetlink.uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
+from fleetlink.uplink.kafka_settings import KafkaSettings
 
 log = logging.getLogger(__name__)
 

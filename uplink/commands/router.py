@@ -30,21 +30,21 @@ from typing import Any
 import zenoh
 from confluent_kafka import Consumer, KafkaException, Message, TopicPartition
 
-from fleetlink.ratelimit import LogLimiter
-from repeater.envelope import StatusEvent
-from schemas.registry import SchemaRegistry
-from uplink.commands.decode import CommandDecoder, DecodedValue
-from uplink.commands.directory import RobotDirectory
-from uplink.commands.errors import RegistryUnreachableError, RoutingError, UndecodableValueError
-from uplink.commands.forwarder import Forwarder
-from uplink.commands.mapping import CommandMapping
-from uplink.commands.offsets import OffsetTracker
-from uplink.commands.plan import CommandRecord, Forward, command_id, lease_until_ms, plan
-from uplink.commands.registrations import RegistrationsReader
-from uplink.commands.status_writer import STATUS_KEY, StatusIntake, StatusWriter
-from uplink.config import UplinkConfig
-from uplink.dead_letter import dead_letter
-from uplink.producer import KafkaSink
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.schemas.registry import SchemaRegistry
+from fleetlink.uplink.commands.decode import CommandDecoder, DecodedValue
+from fleetlink.uplink.commands.directory import RobotDirectory
+from fleetlink.uplink.commands.errors import RegistryUnreachableError, RoutingError, UndecodableValueError
+from fleetlink.uplink.commands.forwarder import Forwarder
+from fleetlink.uplink.commands.mapping import CommandMapping
+from fleetlink.uplink.commands.offsets import OffsetTracker
+from fleetlink.uplink.commands.plan import CommandRecord, Forward, command_id, lease_until_ms, plan
+from fleetlink.uplink.commands.registrations import RegistrationsReader
+from fleetlink.uplink.commands.status_writer import STATUS_KEY, StatusIntake, StatusWriter
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.dead_letter import dead_letter
+from fleetlink.uplink.producer import KafkaSink
+from fleetlink.wire.commands import StatusEvent
 
 log = logging.getLogger(__name__)
 

@@ -19,8 +19,8 @@ from typing import Any
 
 import fastavro
 
-from repeater.envelope import StatusEvent
-from schemas.single_object import confluent_frame
+from fleetlink.schemas.single_object import confluent_frame
+from fleetlink.wire.commands import StatusEvent
 
 STATUS_SCHEMA: dict[str, Any] = {
     "type": "record",

@@ -10,15 +10,15 @@ from typing import Any, Protocol
 
 import zenoh
 
-from fleetlink.ratelimit import LogLimiter
-from repeater.envelope import StatusAck, StatusEvent, decode_status_batch, encode_status_ack
-from repeater.errors import EnvelopeError
-from schemas.errors import RegistryError
-from schemas.registry import subject_for_topic
-from uplink.commands.status_records import STATUS_SCHEMA, status_value
-from uplink.errors import ProduceError
-from uplink.ingest import Sink
-from uplink.producer import Delivery
+from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.schemas.errors import RegistryError
+from fleetlink.schemas.registry import subject_for_topic
+from fleetlink.uplink.commands.status_records import STATUS_SCHEMA, status_value
+from fleetlink.uplink.errors import ProduceError
+from fleetlink.uplink.ingest import Sink
+from fleetlink.uplink.producer import Delivery
+from fleetlink.wire.commands import StatusAck, StatusEvent, decode_status_batch, encode_status_ack
+from fleetlink.wire.errors import EnvelopeError
 
 log = logging.getLogger(__name__)
 

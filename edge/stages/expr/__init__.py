@@ -4,8 +4,8 @@ No ``eval``/``exec``: user text only ever becomes a syntax tree of known node ty
 The language is described in docs/stages.md.
 """
 
-from edge.stages.expr.checker import check_expression, check_predicate
-from edge.stages.expr.compiler import compile_predicate
-from edge.stages.expr.parser import FUNCTIONS, parse_expression
+from fleetlink.edge.stages.expr.checker import check_expression, check_predicate
+from fleetlink.edge.stages.expr.compiler import compile_predicate
+from fleetlink.edge.stages.expr.parser import FUNCTIONS, parse_expression
 
 __all__ = ["FUNCTIONS", "check_expression", "check_predicate", "compile_predicate", "parse_expression"]

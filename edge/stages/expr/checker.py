@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from edge.stages.errors import ExpressionError, FieldPathError
-from edge.stages.expr.nodes import (
+from fleetlink.edge.stages.errors import ExpressionError, FieldPathError
+from fleetlink.edge.stages.expr.nodes import (
     Arith,
     Call,
     Compare,
@@ -24,7 +24,7 @@ from edge.stages.expr.nodes import (
     Quantifier,
     Unary,
 )
-from edge.stages.paths import Steps
+from fleetlink.edge.stages.paths import Steps
 
 FieldKind = Callable[[Steps], str]
 """Field path -> kind; raises ``FieldPathError`` for a path the message type does not have."""

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from edge.stages.base import Sample
-from edge.stages.errors import EvaluationError
-from edge.stages.expr.nodes import (
+from fleetlink.edge.stages.base import Sample
+from fleetlink.edge.stages.errors import EvaluationError
+from fleetlink.edge.stages.expr.nodes import (
     Arith,
     Call,
     Compare,
@@ -30,7 +30,7 @@ from edge.stages.expr.nodes import (
     Quantifier,
     Unary,
 )
-from edge.stages.paths import Steps, make_getter, plain
+from fleetlink.edge.stages.paths import Steps, make_getter, plain
 
 Fn = Callable[[Sample], Any]
 

@@ -6,7 +6,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from edge.stages.errors import ExpressionError
+from fleetlink.edge.stages.errors import ExpressionError
 
 TokenKind = Literal["num", "str", "ident", "meta", "op", "end"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from edge.stages.paths import Steps
+from fleetlink.edge.stages.paths import Steps
 
 
 @dataclass(frozen=True, slots=True)

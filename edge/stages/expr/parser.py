@@ -6,9 +6,9 @@ Precedence, lowest first: ``||``, ``&&``, comparisons and ``in`` (not chainable)
 
 from __future__ import annotations
 
-from edge.stages.errors import ExpressionError
-from edge.stages.expr.lexer import Token, tokenize
-from edge.stages.expr.nodes import (
+from fleetlink.edge.stages.errors import ExpressionError
+from fleetlink.edge.stages.expr.lexer import Token, tokenize
+from fleetlink.edge.stages.expr.nodes import (
     Arith,
     Call,
     Compare,
@@ -21,7 +21,7 @@ from edge.stages.expr.nodes import (
     Quantifier,
     Unary,
 )
-from edge.stages.paths import Step
+from fleetlink.edge.stages.paths import Step
 
 MAX_DEPTH = 64
 """Deepest syntax tree accepted: keeps parsing, checking and evaluation far from Python's

@@ -12,13 +12,13 @@ import pytest
 from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
-from edge.admin.backend import EdgeSnapshot, MappingCounts
-from edge.admin.http import create_app
 from fleetlink.console.app import create_console_app
 from fleetlink.console.auth import COOKIE, cookie_value
 from fleetlink.console.edge import EdgeConsole
 from fleetlink.console.envelope import Envelope, failure
 from fleetlink.console.sources import Process
+from fleetlink.edge.admin.backend import EdgeSnapshot, MappingCounts
+from fleetlink.edge.admin.http import create_app
 from tests.unit.edge.admin.world import World, world
 
 TOKEN = "console-" + "t" * 16

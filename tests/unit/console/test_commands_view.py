@@ -10,10 +10,10 @@ from typing import Any, cast
 import zenoh
 
 from fleetlink.console.uplink import NO_COMMANDS, command_view
-from schemas.registry import SchemaRegistry
-from uplink.commands.router import CommandRouter
-from uplink.config import UplinkConfig
-from uplink.producer import KafkaSink
+from fleetlink.schemas.registry import SchemaRegistry
+from fleetlink.uplink.commands.router import CommandRouter
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.producer import KafkaSink
 
 
 def router() -> CommandRouter:

@@ -1,10 +1,10 @@
-"""fleetlink.console.latency: Kafka delivery latency per site over a window (clock injected)."""
+"""fleetlink.uplink.latency: Kafka delivery latency per site over a window (clock injected)."""
 
 from __future__ import annotations
 
 import pytest
 
-from fleetlink.console.latency import DeliveryLatency, percentile
+from fleetlink.uplink.latency import DeliveryLatency, percentile
 
 
 @pytest.mark.parametrize(

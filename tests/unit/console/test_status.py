@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from edge.admin.backend import BufferState, EdgeSnapshot, WanTotals
-from edge.spool import SpoolStats
 from fleetlink.console.status import site_status
+from fleetlink.edge.admin.backend import BufferState, EdgeSnapshot, WanTotals
+from fleetlink.edge.spool import SpoolStats
 
 
 def stats(stream: str, **values: int | None) -> SpoolStats:

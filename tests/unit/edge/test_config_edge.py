@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from edge.config import EdgeConfig, default_edge_id
-from fleetlink.configfile import load_config
-from fleetlink.errors import ConfigError
+from fleetlink.common.configfile import load_config
+from fleetlink.common.errors import ConfigError
+from fleetlink.edge.config import EdgeConfig, default_edge_id
 
 DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
 EXAMPLES = sorted(DEPLOY.glob("edge*.yaml"))

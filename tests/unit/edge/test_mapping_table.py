@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from edge.errors import MappingError, RenderError
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec, compile_mapping
+from fleetlink.edge.errors import MappingError, RenderError
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec, compile_mapping
 
 TB4 = RobotTypeSpec(
     name="turtlebot4",

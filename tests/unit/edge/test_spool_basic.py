@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from edge.errors import SpoolClosedError, SpoolError, SpoolLockedError
-from edge.spool import FsyncPolicy, Spool, SpoolOptions
-from edge.spool.ledger import RESERVE, encode_entry
-from edge.spool.spool import RESERVE_BLOCK
+from fleetlink.edge.errors import SpoolClosedError, SpoolError, SpoolLockedError
+from fleetlink.edge.spool import FsyncPolicy, Spool, SpoolOptions
+from fleetlink.edge.spool.ledger import RESERVE, encode_entry
+from fleetlink.edge.spool.spool import RESERVE_BLOCK
 from tests.helpers import wait_until
 
 SMALL = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20)

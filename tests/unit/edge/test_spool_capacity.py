@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from edge.errors import SpoolClosedError, SpoolFullError
-from edge.spool import FullPolicy, Spool, SpoolOptions, SpoolStats
+from fleetlink.edge.errors import SpoolClosedError, SpoolFullError
+from fleetlink.edge.spool import FullPolicy, Spool, SpoolOptions, SpoolStats
 from tests.helpers import wait_until
 
 RECORD = b"r" * 100  # a 128-byte frame; 4 KiB segments hold 31 of them

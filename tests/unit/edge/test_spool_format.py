@@ -7,7 +7,7 @@ import zlib
 
 import pytest
 
-from edge.spool.frames import (
+from fleetlink.edge.spool.frames import (
     HEADER_SIZE,
     SEGMENT_HEADER_SIZE,
     Damage,
@@ -19,7 +19,7 @@ from edge.spool.frames import (
     peek_timestamp,
     scan,
 )
-from edge.spool.ledger import ACK, CLEAN, ENTRY_SIZE, RESERVE, encode_entry, parse_ledger
+from fleetlink.edge.spool.ledger import ACK, CLEAN, ENTRY_SIZE, RESERVE, encode_entry, parse_ledger
 
 MAX = 1 << 20
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from edge.errors import SpoolClosedError, SpoolError
-from edge.spool import MemoryBuffer, RecordBuffer, SpoolStats
+from fleetlink.edge.errors import SpoolClosedError, SpoolError
+from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, SpoolStats
 
 
 def balanced(stats: SpoolStats) -> bool:

@@ -12,7 +12,7 @@ from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
-from edge.spool import Spool, SpoolOptions
+from fleetlink.edge.spool import Spool, SpoolOptions
 
 OPTIONS = SpoolOptions(segment_bytes=4096, max_bytes=64 << 20, fsync="batch", fsync_batch=7)
 

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from edge.spool import Spool, SpoolOptions, SpoolRecord
-from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, encode_frame
-from edge.spool.recent import Item, RecentFrames
-from edge.spool.segments import Segment
+from fleetlink.edge.spool import Spool, SpoolOptions, SpoolRecord
+from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, encode_frame
+from fleetlink.edge.spool.recent import Item, RecentFrames
+from fleetlink.edge.spool.segments import Segment
 
 
 def items(first_seq: int, n: int, size: int = 10) -> list[Item]:

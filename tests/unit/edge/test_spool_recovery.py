@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from edge.spool import Spool, SpoolOptions
-from edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
-from edge.spool.ledger import ENTRY_SIZE
+from fleetlink.edge.spool import Spool, SpoolOptions
+from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
+from fleetlink.edge.spool.ledger import ENTRY_SIZE
 
 OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20)
 RECORD = b"p" * 100

@@ -6,8 +6,8 @@ from typing import Any
 
 import pytest
 
-from examples.fault_detection.errors import BadRecordError, CorruptStateError
-from examples.fault_detection.rules import (
+from fleetlink.examples.fault_detection.errors import BadRecordError, CorruptStateError
+from fleetlink.examples.fault_detection.rules import (
     HAZARD_CLIFF,
     HAZARD_WHEEL_DROP,
     INITIAL_MEMORY,

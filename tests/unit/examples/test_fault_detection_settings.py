@@ -9,19 +9,19 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from examples.fault_detection.app import LIGHTRING_TYPE, _RateLimitedLog, lightring_schema
-from examples.fault_detection.cli import build_parser, settings_from_args
-from examples.fault_detection.errors import SettingsError
-from examples.fault_detection.rules import RuleConfig
-from examples.fault_detection.settings import (
+from fleetlink.common.errors import ConfigError
+from fleetlink.examples.fault_detection.app import LIGHTRING_TYPE, _RateLimitedLog, lightring_schema
+from fleetlink.examples.fault_detection.cli import build_parser, settings_from_args
+from fleetlink.examples.fault_detection.errors import SettingsError
+from fleetlink.examples.fault_detection.rules import RuleConfig
+from fleetlink.examples.fault_detection.settings import (
     DEFAULT_STATE_DIR,
     FaultDetectionSettings,
     Topics,
     check_copartitioned,
     parse_duration_ms,
 )
-from fleetlink.errors import ConfigError
-from schemas.bundled import BUNDLED
+from fleetlink.schemas.bundled import BUNDLED
 
 IROBOT = BUNDLED / "irobot_create_msgs"
 REQUIRED = ["--bootstrap", "127.0.0.1:9092", "--registry", "http://127.0.0.1:8081"]
@@ -179,7 +179,7 @@ def test_skipped_records_are_logged_first_then_every_nth(
     count: int, logged: int, caplog: pytest.LogCaptureFixture
 ) -> None:
     log = _RateLimitedLog(every=4)
-    with caplog.at_level(logging.WARNING, logger="examples.fault_detection.app"):
+    with caplog.at_level(logging.WARNING, logger="fleetlink.examples.fault_detection.app"):
         for i in range(count):
             log("late", f"record {i}")
         log("other-kind", "x")

@@ -8,8 +8,8 @@ from typing import Literal
 import pytest
 from pydantic import BaseModel, ConfigDict, Field
 
-from fleetlink.configfile import format_path, load_config
-from fleetlink.errors import ConfigError
+from fleetlink.common.configfile import format_path, load_config
+from fleetlink.common.errors import ConfigError
 
 
 class Mapping(BaseModel):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from pydantic import BaseModel, ValidationError
 
-from fleetlink.durations import DurationNs, format_duration, parse_duration
+from fleetlink.common.durations import DurationNs, format_duration, parse_duration
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""fleetlink.metrics: the Metrics interface, its Prometheus and in-memory implementations,
+"""fleetlink.common.metrics: the Metrics interface, its Prometheus and in-memory implementations,
 cumulative-to-increment helpers and the health model (no sockets)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 from prometheus_client.parser import text_string_to_metric_families
 
-from fleetlink.metrics import (
+from fleetlink.common.metrics import (
     FAMILIES,
     CounterDeltas,
     Health,
@@ -24,7 +24,7 @@ from fleetlink.metrics import (
     metrics_app,
     split_listen,
 )
-from fleetlink.metrics.api import FamilyMetrics, Metrics
+from fleetlink.common.metrics.api import FamilyMetrics, Metrics
 
 DOCS = Path(__file__).resolve().parents[3] / "docs" / "metrics.md"
 

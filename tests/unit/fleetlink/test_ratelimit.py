@@ -6,7 +6,7 @@ import logging
 
 import pytest
 
-from fleetlink.ratelimit import LogLimiter
+from fleetlink.common.ratelimit import LogLimiter
 
 
 def test_repeats_are_suppressed_then_counted(caplog: pytest.LogCaptureFixture) -> None:

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from fleetlink.cli import main
-from fleetlink.validate_cli import guess_kind, validate_file
+from fleetlink.cli.validate import guess_kind, validate_file
 
 DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from fleetlink.errors import ConfigError
-from fleetlink.zenoh_options import ZenohOptions, ZenohSection, add_zenoh_arguments, options_from_args
+from fleetlink.common.errors import ConfigError
+from fleetlink.common.zenoh_options import ZenohOptions, ZenohSection, add_zenoh_arguments, options_from_args
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:

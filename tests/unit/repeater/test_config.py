@@ -10,8 +10,8 @@ import pytest
 from pydantic import ValidationError
 
 from fleetlink.cli import main
-from fleetlink.validate_cli import validate_file
-from repeater.config import RepeaterConfig
+from fleetlink.cli.validate import validate_file
+from fleetlink.repeater.config import RepeaterConfig
 
 DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
 

@@ -11,13 +11,13 @@ from typing import Any
 import fastavro
 import pytest
 
-from repeater.converter import Converter
-from repeater.envelope import CommandEnvelope
-from repeater.errors import ConversionError
-from roswire.sim.messages import LIGHTRING, MessageFactory
-from schemas.codec import get_codec
-from schemas.single_object import fingerprint
-from schemas.typestore import load_typestore
+from fleetlink.repeater.converter import Converter
+from fleetlink.repeater.errors import ConversionError
+from fleetlink.roswire.sim.messages import LIGHTRING, MessageFactory
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire.commands import CommandEnvelope
 from tests.paths import IROBOT
 
 TS = load_typestore("jazzy", [IROBOT])

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import pytest
 
-from repeater.envelope import (
+from fleetlink.wire.commands import (
     FLAG_ZLIB,
     MAGIC,
     CommandEnvelope,
@@ -26,7 +26,7 @@ from repeater.envelope import (
     encode_status_ack,
     encode_status_batch,
 )
-from repeater.errors import EnvelopeError
+from fleetlink.wire.errors import EnvelopeError
 
 SCHEMA = json.dumps({"type": "record", "name": "R", "fields": [{"name": "x", "type": "long"}] * 1}) * 40
 ENV = CommandEnvelope(
@@ -86,7 +86,7 @@ def test_the_hand_built_header_is_valid() -> None:
     (MAGIC + b"\x01\x00\x00\x00\x10\x00{}", "runs past the end"),
     (MAGIC + b"\x01\x00\x00\x00\x00\x03[1]", "not a JSON object"),
     (MAGIC + b"\x01\x00\x00\x00\x00\x02{x", "not JSON"),
-    (_raw(GOOD_HEADER, value=b"\x00\x01" + b"\x00" * 8), "marker"),
+    (_raw(GOOD_HEADER, value=b"\x00\x01" + b"\x00" * 8), "not an Avro single-object value"),
     (_raw(GOOD_HEADER, value=b"\xc3\x01\x00"), "too short"),
     (_raw({**GOOD_HEADER, "id": ""}), "'id' must not be empty"),
     (_raw({**GOOD_HEADER, "robot": 7}), "'robot' must be a string"),

@@ -8,10 +8,18 @@ from pathlib import Path
 
 import pytest
 
-from repeater.envelope import CommandEnvelope, StatusEvent
-from repeater.errors import JournalError
-from repeater.journal import FILENAME, Journal, acked_line, command_line, mark_line, replay, status_line
-from repeater.state import CommandStore
+from fleetlink.repeater.errors import JournalError
+from fleetlink.repeater.journal import (
+    FILENAME,
+    Journal,
+    acked_line,
+    command_line,
+    mark_line,
+    replay,
+    status_line,
+)
+from fleetlink.repeater.state import CommandStore
+from fleetlink.wire.commands import CommandEnvelope, StatusEvent
 
 ENV = CommandEnvelope(
     command_id="c1", robot="tb4_01", ros_topic="/tb4_01/cmd_lightring",

@@ -7,10 +7,10 @@ from typing import Any, cast
 
 import pytest
 
-from repeater.publishers import Publishers, parse_qos
-from roswire.errors import QosParseError
-from roswire.node import RosNode
-from roswire.qos import DEFAULT, TRANSIENT_LOCAL, QoS
+from fleetlink.repeater.publishers import Publishers, parse_qos
+from fleetlink.roswire.errors import QosParseError
+from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.qos import DEFAULT, TRANSIENT_LOCAL, QoS
 
 TRANSIENT = TRANSIENT_LOCAL.to_keyexpr()
 

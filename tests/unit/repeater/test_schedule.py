@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from repeater.schedule import Command, Offer, Schedule
+from fleetlink.repeater.schedule import Command, Offer, Schedule
 
 T0 = 1_700_000_000.0
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from zenoh.ext import Int64, z_serialize
 
-from roswire.attachment import V1_SIZE, V2_SIZE, Attachment, decode, detect_version, encode
-from roswire.errors import AttachmentError
+from fleetlink.roswire.attachment import V1_SIZE, V2_SIZE, Attachment, decode, detect_version, encode
+from fleetlink.roswire.errors import AttachmentError
 
 GID = bytes(range(16))
 V2_VECTOR = bytes.fromhex("0100000000000000" "00002a36fe9c9717" "10" "000102030405060708090a0b0c0d0e0f")

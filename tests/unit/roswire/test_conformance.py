@@ -6,10 +6,10 @@ from __future__ import annotations
 import pytest
 from rosbags.typesys.store import Typestore
 
-from roswire import cdr
-from roswire.names import data_key, parse_data_key
-from schemas.typehash import type_hash
-from schemas.typestore import load_typestore, types_from_srv
+from fleetlink.roswire import cdr
+from fleetlink.roswire.names import data_key, parse_data_key
+from fleetlink.schemas.typehash import type_hash
+from fleetlink.schemas.typestore import load_typestore, types_from_srv
 
 ADD_TWO_INTS_SRV = "int64 a\nint64 b\n---\nint64 sum\n"
 

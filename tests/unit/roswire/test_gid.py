@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import xxhash
 
-from roswire.gid import entity_gid
+from fleetlink.roswire.gid import entity_gid
 
 KEYS = [
     "@ros2_lv/2/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener",

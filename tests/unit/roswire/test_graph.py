@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.errors import TokenError
-from roswire.graph import EventKind, Graph
-from roswire.qos import DEFAULT, SENSOR_DATA, QoS
-from roswire.tokens import EndpointInfo, EntityKind, NodeInfo, endpoint_token, node_token
+from fleetlink.roswire.errors import TokenError
+from fleetlink.roswire.graph import EventKind, Graph
+from fleetlink.roswire.qos import DEFAULT, SENSOR_DATA, QoS
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind, NodeInfo, endpoint_token, node_token
 
 H = "TypeHashNotSupported"
 

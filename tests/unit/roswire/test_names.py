@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.errors import InvalidNameError, KeyParseError
-from roswire.names import (
+from fleetlink.roswire.errors import InvalidNameError, KeyParseError
+from fleetlink.roswire.names import (
     DataKey,
     data_key,
     data_key_expr,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.errors import QosParseError
-from roswire.qos import (
+from fleetlink.roswire.errors import QosParseError
+from fleetlink.roswire.qos import (
     DEFAULT,
     INFINITE,
     SENSOR_DATA,

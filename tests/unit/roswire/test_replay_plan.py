@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
-from roswire.errors import InvalidNameError
-from roswire.qos import DEFAULT, Durability, History, QoS, Reliability
-from roswire.replay import ReplaySchedule, qos_from_bag, robot_topic
+from fleetlink.roswire.errors import InvalidNameError
+from fleetlink.roswire.qos import DEFAULT, Durability, History, QoS, Reliability
+from fleetlink.roswire.replay import ReplaySchedule, qos_from_bag, robot_topic
 
 FOREVER = QosTime(sec=2147483647, nsec=4294967295)
 

@@ -6,11 +6,11 @@ import json
 
 import pytest
 
-from roswire.graph import Graph
-from roswire.qos import SENSOR_DATA
-from roswire.report import RateMeter, graph_report, render_text
-from roswire.robots import RobotRegistry, RobotType
-from roswire.tokens import EntityKind, endpoint_token, node_token
+from fleetlink.roswire.graph import Graph
+from fleetlink.roswire.qos import SENSOR_DATA
+from fleetlink.roswire.report import RateMeter, graph_report, render_text
+from fleetlink.roswire.robots import RobotRegistry, RobotType
+from fleetlink.roswire.tokens import EntityKind, endpoint_token, node_token
 
 IMU_HASH = "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
 KEYS = [

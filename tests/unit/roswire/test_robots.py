@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.errors import RobotError
-from roswire.graph import EventKind, Graph, GraphEvent
-from roswire.qos import DEFAULT
-from roswire.robots import Reason, RobotEventKind, RobotRegistry, RobotType, parse_registration
-from roswire.tokens import EntityKind, endpoint_token, node_token
+from fleetlink.roswire.errors import RobotError
+from fleetlink.roswire.graph import EventKind, Graph, GraphEvent
+from fleetlink.roswire.qos import DEFAULT
+from fleetlink.roswire.robots import Reason, RobotEventKind, RobotRegistry, RobotType, parse_registration
+from fleetlink.roswire.tokens import EntityKind, endpoint_token, node_token
 
 TYPES = [RobotType("turtlebot4", "/tb4_*"), RobotType("husky", "/husky?")]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.sequence import SeqStatus, SequenceTracker
+from fleetlink.roswire.sequence import SeqStatus, SequenceTracker
 
 A, B = b"a" * 16, b"b" * 16
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleetlink.errors import ConfigError
-from fleetlink.zenoh_options import ZenohOptions
-from roswire.session import ros_session_config
+from fleetlink.common.errors import ConfigError
+from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.roswire.session import ros_session_config
 
 
 def get(conf: zenoh.Config, key: str) -> object:

@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 from rosbags.typesys.store import Typestore
 
-from roswire.sim.messages import (
+from fleetlink.roswire.sim.messages import (
     BATTERY,
     HAZARDS,
     IMU,
@@ -19,7 +19,7 @@ from roswire.sim.messages import (
     MessageFactory,
     lightring_colours,
 )
-from roswire.sim.model import (
+from fleetlink.roswire.sim.model import (
     ANGULAR_SPEED,
     HAZARD_WHEEL_DROP,
     IR_NORMAL_MAX,
@@ -30,7 +30,7 @@ from roswire.sim.model import (
     RobotModel,
     colour_name,
 )
-from schemas.typestore import load_typestore
+from fleetlink.schemas.typestore import load_typestore
 from tests.paths import IROBOT
 
 CREATE3 = IROBOT

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.errors import InvalidNameError, TokenError
-from roswire.qos import DEFAULT, SENSOR_DATA, TRANSIENT_LOCAL, QoS
-from roswire.tokens import (
+from fleetlink.roswire.errors import InvalidNameError, TokenError
+from fleetlink.roswire.qos import DEFAULT, SENSOR_DATA, TRANSIENT_LOCAL, QoS
+from fleetlink.roswire.tokens import (
     EndpointInfo,
     EntityKind,
     NodeInfo,

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from roswire.attachment import encode
-from roswire.qos import DEFAULT
-from roswire.tokens import EndpointInfo, EntityKind, endpoint_token, parse_token
-from roswire.wire_detect import WireTally
+from fleetlink.roswire.attachment import encode
+from fleetlink.roswire.qos import DEFAULT
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind, endpoint_token, parse_token
+from fleetlink.roswire.wire_detect import WireTally
 
 V1 = encode(1, 2, bytes(16), 1)
 V2 = encode(1, 2, bytes(16), 2)

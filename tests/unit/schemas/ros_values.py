@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
-from schemas.layout import RANGES
+from fleetlink.schemas.layout import RANGES
 
 _DTYPES = {
     "bool": np.bool_,

@@ -9,9 +9,9 @@ import avro.schema
 import fastavro
 import pytest
 
-from schemas.avro_schema import avro_fullname, avro_schema
-from schemas.typehash import HUMBLE_HASH
-from schemas.typestore import load_typestore, message_types, types_from_msg
+from fleetlink.schemas.avro_schema import avro_fullname, avro_schema
+from fleetlink.schemas.typehash import HUMBLE_HASH
+from fleetlink.schemas.typestore import load_typestore, message_types, types_from_msg
 
 TS = load_typestore("jazzy")
 ALL_KINDS = """

@@ -7,8 +7,8 @@ from collections import Counter
 import pytest
 from rosbags.rosbag2 import Reader
 
-from schemas.codec import get_codec
-from schemas.typestore import load_typestore
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.typestore import load_typestore
 from tests.paths import BAGS
 from tests.unit.schemas.ros_values import avro_shaped, same
 

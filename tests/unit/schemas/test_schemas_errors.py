@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from schemas.codec import get_codec
-from schemas.errors import DecodeError, EncodeError, SchemaError, UnknownTypeError, ValueRangeError
-from schemas.typestore import load_typestore, message_types
-from schemas.wire import zz
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.errors import DecodeError, EncodeError, SchemaError, UnknownTypeError, ValueRangeError
+from fleetlink.schemas.typestore import load_typestore, message_types
+from fleetlink.schemas.wire import zz
 from tests.unit.schemas.ros_values import same
 
 TS = load_typestore("jazzy")
@@ -203,7 +203,7 @@ def test_fixed_array_with_wrong_item_count() -> None:
 
 def test_bounded_sequence_over_its_bound() -> None:
     ts = load_typestore("jazzy")
-    from schemas.typestore import types_from_msg
+    from fleetlink.schemas.typestore import types_from_msg
 
     ts.register(types_from_msg("int32[<=2] xs\nstring<=3 s\n", "t_msgs/msg/Bounded"))
     codec = get_codec(ts, "t_msgs/msg/Bounded", "jazzy")

@@ -11,8 +11,8 @@ import pytest
 from confluent_kafka.schema_registry import Schema
 from confluent_kafka.schema_registry.error import SchemaRegistryError
 
-from schemas.errors import IncompatibleSchemaError, RegistryError
-from schemas.registry import RegistryUnavailableError, SchemaRegistry, subject_for_topic
+from fleetlink.schemas.errors import IncompatibleSchemaError, RegistryError
+from fleetlink.schemas.registry import RegistryUnavailableError, SchemaRegistry, subject_for_topic
 
 V1: dict[str, Any] = {
     "type": "record",

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from schemas.codec import get_codec
-from schemas.typestore import load_typestore, message_types, types_from_msg
+from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.typestore import load_typestore, message_types, types_from_msg
 from tests.paths import IROBOT
 from tests.unit.schemas.ros_values import avro_shaped, message, same
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from fastavro.schema import fingerprint as fastavro_fingerprint
 
-from schemas.avro_schema import avro_schema
-from schemas.single_object import (
+from fleetlink.schemas.avro_schema import avro_schema
+from fleetlink.schemas.single_object import (
     FramingError,
     canonical_form,
     confluent_frame,
@@ -16,7 +16,7 @@ from schemas.single_object import (
     frame,
     unframe,
 )
-from schemas.typestore import load_typestore, message_types
+from fleetlink.schemas.typestore import load_typestore, message_types
 
 TS = load_typestore("jazzy")
 

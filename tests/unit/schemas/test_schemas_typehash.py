@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from rosbags.typesys.store import Typestore
 
-from schemas.errors import UnknownTypeError
-from schemas.typehash import HUMBLE_HASH, type_description, type_hash
-from schemas.typestore import load_typestore, types_from_msg, types_from_srv
+from fleetlink.schemas.errors import UnknownTypeError
+from fleetlink.schemas.typehash import HUMBLE_HASH, type_description, type_hash
+from fleetlink.schemas.typestore import load_typestore, types_from_msg, types_from_srv
 
 ADD_TWO_INTS = "int64 a\nint64 b\n---\nint64 sum\n"
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 from rosbags.interfaces import Nodetype
 
-from schemas.errors import TypeDefinitionError, UnknownTypeError
-from schemas.typestore import (
+from fleetlink.schemas.errors import TypeDefinitionError, UnknownTypeError
+from fleetlink.schemas.typestore import (
     EMPTY_MEMBER,
     load_typestore,
     message_types,
@@ -16,10 +16,7 @@ from schemas.typestore import (
     types_from_msg,
     types_from_srv,
 )
-from tests.paths import DATA
-
-IROBOT = DATA / "msgs" / "irobot_create_msgs"
-BAGS = DATA / "bags"
+from tests.paths import BAGS, IROBOT
 
 
 @pytest.mark.parametrize(

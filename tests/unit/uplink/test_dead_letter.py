@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 
-from uplink.dead_letter import dead_letter
+from fleetlink.uplink.dead_letter import dead_letter
 
 
 def test_raw_bytes_and_reason_are_kept() -> None:

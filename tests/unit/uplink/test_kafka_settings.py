@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from uplink.errors import UnsafeKafkaSettingError
-from uplink.kafka_settings import KafkaSettings, redacted
+from fleetlink.uplink.errors import UnsafeKafkaSettingError
+from fleetlink.uplink.kafka_settings import KafkaSettings, redacted
 
 
 def test_producer_always_runs_acks_all_and_idempotent() -> None:

@@ -6,7 +6,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 
-from uplink.ordered import KeyedSerialExecutor
+from fleetlink.uplink.ordered import KeyedSerialExecutor
 
 
 def test_one_key_runs_in_order_and_never_concurrently() -> None:

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from uplink.schema_ids import SchemaIds, SchemaRefusedError
+from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError
 
 FP_A, FP_B, FP_C = b"a" * 8, b"b" * 8, b"c" * 8
 TEXT = '{"type": "record", "name": "A", "fields": []}'

@@ -5,13 +5,13 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from edge.admin.agent_backend import robots_from_agent, snapshot_from_agent
-from edge.admin.backend import MappingCounts, MappingIssue, RobotStatus, WanTotals
-from edge.admin.changes import change_mapping
-from edge.admin.overlay import Overlay, config_data
-from edge.admin.specs import declarations
-from edge.admin.table_backend import TableBackend
-from edge.spool import SpoolStats
+from fleetlink.edge.admin.agent_backend import robots_from_agent, snapshot_from_agent
+from fleetlink.edge.admin.backend import MappingCounts, MappingIssue, RobotStatus, WanTotals
+from fleetlink.edge.admin.changes import change_mapping
+from fleetlink.edge.admin.overlay import Overlay, config_data
+from fleetlink.edge.admin.specs import declarations
+from fleetlink.edge.admin.table_backend import TableBackend
+from fleetlink.edge.spool import SpoolStats
 from tests.unit.edge.admin.world import base_config, fleet_graph
 
 SPOOL = SpoolStats(

@@ -1,4 +1,4 @@
-"""edge.admin.changes: every change validated as a whole, errors with body-relative YAML paths."""
+"""fleetlink.edge.admin.changes: every change validated as a whole, errors with body-relative YAML paths."""
 
 from __future__ import annotations
 
@@ -7,9 +7,15 @@ from typing import Any
 
 import pytest
 
-from edge.admin import changes
-from edge.admin.errors import AdminError, ConflictError, InvalidChangeError, NotFoundError, OverlayError
-from edge.admin.overlay import Overlay, config_data
+from fleetlink.edge.admin import changes
+from fleetlink.edge.admin.errors import (
+    AdminError,
+    ConflictError,
+    InvalidChangeError,
+    NotFoundError,
+    OverlayError,
+)
+from fleetlink.edge.admin.overlay import Overlay, config_data
 from tests.unit.edge.admin.world import base_config
 
 BASE = config_data(base_config())

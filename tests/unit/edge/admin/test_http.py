@@ -15,10 +15,10 @@ from openapi_spec_validator import validate
 from prometheus_client.parser import text_string_to_metric_families
 from pydantic import SecretStr
 
-from edge.admin.backend import EdgeSnapshot, MappingCounts
-from edge.admin.http import create_app
-from edge.admin.store import OverlayStore
-from fleetlink.metrics import PrometheusMetrics
+from fleetlink.common.metrics import PrometheusMetrics
+from fleetlink.edge.admin.backend import EdgeSnapshot, MappingCounts
+from fleetlink.edge.admin.http import create_app
+from fleetlink.edge.admin.store import OverlayStore
 from tests.unit.edge.admin.world import IMU, World, world
 
 TOKEN = "tok-" + "x" * 20

@@ -1,4 +1,4 @@
-"""edge.admin.overlay: the overlay laid over the config file's data, in a fixed order."""
+"""fleetlink.edge.admin.overlay: the overlay laid over the config file's data, in a fixed order."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from edge.admin.overlay import Overlay, RobotTypeOverlay, apply_overlay, locate_mapping, owner_of
+from fleetlink.edge.admin.overlay import Overlay, RobotTypeOverlay, apply_overlay, locate_mapping, owner_of
 from tests.unit.edge.admin.world import base_data
 
 IMU = {"name": "imu", "from": "/{robot}/imu", "to": "fleet.imu"}

@@ -1,4 +1,4 @@
-"""edge.admin.space: Zenoh admin keys -> operations, replies on concrete keys; run on a service."""
+"""fleetlink.edge.admin.space: Zenoh admin keys -> operations, replies on concrete keys; run on a service."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from edge.admin.space import Target, envelope, execute, parse_body, targets
+from fleetlink.edge.admin.space import Target, envelope, execute, parse_body, targets
 from tests.unit.edge.admin.world import world
 
 P = "fleetlink/warehouse-a/admin"

@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 from pydantic import SecretStr
 
-from edge.admin.auth import ENV_TOKEN, ENV_TOKEN_FILE, authorized, load_token
-from edge.admin.errors import InvalidChangeError, OverlayError, PersistError, TokenError
-from edge.admin.overlay import Overlay, RobotTypeOverlay
-from edge.admin.problems import document_path
-from edge.admin.store import OverlayStore, default_overlay_path
-from edge.config import EdgeConfig
-from edge.errors import MappingError
-from edge.mapping import MappingSpec, RobotTypeSpec
+from fleetlink.edge.admin.auth import ENV_TOKEN, ENV_TOKEN_FILE, authorized, load_token
+from fleetlink.edge.admin.errors import InvalidChangeError, OverlayError, PersistError, TokenError
+from fleetlink.edge.admin.overlay import Overlay, RobotTypeOverlay
+from fleetlink.edge.admin.problems import document_path
+from fleetlink.edge.admin.store import OverlayStore, default_overlay_path
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.errors import MappingError
+from fleetlink.edge.mapping import MappingSpec, RobotTypeSpec
 from tests.unit.edge.admin.world import world
 
 OVERLAY = Overlay(

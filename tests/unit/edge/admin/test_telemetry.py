@@ -6,11 +6,11 @@ import dataclasses
 
 import pytest
 
-from edge.admin.backend import BufferState, EdgeSnapshot, MappingCounts, MappingIssue, WanTotals
-from edge.admin.health import HealthRules, assess
-from edge.admin.telemetry import EdgeTelemetry
-from edge.spool import SpoolStats
-from fleetlink.metrics import MetricsRecorder
+from fleetlink.common.metrics import MetricsRecorder
+from fleetlink.edge.admin.backend import BufferState, EdgeSnapshot, MappingCounts, MappingIssue, WanTotals
+from fleetlink.edge.admin.health import HealthRules, assess
+from fleetlink.edge.admin.telemetry import EdgeTelemetry
+from fleetlink.edge.spool import SpoolStats
 
 NOW_MS = 1_000_000
 

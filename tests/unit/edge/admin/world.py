@@ -7,15 +7,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from edge.admin.backend import EdgeSnapshot
-from edge.admin.service import AdminService
-from edge.admin.store import OverlayStore
-from edge.admin.table_backend import TableBackend
-from edge.config import EdgeConfig
-from edge.mapping import MappingTable
-from roswire.graph import Graph, TopicInfo
-from roswire.qos import DEFAULT
-from roswire.tokens import EntityKind, endpoint_token
+from fleetlink.edge.admin.backend import EdgeSnapshot
+from fleetlink.edge.admin.service import AdminService
+from fleetlink.edge.admin.store import OverlayStore
+from fleetlink.edge.admin.table_backend import TableBackend
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.mapping import MappingTable
+from fleetlink.roswire.graph import Graph, TopicInfo
+from fleetlink.roswire.qos import DEFAULT
+from fleetlink.roswire.tokens import EntityKind, endpoint_token
 
 HASH = "RIHS01_" + "ab" * 32
 IR = "irobot_create_msgs/msg/IrIntensityVector"

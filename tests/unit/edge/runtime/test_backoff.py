@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from edge.runtime.backoff import Backoff
+from fleetlink.edge.runtime.backoff import Backoff
 
 
 class FixedRandom(random.Random):

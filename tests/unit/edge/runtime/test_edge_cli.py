@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from edge.agent import EdgeAgent, edge_session_config
-from edge.config import EdgeConfig
-from edge.runtime.errors import RuntimeSetupError
 from fleetlink.cli import main
-from fleetlink.zenoh_options import ZenohOptions
+from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.edge.agent import EdgeAgent, edge_session_config
+from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.runtime.errors import RuntimeSetupError
 
 
 def test_missing_config_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

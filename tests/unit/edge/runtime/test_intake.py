@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from edge.runtime.intake import Intake
+from fleetlink.edge.runtime.intake import Intake
 from tests.helpers import wait_until
 
 

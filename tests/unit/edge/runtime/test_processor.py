@@ -7,19 +7,19 @@ from functools import cache
 
 import pytest
 
-from edge.errors import SpoolFullError
-from edge.mapping import MappingSpec, MappingTable
-from edge.runtime.intake import Intake
-from edge.runtime.outgoing import Outgoing
-from edge.runtime.processor import Emit, Item, Processor, Rejected
-from edge.runtime.records import RecordMaker
-from edge.runtime.types import TypeStoreCodecs
-from edge.spool import MemoryBuffer, RecordBuffer, SpoolBatch, SpoolStats
-from fleetlink.wan import Record, decode_payload
-from roswire import cdr
-from roswire.errors import PayloadError
-from roswire.subscriber import RosSample
-from schemas.typestore import load_typestore
+from fleetlink.edge.errors import SpoolFullError
+from fleetlink.edge.mapping import MappingSpec, MappingTable
+from fleetlink.edge.runtime.intake import Intake
+from fleetlink.edge.runtime.outgoing import Outgoing
+from fleetlink.edge.runtime.processor import Emit, Item, Processor, Rejected
+from fleetlink.edge.runtime.records import RecordMaker
+from fleetlink.edge.runtime.types import TypeStoreCodecs
+from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, SpoolBatch, SpoolStats
+from fleetlink.roswire import cdr
+from fleetlink.roswire.errors import PayloadError
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire import Record, decode_payload
 from tests.helpers import wait_until
 
 STRING = "std_msgs/msg/String"

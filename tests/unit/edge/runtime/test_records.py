@@ -12,20 +12,20 @@ import fastavro
 import pytest
 from rosbags.rosbag2 import Reader
 
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
-from edge.runtime.outgoing import Outgoing
-from edge.runtime.records import RecordMaker
-from edge.runtime.types import TypeStoreCodecs
-from edge.stages import AggregateSpec, FilterSpec, ProjectSpec, ThrottleSpec
-from fleetlink.wan import Record, split_single_object
-from roswire import cdr
-from roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
-from roswire.subscriber import RosSample
-from schemas.single_object import fingerprint
-from schemas.typestore import load_typestore
-from tests.paths import HUSKY
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.edge.runtime.outgoing import Outgoing
+from fleetlink.edge.runtime.records import RecordMaker
+from fleetlink.edge.runtime.types import TypeStoreCodecs
+from fleetlink.edge.stages import AggregateSpec, FilterSpec, ProjectSpec, ThrottleSpec
+from fleetlink.roswire import cdr
+from fleetlink.roswire.errors import AttachmentError, KeyParseError, PayloadError, RoswireError
+from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire import Record, split_single_object
+from tests.paths import HUSKY as HUSKY_BAG
 
-BAG = HUSKY
+BAG = HUSKY_BAG
 IMU = "sensor_msgs/msg/Imu"
 STRING = "std_msgs/msg/String"
 IMU_HASH = "RIHS01_" + "7d" * 32

@@ -8,7 +8,7 @@ import json
 import fastavro
 import pytest
 
-from edge.runtime.registration import (
+from fleetlink.edge.runtime.registration import (
     EVENT_FINGERPRINT,
     EVENT_SCHEMA,
     EVENT_SCHEMA_JSON,
@@ -16,9 +16,9 @@ from edge.runtime.registration import (
     event_json,
     event_record,
 )
-from fleetlink.wan import split_single_object
-from roswire.robots import Reason, RobotEvent, RobotEventKind
-from schemas.single_object import fingerprint
+from fleetlink.roswire.robots import Reason, RobotEvent, RobotEventKind
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.wire import split_single_object
 
 
 @pytest.mark.parametrize(

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from edge.runtime.encoding import identity_of
-from edge.runtime.schema_book import SchemaBook
+from fleetlink.edge.runtime.encoding import identity_of
+from fleetlink.edge.runtime.schema_book import SchemaBook
 
 SCHEMA_A = {"type": "record", "name": "A", "fields": [{"name": "x", "type": "long"}]}
 SCHEMA_B = {"type": "record", "name": "B", "fields": [{"name": "y", "type": "string"}]}

@@ -9,12 +9,12 @@ from contextlib import contextmanager
 
 import pytest
 
-from edge.runtime.encoding import identity_of
-from edge.runtime.schema_book import SchemaBook
-from edge.runtime.sender import SenderOptions, WanSender
-from edge.runtime.transport import Done
-from edge.spool import MemoryBuffer
-from fleetlink.wan import (
+from fleetlink.edge.runtime.encoding import identity_of
+from fleetlink.edge.runtime.schema_book import SchemaBook
+from fleetlink.edge.runtime.sender import SenderOptions, WanSender
+from fleetlink.edge.runtime.transport import Done
+from fleetlink.edge.spool import MemoryBuffer
+from fleetlink.wire import (
     Ack,
     Batch,
     Record,
@@ -139,7 +139,7 @@ def test_failed_batches_are_resent_until_acknowledged(
     buffer = MemoryBuffer(first_seq=1)
     buffer.append_many([payload(i) for i in range(5)])
     uplink = ScriptedUplink(policy)
-    caplog.set_level(logging.WARNING, logger="edge.runtime.sender")
+    caplog.set_level(logging.WARNING, logger="fleetlink.edge.runtime.sender")
     with running(uplink, buffer) as sender:
         sender.wake()
         wait_until(drained(buffer), 5, message="buffer drained")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
-from edge.runtime.subscriptions import eager_topics, plan
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.edge.runtime.subscriptions import eager_topics, plan
 
 IMU = "sensor_msgs/msg/Imu"
 STRING = "std_msgs/msg/String"

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from edge.stages import Sample
+from fleetlink.edge.stages import Sample
 
 TIME = {
     "type": "record",

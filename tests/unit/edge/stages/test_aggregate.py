@@ -11,8 +11,8 @@ from typing import Any
 import fastavro
 import pytest
 
-from edge.stages import AggregateStage, FieldPathError, Sample, StageConfigError
-from edge.stages.windows import RunningStats, window_starts
+from fleetlink.edge.stages import AggregateStage, FieldPathError, Sample, StageConfigError
+from fleetlink.edge.stages.windows import RunningStats, window_starts
 from tests.unit.edge.stages.messages import IMU_SCHEMA, STATUS_SCHEMA, sample, schema
 
 MS = 1_000_000

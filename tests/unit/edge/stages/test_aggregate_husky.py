@@ -15,8 +15,8 @@ import pytest
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
-from edge.stages import Sample, build_pipeline
-from edge.stages.spec import AggregateSpec
+from fleetlink.edge.stages import Sample, build_pipeline
+from fleetlink.edge.stages.spec import AggregateSpec
 from tests.paths import HUSKY
 from tests.unit.edge.stages.messages import IMU_SCHEMA, schema
 

@@ -7,9 +7,9 @@ from typing import Any
 import fastavro
 import pytest
 
-from edge.stages.avro import copy_self_contained, kind_of, resolve_path, root_node, short_hash
-from edge.stages.errors import FieldPathError, StageConfigError
-from edge.stages.paths import parse_path
+from fleetlink.edge.stages.avro import copy_self_contained, kind_of, resolve_path, root_node, short_hash
+from fleetlink.edge.stages.errors import FieldPathError, StageConfigError
+from fleetlink.edge.stages.paths import parse_path
 from tests.unit.edge.stages.messages import IMU_SCHEMA, ODOMETRY_SCHEMA, STATUS_SCHEMA, schema
 
 

@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from edge.stages.avro import kind_of, resolve_path, root_node
-from edge.stages.errors import EvaluationError, ExpressionError
-from edge.stages.expr import check_predicate, compile_predicate, parse_expression
-from edge.stages.paths import Steps
+from fleetlink.edge.stages.avro import kind_of, resolve_path, root_node
+from fleetlink.edge.stages.errors import EvaluationError, ExpressionError
+from fleetlink.edge.stages.expr import check_predicate, compile_predicate, parse_expression
+from fleetlink.edge.stages.paths import Steps
 from tests.unit.edge.stages.messages import IMU_SCHEMA, STATUS_SCHEMA, sample, schema, status_value
 
 FAILS = "fails"

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from edge.stages.errors import ExpressionError
-from edge.stages.expr import check_predicate, parse_expression
-from edge.stages.expr.nodes import (
+from fleetlink.edge.stages.errors import ExpressionError
+from fleetlink.edge.stages.expr import check_predicate, parse_expression
+from fleetlink.edge.stages.expr.nodes import (
     Arith,
     Compare,
     Const,

@@ -6,7 +6,7 @@ import logging
 
 import pytest
 
-from edge.stages import ExpressionError, FilterStage, Sample
+from fleetlink.edge.stages import ExpressionError, FilterStage, Sample
 from tests.unit.edge.stages.messages import IMU_SCHEMA, STATUS_SCHEMA, sample, schema, status_value
 
 
@@ -56,7 +56,7 @@ def test_forwards_the_same_sample_object() -> None:
 
 def test_first_evaluation_error_is_logged_then_only_counted(caplog: pytest.LogCaptureFixture) -> None:
     stage = FilterStage("level > 1")
-    with caplog.at_level(logging.WARNING, logger="edge.stages.filter"):
+    with caplog.at_level(logging.WARNING, logger="fleetlink.edge.stages.filter"):
         for _ in range(3):
             stage.process(sample({"level": "x"}), 0)
         stage.process(sample({}), 0)

@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from edge.stages import FieldPathError, OnChangeStage
-from edge.stages.on_change import changed
+from fleetlink.edge.stages import FieldPathError, OnChangeStage
+from fleetlink.edge.stages.on_change import changed
 from tests.unit.edge.stages.messages import ODOMETRY_SCHEMA, sample, schema
 
 MS = 1_000_000

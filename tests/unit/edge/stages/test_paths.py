@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from edge.stages.errors import FieldPathError
-from edge.stages.paths import Steps, field_name, make_getter, parse_path, path_text
+from fleetlink.edge.stages.errors import FieldPathError
+from fleetlink.edge.stages.paths import Steps, field_name, make_getter, parse_path, path_text
 
 
 @pytest.mark.parametrize(

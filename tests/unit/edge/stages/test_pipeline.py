@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 from pydantic import TypeAdapter
 
-from edge.stages import (
+from fleetlink.edge.stages import (
     AggregateStage,
     ExpressionError,
     FieldPathError,

@@ -9,7 +9,7 @@ from typing import Any
 import fastavro
 import pytest
 
-from edge.stages import FieldPathError, ProjectStage, StageConfigError
+from fleetlink.edge.stages import FieldPathError, ProjectStage, StageConfigError
 from tests.unit.edge.stages.messages import IMU_SCHEMA, ODOMETRY_SCHEMA, imu_value, sample, schema
 
 

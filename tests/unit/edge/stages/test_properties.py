@@ -8,8 +8,8 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.stages import AggregateStage, ExpressionError, FilterStage, Sample
-from edge.stages.expr import check_predicate, parse_expression
+from fleetlink.edge.stages import AggregateStage, ExpressionError, FilterStage, Sample
+from fleetlink.edge.stages.expr import check_predicate, parse_expression
 from tests.unit.edge.stages.messages import sample, status_value
 
 S = 1_000_000_000

@@ -8,7 +8,9 @@ import pytest
 import yaml
 from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
 
-from edge.stages import (
+from fleetlink.common.configfile import validate_data
+from fleetlink.common.errors import ConfigError
+from fleetlink.edge.stages import (
     AggregateSpec,
     FilterSpec,
     OnChangeSpec,
@@ -16,8 +18,6 @@ from edge.stages import (
     StageSpec,
     ThrottleSpec,
 )
-from fleetlink.configfile import validate_data
-from fleetlink.errors import ConfigError
 
 BRIEF_YAML = """
 stages:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from edge.stages import Sample, ThrottleStage
+from fleetlink.edge.stages import Sample, ThrottleStage
 from tests.unit.edge.stages.messages import sample
 
 MS = 1_000_000

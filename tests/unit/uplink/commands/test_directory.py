@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from uplink.commands.directory import RobotDirectory
+from fleetlink.uplink.commands.directory import RobotDirectory
 
 Event = tuple[str | None, dict[str, Any] | None]
 

@@ -8,11 +8,11 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from fleetlink.configfile import load_config
-from fleetlink.errors import ConfigError
-from uplink.commands.errors import RoutingError
-from uplink.commands.mapping import CommandMapping, Ref, Target, parse_template, targets
-from uplink.config import UplinkConfig
+from fleetlink.common.configfile import load_config
+from fleetlink.common.errors import ConfigError
+from fleetlink.uplink.commands.errors import RoutingError
+from fleetlink.uplink.commands.mapping import CommandMapping, Ref, Target, parse_template, targets
+from fleetlink.uplink.config import UplinkConfig
 
 TYPE = "irobot_create_msgs/msg/LightringLeds"
 

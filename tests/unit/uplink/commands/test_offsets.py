@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from uplink.commands.offsets import OffsetTracker
+from fleetlink.uplink.commands.offsets import OffsetTracker
 
 TP = ("cmd", 0)
 

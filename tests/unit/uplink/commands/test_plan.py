@@ -9,15 +9,15 @@ from typing import Any
 import fastavro
 import pytest
 
-from repeater.envelope import StatusEvent
-from schemas.errors import RegistryError
-from schemas.registry import RegistryUnavailableError
-from schemas.single_object import confluent_frame, fingerprint
-from uplink.commands.decode import CommandDecoder
-from uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
-from uplink.commands.mapping import CommandMapping
-from uplink.commands.plan import COMMAND_ID_HEADER, CommandRecord, command_id, plan
-from uplink.commands.status_records import STATUS_SCHEMA, status_value
+from fleetlink.schemas.errors import RegistryError
+from fleetlink.schemas.registry import RegistryUnavailableError
+from fleetlink.schemas.single_object import confluent_frame, fingerprint
+from fleetlink.uplink.commands.decode import CommandDecoder
+from fleetlink.uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
+from fleetlink.uplink.commands.mapping import CommandMapping
+from fleetlink.uplink.commands.plan import COMMAND_ID_HEADER, CommandRecord, command_id, plan
+from fleetlink.uplink.commands.status_records import STATUS_SCHEMA, status_value
+from fleetlink.wire.commands import StatusEvent
 
 SCHEMA: dict[str, Any] = {
     "type": "record", "name": "Task", "namespace": "t",

@@ -1,0 +1,76 @@
+"""The ``fleetlink`` command: one entry point, one subcommand per component.
+
+Each component contributes its subcommands through a module exposing
+``register(subparsers)``; the subcommand's handler returns the process exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Callable, Sequence
+
+from fleetlink import __version__
+from fleetlink.common.errors import FleetlinkError
+
+# Modules that add subcommands, in the order they appear in --help.
+COMMAND_MODULES: tuple[str, ...] = (
+    "fleetlink.demo.cli",
+    "fleetlink.cli.validate",
+    "fleetlink.cli.stack",
+    "fleetlink.cli.ros",
+    "fleetlink.cli.schemas",
+    "fleetlink.cli.certs",
+    "fleetlink.cli.edge",
+    "fleetlink.cli.uplink",
+    "fleetlink.cli.repeater",
+)
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fleetlink",
+        description="Connect fleets of ROS 2 robots (rmw_zenoh) to Apache Kafka.",
+    )
+    parser.add_argument("--version", action="version", version=f"fleetlink {__version__}")
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def configure_logging(verbosity: int) -> None:
+    level = logging.WARNING - 10 * min(verbosity + 1, 2)
+    logging.basicConfig(
+        level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr
+    )
+    if verbosity < 2:
+        logging.getLogger("httpx").setLevel(logging.WARNING)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Handler | None = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help()
+        return 2
+    configure_logging(args.verbose)
+    try:
+        return handler(args)
+    except FleetlinkError as exc:
+        print(f"fleetlink: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

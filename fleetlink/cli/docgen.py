@@ -1,0 +1,147 @@
+"""The configuration reference, generated from the config models (``docs/reference/config.md``).
+
+    python -m fleetlink.cli.docgen > docs/reference/config.md
+
+A unit test regenerates it and compares, so the reference never drifts from the code. Each
+field's text is its ``Field(description=...)`` or the docstring written under it.
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import textwrap
+import types
+import typing
+from collections.abc import Iterator
+from functools import cache
+from typing import Any
+
+from pydantic import BaseModel, ByteSize, PlainSerializer
+from pydantic_core import PydanticUndefined
+
+from fleetlink.cli.validate import KINDS, model_for
+
+
+@cache
+def attribute_docs(cls: type) -> dict[str, str]:
+    """Docstrings written under class attributes (``x: int = 1`` then ``\"\"\"text\"\"\"``)."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if klass in (object, BaseModel) or not issubclass(klass, BaseModel):
+            continue
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError, SyntaxError):
+            continue
+        body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+        for node, following in zip(body, [*body[1:], None], strict=True):
+            if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                    and isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant)
+                    and isinstance(following.value.value, str)):
+                docs[node.target.id] = " ".join(following.value.value.split())
+    return docs
+
+
+def type_text(annotation: Any) -> str:  # noqa: PLR0911 - one return per kind of annotation
+    origin = typing.get_origin(annotation)
+    args = typing.get_args(annotation)
+    if origin is typing.Annotated:
+        return type_text(args[0])
+    if origin is typing.Literal:
+        return " \\| ".join(f"`{a}`" for a in args)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(type_text(a) for a in args if a is not type(None)) + (
+            " (optional)" if type(None) in args else "")
+    if origin in (list, tuple, set, frozenset):
+        return f"list of {type_text(args[0])}" if args else "list"
+    if origin is dict:
+        return f"map of {type_text(args[0])} → {type_text(args[1])}" if args else "map"
+    if isinstance(annotation, type):
+        if issubclass(annotation, BaseModel):
+            return "section"
+        return annotation.__name__
+    return str(annotation).replace("typing.", "")
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    found: list[type[BaseModel]] = []
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        found.append(annotation)
+    for arg in typing.get_args(annotation):
+        found.extend(_models_in(arg))
+    return found
+
+
+def _serializer(field: Any) -> Any:
+    return next((m.func for m in field.metadata if isinstance(m, PlainSerializer)), None)
+
+
+def _field_type(field: Any) -> str:
+    for meta in field.metadata:
+        schema = getattr(meta, "json_schema", None) or {}
+        if str(schema.get("description", "")).startswith("a duration"):
+            return "duration"
+    if isinstance(field.annotation, type) and issubclass(field.annotation, ByteSize):
+        return "size"
+    models = _models_in(field.annotation)
+    if len(models) > 1:
+        kinds = [str(typing.get_args(m.model_fields["type"].annotation)[0])
+                 for m in models if "type" in m.model_fields]
+        what = "stage" if kinds else "section"
+        listed = f" ({', '.join(kinds)}: see docs/stages.md)" if kinds else ""
+        return f"list of {what}{listed}" if typing.get_origin(field.annotation) is list else what
+    return type_text(field.annotation)
+
+
+def _default(field: Any) -> str:
+    if field.default is PydanticUndefined:
+        return "required" if field.default_factory is None else "(computed)"
+    value = field.default
+    if isinstance(value, BaseModel):
+        return "(section defaults)"
+    serialize = _serializer(field)
+    if serialize is not None and value is not None:
+        value = serialize(value)
+    elif isinstance(value, ByteSize):
+        value = value.human_readable(separator="")
+    return f"`{value!r}`" if value not in ([], {}, None) else f"`{value}`"
+
+
+def rows(model: type[BaseModel], prefix: str = "") -> Iterator[tuple[str, str, str, str]]:
+    docs = attribute_docs(model)
+    for name, field in model.model_fields.items():
+        key = field.alias or name
+        path = f"{prefix}{key}"
+        text = field.description or docs.get(name, "")
+        yield path, _field_type(field), _default(field), text
+        nested = _models_in(field.annotation)
+        if len(nested) != 1:
+            continue  # unions of models (stages) are documented on their own
+        origin = typing.get_origin(field.annotation)
+        marker = "[]." if origin is list else ".<name>." if origin is dict else "."
+        yield from rows(nested[0], f"{path}{marker}")
+
+
+def render() -> str:
+    out = [
+        "# Configuration reference",
+        "",
+        "Generated from the config models by `python -m fleetlink.cli.docgen`; do not edit by hand.",
+        "Every file is checked with `fleetlink validate FILE` (errors name the YAML path).",
+        "Durations are text with a unit (`250ms`, `5s`, `2m`) or seconds; sizes take `KiB`, `MiB`, `GiB`.",
+        "",
+    ]
+    for kind in KINDS:
+        model = model_for(kind)
+        out += [f"## {kind} (`{model.__module__}.{model.__name__}`)", ""]
+        if model.__doc__:
+            out += [" ".join(model.__doc__.split()), ""]
+        out += ["| key | type | default | meaning |", "|---|---|---|---|"]
+        out += [f"| `{p}` | {t} | {d} | {m} |" for p, t, d, m in rows(model)]
+        out.append("")
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    print(render(), end="")

@@ -1,0 +1,1 @@
+"""The ground floor: errors, durations, config base, names, metrics, rate limits, Zenoh options."""

@@ -1,0 +1,217 @@
+"""Batches: encode (from records, or straight from spool payloads) and decode, compressed."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+from fleetlink.wire.errors import WireError
+from fleetlink.wire.framing import U16, U32, U64, Reader, str16
+from fleetlink.wire.records import FLAGS_V1, FLAGS_V2, Record, Tails, decode_record, encode_payload
+
+try:  # zstd is in the standard library from Python 3.14; the backport is a rosbags dependency
+    from compression import zstd as _zstd  # type: ignore[import-not-found,unused-ignore]
+except ImportError:  # pragma: no cover - depends on the Python version
+    try:
+        from backports import zstd as _zstd  # type: ignore[no-redef,unused-ignore]
+    except ImportError:
+        _zstd = None
+
+_DECOMPRESS_ERRORS: tuple[type[Exception], ...] = (zlib.error, EOFError) + (
+    () if _zstd is None else (_zstd.ZstdError,)
+)
+
+Codec = Literal["none", "zlib", "zstd"]
+_CODECS: dict[str, int] = {"none": 0, "zlib": 1, "zstd": 2}
+_CODEC_NAMES = {v: k for k, v in _CODECS.items()}
+
+BATCH_MAGIC = b"FLB"
+BATCH_VERSION = 3
+"""What ``encode_batch_payloads`` writes. Version 2 adds the record flag ``FLAG_SOURCE_SEQ``,
+version 3 schema entries without their text (``Batch.elided``); versions 1 and 2 (from edges
+not yet upgraded) are still read."""
+_RECORD_FLAGS = {1: FLAGS_V1, 2: FLAGS_V2, 3: FLAGS_V2}
+_ELIDED = 0xFFFFFFFF
+"""A schema entry's length that says "text left out" (version 3)."""
+MAX_BATCH_BYTES = 64 * 1024 * 1024
+"""Default cap on a batch's uncompressed body (a decompression-bomb guard)."""
+_ELIDED_BYTES = U32.pack(_ELIDED)
+_HEAD = struct.Struct("<3sBBI")
+_SEQ_LEN = struct.Struct("<QI")
+
+
+def zstd_available() -> bool:
+    return _zstd is not None
+
+
+@dataclass(frozen=True, slots=True)
+class Batch:
+    """Records from one edge stream, ``seq`` strictly increasing from ``first_seq``, with the
+    schema JSON of the fingerprints they use (``schemas``: fingerprint -> JSON text). ``elided``
+    are fingerprints they use whose text the edge left out, because an uplink acknowledged a
+    batch carrying it before (an uplink that does not know one answers ``need_schemas``)."""
+
+    site: str
+    edge_id: str
+    stream: str
+    first_seq: int
+    records: tuple[Record, ...]
+    schemas: Mapping[bytes, str] = field(default_factory=dict)
+    elided: frozenset[bytes] = frozenset()
+
+    @property
+    def last_seq(self) -> int:
+        return self.records[-1].seq if self.records else self.first_seq
+
+
+def _compress(body: bytes, codec: Codec, level: int | None) -> bytes:
+    if codec == "none":
+        return body
+    if codec == "zlib":
+        return zlib.compress(body, 1 if level is None else level)
+    if _zstd is None:
+        raise WireError("the zstd codec is not available in this Python")
+    return bytes(_zstd.compress(body, 1 if level is None else level))
+
+
+def encode_batch_payloads(
+    *,
+    site: str,
+    edge_id: str,
+    stream: str,
+    items: Sequence[tuple[int, bytes]],
+    schemas: Mapping[bytes, str],
+    elided: Collection[bytes] = (),
+    codec: Codec = "zlib",
+    level: int | None = None,
+) -> bytes:
+    """A batch from spool payloads ``(seq, payload)`` as stored (no per-record re-encoding);
+    ``elided``: fingerprints used without their text (see ``Batch``)."""
+    if not items:
+        raise WireError("a batch needs at least one record")
+    if codec not in _CODECS:
+        raise WireError(f"unknown codec {codec!r}")
+    if len(schemas) + len(elided) > 0xFFFF:
+        raise WireError(f"{len(schemas) + len(elided)} schemas do not fit a 16-bit count")
+    parts = [str16(site), str16(edge_id), str16(stream), U64.pack(items[0][0]),
+             U16.pack(len(schemas) + len(elided))]
+    for fingerprint in elided:
+        if len(fingerprint) != 8:
+            raise WireError(f"a schema fingerprint has 8 bytes, got {len(fingerprint)}")
+        if fingerprint in schemas:
+            raise WireError(f"schema {fingerprint.hex()} is both carried and elided")
+        parts += (fingerprint, U32.pack(_ELIDED))
+    for fingerprint, schema in schemas.items():
+        if len(fingerprint) != 8:
+            raise WireError(f"a schema fingerprint has 8 bytes, got {len(fingerprint)}")
+        data = schema.encode("utf-8")
+        if len(data) >= _ELIDED:
+            raise WireError(f"schema {fingerprint.hex()} of {len(data)} bytes is too long")
+        parts += (fingerprint, U32.pack(len(data)), data)
+    parts.append(U32.pack(len(items)))
+    previous = -1
+    for seq, payload in items:
+        if seq <= previous:
+            raise WireError(f"record seqs must increase: {seq} after {previous}")
+        previous = seq
+        parts += (_SEQ_LEN.pack(seq, len(payload)), payload)
+    body = b"".join(parts)
+    return _HEAD.pack(BATCH_MAGIC, BATCH_VERSION, _CODECS[codec], len(body)) + _compress(body, codec, level)
+
+
+def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = None) -> bytes:
+    """Encode ``batch``; every record's ``seq`` is used, ``first_seq`` must equal the first one's."""
+    if batch.records and batch.records[0].seq != batch.first_seq:
+        raise WireError(f"first_seq {batch.first_seq} is not the first record's seq {batch.records[0].seq}")
+    return encode_batch_payloads(
+        site=batch.site, edge_id=batch.edge_id, stream=batch.stream,
+        items=[(r.seq, encode_payload(r)) for r in batch.records], schemas=batch.schemas,
+        elided=batch.elided, codec=codec, level=level,
+    )
+
+
+def _decompress(codec: int, data: memoryview, size: int) -> bytes:
+    if codec == 0:
+        return bytes(data)
+    try:
+        if codec == 1:
+            out = zlib.decompressobj().decompress(data, size + 1)
+        elif codec == 2:
+            if _zstd is None:
+                raise WireError("batch compressed with zstd, which this Python lacks")
+            out = _zstd.ZstdDecompressor().decompress(data, size + 1)
+        else:
+            raise WireError(f"unknown codec {codec}", offset=4)
+    except _DECOMPRESS_ERRORS as exc:
+        raise WireError(f"corrupt {_CODEC_NAMES[codec]} data: {exc}") from None
+    return bytes(out)
+
+
+def _read_schemas(r: Reader, version: int) -> tuple[dict[bytes, str], frozenset[bytes]]:
+    """The schema section: texts by fingerprint, and the fingerprints left out (version 3)."""
+    (n_schemas,) = r.unpack(U16, "schema count")
+    schemas: dict[bytes, str] = {}
+    elided: set[bytes] = set()
+    for _ in range(n_schemas):
+        fingerprint = r.take(8, "schema fingerprint")
+        if fingerprint in schemas or fingerprint in elided:
+            raise WireError(f"schema {fingerprint.hex()} is listed twice", offset=r.pos - 8)
+        if version >= 3 and r.data[r.pos : r.pos + 4] == _ELIDED_BYTES:
+            r.pos += 4
+            elided.add(fingerprint)
+        else:
+            schemas[fingerprint] = r.text("schema JSON", wide=True)
+    return schemas, frozenset(elided)
+
+
+def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
+    """Parse and check a batch; raises ``WireError`` naming what is wrong and where."""
+    view = memoryview(data)
+    if len(view) < _HEAD.size:
+        raise WireError(f"a batch has at least {_HEAD.size} bytes, got {len(view)}", offset=0)
+    magic, version, codec, size = _HEAD.unpack_from(view, 0)
+    if magic != BATCH_MAGIC:
+        raise WireError(f"not a fleetlink batch (magic {bytes(magic).hex()})", offset=0)
+    allowed_flags = _RECORD_FLAGS.get(version)
+    if allowed_flags is None:
+        raise WireError(f"unsupported batch version {version}", offset=3)
+    if size > max_bytes:
+        raise WireError(f"batch body of {size} bytes exceeds the {max_bytes}-byte limit", offset=5)
+    body = _decompress(codec, view[_HEAD.size :], size)
+    if len(body) != size:
+        raise WireError(f"batch body has {len(body)} bytes, header says {size}")
+    r = Reader(body)
+    site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
+    (first_seq,) = r.unpack(U64, "first_seq")
+    schemas, elided = _read_schemas(r, version)
+    (n_records,) = r.unpack(U32, "record count")
+    if n_records == 0:
+        raise WireError("a batch needs at least one record", offset=r.pos - 4)
+    records: list[Record] = []
+    append = records.append
+    unpack = _SEQ_LEN.unpack_from
+    tails: Tails = {}
+    pos, end = r.pos, r.end
+    previous = -1
+    for _ in range(n_records):
+        if end - pos < _SEQ_LEN.size:
+            raise WireError("truncated record seq/length", offset=pos)
+        seq, length = unpack(body, pos)
+        if seq <= previous:
+            raise WireError(f"record seqs must increase: {seq} after {previous}", offset=pos)
+        previous = seq
+        pos += _SEQ_LEN.size
+        if length > end - pos:
+            raise WireError(f"truncated record {seq}", offset=pos)
+        append(decode_record(body, pos, pos + length, seq, tails=tails, allowed_flags=allowed_flags))
+        pos += length
+    r.pos = pos
+    r.done("the batch")
+    if records[0].seq != first_seq:
+        raise WireError(f"first_seq {first_seq} is not the first record's seq {records[0].seq}")
+    return Batch(site=site, edge_id=edge_id, stream=stream, first_seq=first_seq,
+                 records=tuple(records), schemas=schemas, elided=elided)
+

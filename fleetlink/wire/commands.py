@@ -1,0 +1,353 @@
+"""The command wire contract between the uplink and the repeaters (pure: bytes in, bytes out).
+
+Three messages travel on a site's keys (``fleetlink/<site>/…``):
+
+* **command envelope** — the uplink's query on ``fleetlink/<site>/command/<robot>/<command>``::
+
+      "FLC" | version (1) | flags (bit 0: zlib) | rest
+      rest = u32 header length (big-endian) | header (JSON, UTF-8) | value
+
+  ``value`` is the command's Avro record in single-object encoding (``C3 01`` + 8-byte schema
+  fingerprint + body); the header carries ids, targets and times, and the writer schema's
+  JSON text unless the uplink knows the site already has it (then a repeater that does not
+  answers ``need-schema`` and the uplink sends it again with the schema).
+* **reply** — the repeater's answer to that query (JSON): what it did with the command.
+* **status batch** — the repeater's query on ``fleetlink/<site>/command-status/<repeater>``
+  (JSON): delivered / superseded / expired / rejected events; an empty batch is a heartbeat.
+  The uplink answers with a :class:`StatusAck` once Kafka has the records.
+
+Every decoder checks every field and raises :class:`~fleetlink.wire.errors.EnvelopeError` naming it.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from dataclasses import dataclass, field
+from typing import Any, Literal, get_args
+
+from fleetlink.common.names import ROS_MSG_TYPE, ros_topic_problem
+from fleetlink.wire.errors import EnvelopeError, WireError
+from fleetlink.wire.keys import check_key_name
+from fleetlink.wire.records import single_object, split_single_object
+
+MAGIC = b"FLC"
+VERSION = 1
+FLAG_ZLIB = 0x01
+COMPRESS_ABOVE = 160
+"""Envelopes and status batches larger than this many bytes are sent zlib-compressed (when that
+makes them smaller): the WAN is the scarce resource, and the CPU cost is microseconds."""
+MAX_ENVELOPE = 8 << 20
+_HEADER_LEN = struct.Struct(">I")
+
+Result = Literal["applied", "duplicate", "expired", "superseded", "rejected", "need-schema"]
+RESULTS: frozenset[str] = frozenset(get_args(Result))
+Status = Literal["delivered", "superseded", "expired", "rejected"]
+STATUSES: frozenset[str] = frozenset(get_args(Status))
+SETTLED: frozenset[str] = frozenset({"applied", "duplicate", "expired", "superseded", "rejected"})
+"""Results after which the uplink may commit: the site has taken responsibility or refused for good."""
+
+
+@dataclass(frozen=True, slots=True)
+class CommandEnvelope:
+    command_id: str
+    robot: str
+    ros_topic: str
+    ros_type: str
+    mapping: str
+    issued_at_ms: int
+    """Start of the lease: the Kafka record's timestamp (ms since the epoch)."""
+    lease_until_ms: int
+    period_ms: int
+    schema_fp: bytes
+    body: bytes
+    """The Avro body, written with the schema whose fingerprint is ``schema_fp``."""
+    schema: str | None = None
+    """The writer schema's JSON text, or None when the uplink expects the repeater to know it."""
+    qos: str | None = None
+    """rmw_zenoh's compact QoS string for the repeater's publisher (None: reliable, volatile, depth 10)."""
+    order: int = 0
+    """Tie-break between commands with the same timestamp (the Kafka offset)."""
+    source: str = ""
+    """Where the command came from: ``<topic>:<partition>:<offset>``."""
+
+    @property
+    def lease_ms(self) -> int:
+        return self.lease_until_ms - self.issued_at_ms
+
+    def without_schema(self) -> CommandEnvelope:
+        return _replace_schema(self, None)
+
+    def with_schema(self, schema: str) -> CommandEnvelope:
+        return _replace_schema(self, schema)
+
+
+def _replace_schema(env: CommandEnvelope, schema: str | None) -> CommandEnvelope:
+    return CommandEnvelope(
+        env.command_id, env.robot, env.ros_topic, env.ros_type, env.mapping, env.issued_at_ms,
+        env.lease_until_ms, env.period_ms, env.schema_fp, env.body, schema, env.qos, env.order, env.source,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class CommandReply:
+    command_id: str
+    robot: str
+    result: Result
+    detail: str = ""
+    site: str = ""
+    repeater: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class StatusEvent:
+    command_id: str
+    robot: str
+    ros_topic: str
+    status: Status
+    at_ms: int
+    site: str = ""
+    detail: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class StatusBatch:
+    repeater: str
+    site: str
+    events: tuple[StatusEvent, ...] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True, slots=True)
+class StatusAck:
+    accepted: int
+    detail: str = ""
+
+
+# -- command envelope -----------------------------------------------------------------------
+
+
+def encode_envelope(env: CommandEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    check_envelope(env)
+    header: dict[str, Any] = {
+        "id": env.command_id, "robot": env.robot, "topic": env.ros_topic, "type": env.ros_type,
+        "mapping": env.mapping, "issued": env.issued_at_ms, "until": env.lease_until_ms,
+        "period": env.period_ms, "order": env.order,
+    }
+    if env.source != env.command_id:
+        header["source"] = env.source
+    if env.schema is not None:
+        header["schema"] = env.schema
+    if env.qos is not None:
+        header["qos"] = env.qos
+    head = json.dumps(header, separators=(",", ":"), ensure_ascii=False).encode()
+    rest = _HEADER_LEN.pack(len(head)) + head + single_object(env.schema_fp, env.body)
+    flags = 0
+    if len(rest) > compress_above:
+        packed = zlib.compress(rest, 6)
+        if len(packed) < len(rest):
+            rest, flags = packed, FLAG_ZLIB
+    return MAGIC + bytes((VERSION, flags)) + rest
+
+
+def decode_envelope(data: bytes) -> CommandEnvelope:
+    if len(data) < 5 or data[:3] != MAGIC:
+        raise EnvelopeError("command envelope", f"does not start with {MAGIC!r}", data)
+    if data[3] != VERSION:
+        raise EnvelopeError("command envelope", f"version {data[3]} is not {VERSION}", data)
+    flags, rest = data[4], data[5:]
+    if flags & ~FLAG_ZLIB:
+        raise EnvelopeError("command envelope", f"unknown flags 0x{flags:02x}", data)
+    if flags & FLAG_ZLIB:
+        rest = _inflate(rest, "command envelope", data)
+    if len(rest) < _HEADER_LEN.size:
+        raise EnvelopeError("command envelope", "truncated before the header length", data)
+    (size,) = _HEADER_LEN.unpack_from(rest)
+    end = _HEADER_LEN.size + size
+    if end > len(rest):
+        raise EnvelopeError("command envelope", f"header of {size} bytes runs past the end", data)
+    header = _json_object(rest[_HEADER_LEN.size:end], "command envelope header", data)
+    try:
+        fp, view = split_single_object(bytes(rest[end:]))
+        body = bytes(view)
+    except WireError as exc:
+        raise EnvelopeError("command envelope", f"value: {exc}", data) from None
+    get = _Fields(header, "command envelope", data)
+    env = CommandEnvelope(
+        command_id=get.text("id"), robot=get.text("robot"), ros_topic=get.text("topic"),
+        ros_type=get.text("type"), mapping=get.text("mapping"), issued_at_ms=get.integer("issued"),
+        lease_until_ms=get.integer("until"), period_ms=get.integer("period"), schema_fp=fp, body=body,
+        schema=get.optional_text("schema"), qos=get.optional_text("qos"), order=get.integer("order"),
+        source=get.text("source", allow_empty=True) if "source" in header else get.text("id"),
+    )
+    try:
+        check_envelope(env)
+    except EnvelopeError as exc:
+        raise EnvelopeError("command envelope", exc.reason, data) from None
+    return env
+
+
+def check_envelope(env: CommandEnvelope) -> None:
+    """Raise :class:`EnvelopeError` unless every field of ``env`` is usable."""
+
+    def bad(reason: str) -> EnvelopeError:
+        return EnvelopeError("command envelope", reason)
+
+    if not env.command_id or len(env.command_id) > 1000:
+        raise bad("command id must have 1 to 1000 characters")
+    try:
+        check_key_name(env.robot, "robot")
+        check_key_name(env.mapping, "command")
+    except WireError as exc:
+        raise bad(str(exc)) from None
+    if "/" in env.mapping:
+        raise bad(f"command {env.mapping!r} must be a single key chunk")
+    problem = ros_topic_problem(env.ros_topic)
+    if problem is not None:
+        raise bad(f"ROS topic {env.ros_topic!r}: {problem}")
+    if ROS_MSG_TYPE.fullmatch(env.ros_type) is None:
+        raise bad(f"ROS type {env.ros_type!r} is not of the form package/msg/Name")
+    if env.issued_at_ms < 0 or env.lease_until_ms < env.issued_at_ms:
+        raise bad(f"lease [{env.issued_at_ms}, {env.lease_until_ms}] ms is not a time span")
+    if env.period_ms <= 0:
+        raise bad(f"period {env.period_ms} ms must be positive")
+    if len(env.schema_fp) != 8:
+        raise bad(f"schema fingerprint has {len(env.schema_fp)} bytes, not 8")
+    if env.order < 0:
+        raise bad(f"order {env.order} must not be negative")
+
+
+# -- reply ----------------------------------------------------------------------------------
+
+
+def encode_reply(reply: CommandReply) -> bytes:
+    if reply.result not in RESULTS:
+        raise EnvelopeError("command reply", f"result {reply.result!r} is not one of {sorted(RESULTS)}")
+    obj = {"id": reply.command_id, "robot": reply.robot, "result": reply.result, "detail": reply.detail,
+           "site": reply.site, "repeater": reply.repeater}
+    return json.dumps({k: v for k, v in obj.items() if v}, separators=(",", ":")).encode()
+
+
+def decode_reply(data: bytes) -> CommandReply:
+    get = _Fields(_json_object(data, "command reply", data), "command reply", data)
+    result = get.text("result")
+    if result not in RESULTS:
+        raise EnvelopeError("command reply", f"result {result!r} is not one of {sorted(RESULTS)}", data)
+    return CommandReply(get.text("id"), get.text("robot"), result,  # type: ignore[arg-type]
+                        get.text("detail", allow_empty=True), get.text("site", allow_empty=True),
+                        get.text("repeater", allow_empty=True))
+
+
+# -- status ---------------------------------------------------------------------------------
+
+
+def encode_status_batch(batch: StatusBatch, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    """JSON, zlib-compressed when larger than ``compress_above`` bytes (JSON starts with ``{``)."""
+    for event in batch.events:
+        if event.status not in STATUSES:
+            raise EnvelopeError("status batch", f"status {event.status!r} is not one of {sorted(STATUSES)}")
+    text = json.dumps({
+        "repeater": batch.repeater, "site": batch.site,
+        "events": [status_to_json(e) for e in batch.events],
+    }, separators=(",", ":"), ensure_ascii=False).encode()
+    if len(text) > compress_above:
+        packed = zlib.compress(text, 6)
+        if len(packed) < len(text):
+            return packed
+    return text
+
+
+def status_to_json(event: StatusEvent) -> dict[str, Any]:
+    return {"id": event.command_id, "robot": event.robot, "topic": event.ros_topic,
+            "status": event.status, "at": event.at_ms, "site": event.site, "detail": event.detail}
+
+
+def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
+    if not isinstance(obj, dict):
+        raise EnvelopeError("status event", "not a JSON object", data)
+    get = _Fields(obj, "status event", data)
+    status = get.text("status")
+    if status not in STATUSES:
+        raise EnvelopeError("status event", f"status {status!r} is not one of {sorted(STATUSES)}", data)
+    return StatusEvent(get.text("id"), get.text("robot"), get.text("topic"), status,  # type: ignore[arg-type]
+                       get.integer("at"), get.text("site", allow_empty=True),
+                       get.text("detail", allow_empty=True))
+
+
+def decode_status_batch(data: bytes) -> StatusBatch:
+    raw = data
+    if data[:1] != b"{":
+        raw = _inflate(data, "status batch")
+    obj = _json_object(raw, "status batch", data)
+    get = _Fields(obj, "status batch", data)
+    events = obj.get("events")
+    if not isinstance(events, list):
+        raise EnvelopeError("status batch", "field 'events' must be a list", data)
+    return StatusBatch(get.text("repeater"), get.text("site"),
+                       tuple(status_from_json(e, data) for e in events))
+
+
+def encode_status_ack(ack: StatusAck) -> bytes:
+    return json.dumps({"accepted": ack.accepted, "detail": ack.detail}, separators=(",", ":")).encode()
+
+
+def decode_status_ack(data: bytes) -> StatusAck:
+    get = _Fields(_json_object(data, "status ack", data), "status ack", data)
+    return StatusAck(get.integer("accepted"), get.text("detail", allow_empty=True))
+
+
+# -- helpers --------------------------------------------------------------------------------
+
+
+def _inflate(packed: bytes, what: str, data: bytes | None = None) -> bytes:
+    data = packed if data is None else data
+    try:
+        inflater = zlib.decompressobj()
+        out = inflater.decompress(packed, MAX_ENVELOPE)
+        if inflater.unconsumed_tail:
+            raise EnvelopeError(what, f"inflates beyond {MAX_ENVELOPE} bytes", data)
+    except zlib.error as exc:
+        raise EnvelopeError(what, f"bad zlib data: {exc}", data) from None
+    return out
+
+
+def _json_object(raw: bytes, what: str, data: bytes) -> dict[str, Any]:
+    try:
+        obj = json.loads(raw)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise EnvelopeError(what, f"not JSON: {exc}", data) from None
+    if not isinstance(obj, dict):
+        raise EnvelopeError(what, "not a JSON object", data)
+    return obj
+
+
+class _Fields:
+    def __init__(self, obj: dict[str, Any], what: str, data: bytes) -> None:
+        self._obj, self._what, self._data = obj, what, data
+
+    def _fail(self, name: str, reason: str) -> EnvelopeError:
+        return EnvelopeError(self._what, f"field {name!r} {reason}", self._data)
+
+    def text(self, name: str, *, allow_empty: bool = False) -> str:
+        value = self._obj.get(name, "" if allow_empty else None)
+        if not isinstance(value, str):
+            raise self._fail(name, "must be a string")
+        if not value and not allow_empty:
+            raise self._fail(name, "must not be empty")
+        return value
+
+    def optional_text(self, name: str) -> str | None:
+        value = self._obj.get(name)
+        if value is None:
+            return None
+        if not isinstance(value, str):
+            raise self._fail(name, "must be a string")
+        return value
+
+    def integer(self, name: str) -> int:
+        value = self._obj.get(name)
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise self._fail(name, "must be an integer")
+        if value < 0:
+            raise self._fail(name, "must not be negative")
+        return value
