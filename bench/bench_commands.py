@@ -69,9 +69,14 @@ from tests.paths import IROBOT  # noqa: E402
 LIGHTRING = "irobot_create_msgs/msg/LightringLeds"
 NO_GOSSIP = {"scouting/gossip/enabled": False}
 REGISTRATION = {  # what the edge agents write to the registrations topic (the fields the uplink reads)
-    "type": "record", "name": "RobotRegistration", "namespace": "fleetlink",
-    "fields": [{"name": "robot", "type": "string"}, {"name": "site", "type": "string"},
-               {"name": "event", "type": "string"}],
+    "type": "record",
+    "name": "RobotRegistration",
+    "namespace": "fleetlink",
+    "fields": [
+        {"name": "robot", "type": "string"},
+        {"name": "site", "type": "string"},
+        {"name": "event", "type": "string"},
+    ],
 }
 
 
@@ -117,8 +122,10 @@ class Robots:
     def __init__(self, endpoint: str, n: int, typestore: Any) -> None:
         self.names = [f"tb4_{i:02d}" for i in range(1, n + 1)]
         self._session = zenoh.open(client(endpoint))
-        self._nodes = [RosNode("create3", f"/{name}", session=self._session, typestore=typestore).start()
-                       for name in self.names]
+        self._nodes = [
+            RosNode("create3", f"/{name}", session=self._session, typestore=typestore).start()
+            for name in self.names
+        ]
         self.received: list[tuple[str, bytes, float]] = []
         self._lock = threading.Lock()
         for name, node in zip(self.names, self._nodes, strict=True):
@@ -129,6 +136,7 @@ class Robots:
             now = time.time()
             with self._lock:
                 self.received.append((name, sample.payload, now))
+
         return on_sample
 
     def first(self, payload: bytes) -> dict[str, float]:
@@ -154,8 +162,12 @@ def uplink_process(config: UplinkConfig, path: Path) -> Iterator[subprocess.Pope
     """``fleetlink uplink run`` in its own process (the cloud side), stopped with SIGTERM."""
     path.write_text(yaml.safe_dump(config.model_dump(mode="json", by_alias=True, exclude_none=True)))
     with path.with_suffix(".log").open("wb") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "fleetlink.cli", "uplink", "run", "-c", str(path)],
-                                cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "fleetlink.cli", "uplink", "run", "-c", str(path)],
+            cwd=ROOT,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
     try:
         yield proc
     finally:
@@ -169,15 +181,19 @@ def uplink_process(config: UplinkConfig, path: Path) -> Iterator[subprocess.Pope
 
 def main(argv: list[str] | None = None) -> int:
     exit_on_sigterm()  # stopped with SIGTERM: the stack and the processes started here stop too
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--robots", type=int, default=50)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--period", type=float, default=1.0)
     parser.add_argument("--lease", type=float, default=10.0)
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
-    parser.add_argument("--uplink-in-process", action="store_true",
-                        help="run the uplink in this process (default: its own process, as deployed)")
+    parser.add_argument(
+        "--uplink-in-process",
+        action="store_true",
+        help="run the uplink in this process (default: its own process, as deployed)",
+    )
     args = parser.parse_args(argv)
     ts = load_typestore("jazzy", [IROBOT])
     codec = get_codec(ts, LIGHTRING, "jazzy")
@@ -187,27 +203,42 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, Any] = {"robots": args.robots, "period_s": args.period, "lease_s": args.lease}
 
     def datum(red: int) -> dict[str, Any]:
-        return {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
-                "leds": [{"red": red, "green": 0, "blue": 0}] * 6, "override_system": True}
+        return {
+            "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
+            "leds": [{"red": red, "green": 0, "blue": 0}] * 6,
+            "override_system": True,
+        }
 
     def cdr(red: int) -> bytes:
         return codec.avro_to_cdr(codec.encode_datum(datum(red)))
 
-    with kafka_stack() as (bootstrap, registry_url), ExitStack() as stack, \
-            tempfile.TemporaryDirectory(prefix="bench-repeater-") as state:
+    with (
+        kafka_stack() as (bootstrap, registry_url),
+        ExitStack() as stack,
+        tempfile.TemporaryDirectory(prefix="bench-repeater-") as state,
+    ):
         admin = AdminClient({"bootstrap.servers": bootstrap})
         admin.create_topics([NewTopic(topic, num_partitions=1, replication_factor=1)])[topic].result(20)
-        serializer = AvroSerializer(SchemaRegistryClient({"url": registry_url}), json.dumps(schema),
-                                    to_dict=lambda obj, _ctx: obj)
+        serializer = AvroSerializer(
+            SchemaRegistryClient({"url": registry_url}), json.dumps(schema), to_dict=lambda obj, _ctx: obj
+        )
         producer = Producer({"bootstrap.servers": bootstrap, "linger.ms": 0})
         registrations = f"bench.robots.{run}"
-        register = AvroSerializer(SchemaRegistryClient({"url": registry_url}), json.dumps(REGISTRATION),
-                                  to_dict=lambda obj, _ctx: obj)
+        register = AvroSerializer(
+            SchemaRegistryClient({"url": registry_url}),
+            json.dumps(REGISTRATION),
+            to_dict=lambda obj, _ctx: obj,
+        )
         for i in range(1, args.robots + 1):
             robot = f"tb4_{i:02d}"
-            producer.produce(registrations, key=robot.encode(), value=register(
-                {"robot": robot, "site": "site-a", "event": "registered"},
-                SerializationContext(registrations, MessageField.VALUE)))
+            producer.produce(
+                registrations,
+                key=robot.encode(),
+                value=register(
+                    {"robot": robot, "site": "site-a", "event": "registered"},
+                    SerializationContext(registrations, MessageField.VALUE),
+                ),
+            )
         producer.flush(10)
 
         cloud = stack.enter_context(ZenohRouter(extra=NO_GOSSIP))
@@ -215,20 +246,39 @@ def main(argv: list[str] | None = None) -> int:
         site = stack.enter_context(ZenohRouter(connect=(relay.endpoint,), extra=NO_GOSSIP))
         robots = Robots(site.endpoint, args.robots, ts)
         stack.callback(robots.close)
-        repeater = stack.enter_context(Repeater(RepeaterConfig.model_validate({
-            "repeater": {"site": "site-a", "state_dir": state, "id": "bench", "heartbeat": "2s"},
-            "ros": {"distro": "jazzy", "message_paths": [str(IROBOT)]},
-            "zenoh": {"mode": "client", "connect": [site.endpoint]},
-        })))
-        config = UplinkConfig.model_validate({
-            "kafka": {"bootstrap_servers": bootstrap, "client_id": f"bench-{run}", "linger_ms": 0},
-            "registry": {"url": registry_url},
-            "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
-            "topics": {"registrations": registrations, "command_status": f"bench.status.{run}",
-                       "command_dead_letter": f"bench.dlq.{run}", "dead_letter": f"bench.dl.{run}"},
-            "commands": [{"name": "lightring", "from": topic, "to": "/{key}/cmd_lightring", "type": LIGHTRING,
-                          "repeat": {"period": f"{args.period}s", "lease": f"{args.lease}s"}}],
-        })
+        repeater = stack.enter_context(
+            Repeater(
+                RepeaterConfig.model_validate(
+                    {
+                        "repeater": {"site": "site-a", "state_dir": state, "id": "bench", "heartbeat": "2s"},
+                        "ros": {"distro": "jazzy", "message_paths": [str(IROBOT)]},
+                        "zenoh": {"mode": "client", "connect": [site.endpoint]},
+                    }
+                )
+            )
+        )
+        config = UplinkConfig.model_validate(
+            {
+                "kafka": {"bootstrap_servers": bootstrap, "client_id": f"bench-{run}", "linger_ms": 0},
+                "registry": {"url": registry_url},
+                "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
+                "topics": {
+                    "registrations": registrations,
+                    "command_status": f"bench.status.{run}",
+                    "command_dead_letter": f"bench.dlq.{run}",
+                    "dead_letter": f"bench.dl.{run}",
+                },
+                "commands": [
+                    {
+                        "name": "lightring",
+                        "from": topic,
+                        "to": "/{key}/cmd_lightring",
+                        "type": LIGHTRING,
+                        "repeat": {"period": f"{args.period}s", "lease": f"{args.lease}s"},
+                    }
+                ],
+            }
+        )
         produced = [0]
         if args.uplink_in_process:
             uplink = stack.enter_context(Uplink(config))
@@ -238,8 +288,13 @@ def main(argv: list[str] | None = None) -> int:
             in_flight: Callable[[], int] = router.in_flight
         else:
             stack.enter_context(uplink_process(config, Path(state) / "uplink.yaml"))
-            lag = Consumer({"bootstrap.servers": bootstrap, "group.id": f"{config.kafka.client_id}.commands",
-                            "enable.auto.commit": False})
+            lag = Consumer(
+                {
+                    "bootstrap.servers": bootstrap,
+                    "group.id": f"{config.kafka.client_id}.commands",
+                    "enable.auto.commit": False,
+                }
+            )
             stack.callback(lag.close)
 
             def group_ready() -> bool:
@@ -257,14 +312,22 @@ def main(argv: list[str] | None = None) -> int:
                     return 0
                 done: int = lag.committed([TopicPartition(topic, 0)], timeout=10)[0].offset
                 return produced[0] - max(done, 0)
-        wait_for(lambda: all(repeater.subscribers(f"/{n}/cmd_lightring") for n in robots.names), 30,
-                 "the repeater to see every robot")
+
+        wait_for(
+            lambda: all(repeater.subscribers(f"/{n}/cmd_lightring") for n in robots.names),
+            30,
+            "the repeater to see every robot",
+        )
 
         def send(robot: str, red: int) -> float:
             value = serializer(datum(red), SerializationContext(topic, MessageField.VALUE))
             sent = time.time()
-            producer.produce(topic, key=robot.encode(), value=value,
-                             headers=[("fleetlink-command-id", f"{robot}-{red}-{run}".encode())])
+            producer.produce(
+                topic,
+                key=robot.encode(),
+                value=value,
+                headers=[("fleetlink-command-id", f"{robot}-{red}-{run}".encode())],
+            )
             producer.poll(0)
             produced[0] += 1
             return sent
@@ -274,8 +337,12 @@ def main(argv: list[str] | None = None) -> int:
 
         def phase(spent: int, window: float, samples: int) -> dict[str, Any]:
             per_command = (spent - idle_rate * window) / len(robots.names)
-            return {"wan_bytes": spent, "window_s": round(window, 1),
-                    "wan_bytes_per_command": round(per_command), "samples_at_robots": samples}
+            return {
+                "wan_bytes": spent,
+                "window_s": round(window, 1),
+                "wan_bytes_per_command": round(per_command),
+                "samples_at_robots": samples,
+            }
 
         def round_of_commands(red: int, timeout: float) -> list[float]:
             sent = {name: send(name, red) for name in robots.names}
@@ -300,11 +367,13 @@ def main(argv: list[str] | None = None) -> int:
         latencies: list[float] = []
         for rnd in range(args.rounds):
             latencies += round_of_commands(10 + rnd, 30)
-        results["latency_ms"] = {"p50": round(pct(latencies, 0.50) * 1000, 1),
-                                 "p99": round(pct(latencies, 0.99) * 1000, 1),
-                                 "max": round(max(latencies) * 1000, 1),
-                                 "mean": round(statistics.fmean(latencies) * 1000, 1),
-                                 "samples": len(latencies)}
+        results["latency_ms"] = {
+            "p50": round(pct(latencies, 0.50) * 1000, 1),
+            "p99": round(pct(latencies, 0.99) * 1000, 1),
+            "max": round(max(latencies) * 1000, 1),
+            "mean": round(statistics.fmean(latencies) * 1000, 1),
+            "samples": len(latencies),
+        }
         wait_for(settled, args.lease + 30, "the latency rounds to end")
 
         # 3. fleetlink: one command per robot, WAN bytes for its whole life
@@ -336,8 +405,9 @@ def main(argv: list[str] | None = None) -> int:
                 for pub in publishers:
                     pub.publish_cdr(payload)
                 time.sleep(max(0.0, args.period - (time.monotonic() - tick)))
-            wait_for(lambda: robots.count() - received_before >= len(robots.names) * repeats, 10,
-                     "naive samples")
+            wait_for(
+                lambda: robots.count() - received_before >= len(robots.names) * repeats, 10, "naive samples"
+            )
             spent = relay.counters.total_bytes - before
             window = time.monotonic() - start
             for pub in publishers:
@@ -350,13 +420,17 @@ def main(argv: list[str] | None = None) -> int:
     else:
         lat, fl, naive = results["latency_ms"], results["fleetlink"], results["cloud_repeats"]
         print(f"robots {args.robots}, period {args.period} s, lease {args.lease} s")
-        print(f"latency Kafka produce -> ROS sample: p50 {lat['p50']} ms, p99 {lat['p99']} ms, "
-              f"max {lat['max']} ms ({lat['samples']} commands)")
+        print(
+            f"latency Kafka produce -> ROS sample: p50 {lat['p50']} ms, p99 {lat['p99']} ms, "
+            f"max {lat['max']} ms ({lat['samples']} commands)"
+        )
         print(f"idle WAN: {results['idle_bytes_per_s']} B/s")
         for label, figures in (("fleetlink:    ", fl), ("cloud repeats:", naive)):
-            print(f"{label} {figures['wan_bytes_per_command']:>7} WAN bytes per command "
-                  f"({figures['wan_bytes']} B in {figures['window_s']} s; "
-                  f"{figures['samples_at_robots']} samples at the robots)")
+            print(
+                f"{label} {figures['wan_bytes_per_command']:>7} WAN bytes per command "
+                f"({figures['wan_bytes']} B in {figures['window_s']} s; "
+                f"{figures['samples_at_robots']} samples at the robots)"
+            )
     return 0
 
 

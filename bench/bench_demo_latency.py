@@ -46,8 +46,13 @@ def main() -> None:
         red: list[float] = []
         green: list[float] = []
         for run in range(args.runs):
-            options = DemoOptions(workdir=Path(tmp) / f"run{run}", bootstrap=bootstrap,
-                                  registry_url=registry, window=args.window, out=io.StringIO())
+            options = DemoOptions(
+                workdir=Path(tmp) / f"run{run}",
+                bootstrap=bootstrap,
+                registry_url=registry,
+                window=args.window,
+                out=io.StringIO(),
+            )
             summary = Demo(options).run()
             if not summary["loop_closed"]:
                 raise SystemExit(f"run {run}: the loop did not close: {summary}")
@@ -55,8 +60,10 @@ def main() -> None:
             green.append(summary["heal_to_green_led_s"])
             print(f"run {run + 1}: fault → red {red[-1]:.2f} s, heal → green {green[-1]:.2f} s", flush=True)
         print(f"\nwindow {window_s:.1f} s; over {args.runs} runs:")
-        print(f"  fault → red light ring:  p50 {statistics.median(red):.2f} s "
-              f"(window {window_s:.1f} s = {window_s / statistics.median(red):.0%} of it)")
+        print(
+            f"  fault → red light ring:  p50 {statistics.median(red):.2f} s "
+            f"(window {window_s:.1f} s = {window_s / statistics.median(red):.0%} of it)"
+        )
         print(f"  heal → green light ring: p50 {statistics.median(green):.2f} s")
 
 

@@ -92,8 +92,9 @@ def create_topic(bootstrap: str, prefix: str) -> str:
     return topic
 
 
-def read_topic(bootstrap: str, topic: str, count: int, timeout: float, *, per_record: bool = True
-               ) -> list[tuple[float, int]]:
+def read_topic(
+    bootstrap: str, topic: str, count: int, timeout: float, *, per_record: bool = True
+) -> list[tuple[float, int]]:
     """(receive time, record timestamp ms) for ``count`` records of a one-partition topic.
 
     ``per_record``: one ``poll`` per record, receive times exact (latency). Otherwise batches of
@@ -101,9 +102,15 @@ def read_topic(bootstrap: str, topic: str, count: int, timeout: float, *, per_re
     with what it measures) costs a fraction. Never ``consume(n, 0.1)``: it returns only when
     ``n`` records are there or the timeout is over, adding up to 0.1 s to receive times.
     """
-    consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"bench-{uuid.uuid4().hex}",
-                         "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 200,
-                         "fetch.wait.max.ms": 5})
+    consumer = Consumer(
+        {
+            "bootstrap.servers": bootstrap,
+            "group.id": f"bench-{uuid.uuid4().hex}",
+            "enable.auto.commit": False,
+            "topic.metadata.refresh.interval.ms": 200,
+            "fetch.wait.max.ms": 5,
+        }
+    )
     consumer.assign([TopicPartition(topic, 0, 0)])
     out: list[tuple[float, int]] = []
     gc.freeze()  # a full collection of this process (payloads, type store) would delay receive times
@@ -136,14 +143,26 @@ class Pipeline:
         if os.environ.get("BENCH_METRICS"):  # Prometheus metrics on: every delivery report counted
             uplink["metrics"] = {"listen": "127.0.0.1:0"}
         edge = {
-            "site": "bench", "edge_id": "edge-1",
-            "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.site_port}"],
-                      "connect": [f"tcp/127.0.0.1:{self.cloud_port}"]},
-            "robot_types": {"bench": {"match": "/r*", "mappings": [
-                {"name": "imu", "from": "/{robot}/imu", "to": topic, "type": IMU}]}},
+            "site": "bench",
+            "edge_id": "edge-1",
+            "zenoh": {
+                "mode": "router",
+                "listen": [f"tcp/127.0.0.1:{self.site_port}"],
+                "connect": [f"tcp/127.0.0.1:{self.cloud_port}"],
+            },
+            "robot_types": {
+                "bench": {
+                    "match": "/r*",
+                    "mappings": [{"name": "imu", "from": "/{robot}/imu", "to": topic, "type": IMU}],
+                }
+            },
             "spool": {"dir": str(work / "spool"), "max_bytes": "1GiB", "fsync": "interval"},
-            "wan": {"batch_max_records": 2000, "linger": os.environ.get("BENCH_LINGER", "10ms"),
-                    "max_in_flight": 4, "codec": "zstd"},
+            "wan": {
+                "batch_max_records": 2000,
+                "linger": os.environ.get("BENCH_LINGER", "10ms"),
+                "max_in_flight": 4,
+                "codec": "zstd",
+            },
         }
         self.procs: dict[str, ServerProcess] = {}
         for name, config, argv in (
@@ -155,12 +174,15 @@ class Pipeline:
             log = work / f"{name}.log"
             marker = work / f"{name}.ready"
             extra = ["--stats-file", str(marker)] if name == "edge" else []
+
             def uplink_up(log: Path = log) -> bool:
                 return "uplink running" in log.read_text()
 
             proc = ServerProcess(
-                name=name, argv=[sys.executable, "-m", "fleetlink", *argv, "-c", str(path), *extra],
-                log_path=log, pid_path=work / f"{name}.pid",
+                name=name,
+                argv=[sys.executable, "-m", "fleetlink", *argv, "-c", str(path), *extra],
+                log_path=log,
+                pid_path=work / f"{name}.pid",
                 ready=marker.exists if name == "edge" else uplink_up,
             )
             proc.start(60)
@@ -173,9 +195,21 @@ class Pipeline:
 
 def run_robots(site_port: int, robots: int, count: int, rate: float) -> tuple[subprocess.Popen[str], float]:
     pub = subprocess.Popen(
-        [sys.executable, str(ROOT / "bench" / "e2e_publisher.py"), "--connect", f"tcp/127.0.0.1:{site_port}",
-         "--robots", str(robots), "--count", str(count), "--rate", str(rate)],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            str(ROOT / "bench" / "e2e_publisher.py"),
+            "--connect",
+            f"tcp/127.0.0.1:{site_port}",
+            "--robots",
+            str(robots),
+            "--count",
+            str(count),
+            "--rate",
+            str(rate),
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
     )
     if pub.stdout is None or pub.stdin is None:
         raise SystemExit("publisher has no pipes")
@@ -223,8 +257,7 @@ def direct_path(bootstrap: str, registry: str, payloads: list[bytes], n: int) ->
 
 
 def latency_line(lat: list[float]) -> str:
-    return (f"p50 {statistics.median(lat):.1f} ms   p99 {percentile(lat, 0.99):.1f} ms   "
-            f"max {max(lat):.1f} ms")
+    return f"p50 {statistics.median(lat):.1f} ms   p99 {percentile(lat, 0.99):.1f} ms   max {max(lat):.1f} ms"
 
 
 @dataclass
@@ -240,8 +273,9 @@ class Throughput:
         return self.got / self.elapsed
 
 
-def run_throughput(work: Path, bootstrap: str, registry: str, robots: int, per_robot: int,
-                   broker_pid: int | None) -> Throughput:
+def run_throughput(
+    work: Path, bootstrap: str, registry: str, robots: int, per_robot: int, broker_pid: int | None
+) -> Throughput:
     """The robots publish ``per_robot`` messages each at once; first publish -> last record read."""
     topic = create_topic(bootstrap, "bench.imu")
     work.mkdir()
@@ -266,8 +300,9 @@ def run_throughput(work: Path, bootstrap: str, registry: str, robots: int, per_r
     return Throughput(len(got), elapsed, int(published[1]), float(published[2]), cpu)
 
 
-def run_latency(work: Path, bootstrap: str, registry: str, robots: int, rate: float, seconds: float
-                ) -> list[tuple[float, int]]:
+def run_latency(
+    work: Path, bootstrap: str, registry: str, robots: int, rate: float, seconds: float
+) -> list[tuple[float, int]]:
     topic = create_topic(bootstrap, "bench.imu.lat")
     work.mkdir()
     with ExitStack() as stack:
@@ -288,17 +323,33 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robots", type=int, default=8)
     ap.add_argument("--records", type=int, default=40_000, help="total records for the throughput run")
-    ap.add_argument("--repeat", type=int, default=3,
-                    help="throughput rounds, fleetlink and the direct path alternating (medians compared)")
-    ap.add_argument("--warmup-rounds", type=int, default=1,
-                    help="rounds of both run first and not counted (a fresh broker's JVM is still cold)")
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=3,
+        help="throughput rounds, fleetlink and the direct path alternating (medians compared)",
+    )
+    ap.add_argument(
+        "--warmup-rounds",
+        type=int,
+        default=1,
+        help="rounds of both run first and not counted (a fresh broker's JVM is still cold)",
+    )
     ap.add_argument("--latency-rate", type=float, default=1000.0)
     ap.add_argument("--latency-seconds", type=float, default=10.0)
-    ap.add_argument("--warmup", type=float, default=1.0,
-                    help="seconds at the start of the latency run also reported apart (schema registration, "
-                         "first batches)")
-    ap.add_argument("--only", choices=("throughput", "latency", "direct"), action="append",
-                    help="run only these parts (repeatable; default: all three)")
+    ap.add_argument(
+        "--warmup",
+        type=float,
+        default=1.0,
+        help="seconds at the start of the latency run also reported apart (schema registration, "
+        "first batches)",
+    )
+    ap.add_argument(
+        "--only",
+        choices=("throughput", "latency", "direct"),
+        action="append",
+        help="run only these parts (repeatable; default: all three)",
+    )
     args = ap.parse_args()
     parts = set(args.only or ("throughput", "latency", "direct"))
 
@@ -319,18 +370,29 @@ def main() -> None:
         rates: list[float] = []
         directs: list[float] = []
         if parts & {"throughput", "direct"}:
-            print(f"\n1. throughput, {total} records, at-least-once (durable spool, acked WAN batches, "
-                  "acks=all), against 3. the direct path (one process: rosbags → dict → fastavro → "
-                  "produce; no spool, no acks), alternating:")
+            print(
+                f"\n1. throughput, {total} records, at-least-once (durable spool, acked WAN batches, "
+                "acks=all), against 3. the direct path (one process: rosbags → dict → fastavro → "
+                "produce; no spool, no acks), alternating:"
+            )
         for i in range(-args.warmup_rounds, args.repeat):
             line = f"   round {i + 1}:" if i >= 0 else "   warm-up (not counted):"
             if "throughput" in parts:
-                t = run_throughput(work / f"tp{i + args.warmup_rounds}", bootstrap, registry, args.robots,
-                                   per_robot, broker_pid)
+                t = run_throughput(
+                    work / f"tp{i + args.warmup_rounds}",
+                    bootstrap,
+                    registry,
+                    args.robots,
+                    per_robot,
+                    broker_pid,
+                )
                 rates.append(t.rate)
-                line += (f" fleetlink {t.got}/{total} in {t.elapsed:.2f} s = {t.rate:,.0f} records/s"
-                         f" (robots published in {t.publish_s:.2f} s; CPU s: "
-                         + ", ".join(f"{k} {v:.1f}" for k, v in t.cpu.items()) + ")")
+                line += (
+                    f" fleetlink {t.got}/{total} in {t.elapsed:.2f} s = {t.rate:,.0f} records/s"
+                    f" (robots published in {t.publish_s:.2f} s; CPU s: "
+                    + ", ".join(f"{k} {v:.1f}" for k, v in t.cpu.items())
+                    + ")"
+                )
             if "direct" in parts:
                 directs.append(direct_path(bootstrap, registry, payloads, total))
                 line += f" | direct {directs[-1]:,.0f} records/s"
@@ -345,17 +407,22 @@ def main() -> None:
         if directs:
             print(f"   direct path, median: {statistics.median(directs):,.0f} records/s")
         if rates and directs:
-            print(f"\nratio fleetlink end to end / direct path (medians): "
-                  f"{statistics.median(rates) / statistics.median(directs):.2f}")
+            print(
+                f"\nratio fleetlink end to end / direct path (medians): "
+                f"{statistics.median(rates) / statistics.median(directs):.2f}"
+            )
 
         if "latency" in parts:
-            got = run_latency(work / "lat", bootstrap, registry, args.robots, args.latency_rate,
-                              args.latency_seconds)
+            got = run_latency(
+                work / "lat", bootstrap, registry, args.robots, args.latency_rate, args.latency_seconds
+            )
             lat = [(recv * 1000 - stamp) for recv, stamp in got]
             first = min(stamp for _recv, stamp in got)
             steady = [(recv * 1000 - stamp) for recv, stamp in got if stamp - first >= args.warmup * 1000]
-            print(f"\n2. latency at {args.latency_rate:,.0f} records/s (publish → record read from Kafka), "
-                  f"{len(lat)} records:")
+            print(
+                f"\n2. latency at {args.latency_rate:,.0f} records/s (publish → record read from Kafka), "
+                f"{len(lat)} records:"
+            )
             print(f"   all records:            {latency_line(lat)}")
             if steady:
                 print(f"   after the first {args.warmup:g} s ({len(steady)} records): {latency_line(steady)}")

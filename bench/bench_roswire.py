@@ -61,8 +61,9 @@ def imu_payload() -> bytes:
     import numpy as np
 
     msg = t[IMU](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2),
-                                        frame_id="imu_link"),
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="imu_link"
+        ),
         orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
         orientation_covariance=np.zeros(9),
         angular_velocity=t["geometry_msgs/msg/Vector3"](x=0.1, y=0.2, z=0.3),
@@ -160,23 +161,28 @@ def run_subscriber(endpoint: str, kind: str) -> None:
             _ = sample.payload.to_bytes()
             rec.add(time.time_ns(), source_ns, seq)
 
-        subs: list[Any] = [session.declare_subscriber(f"{DOMAIN}/bench_bot/{name}/**", on_raw)
-                           for name in ("imu_raw", "imu_both")]
+        subs: list[Any] = [
+            session.declare_subscriber(f"{DOMAIN}/bench_bot/{name}/**", on_raw)
+            for name in ("imu_raw", "imu_both")
+        ]
         closer: Any = session
     else:
         from fleetlink.roswire.node import RosNode
         from fleetlink.roswire.subscriber import RosSample
         from fleetlink.schemas.typestore import load_typestore
 
-        node = RosNode("imu_sub", domain_id=DOMAIN, config=client_config(endpoint),
-                       typestore=load_typestore("jazzy")).start()
+        node = RosNode(
+            "imu_sub", domain_id=DOMAIN, config=client_config(endpoint), typestore=load_typestore("jazzy")
+        ).start()
 
         def on_ros(sample: RosSample) -> None:
             _ = sample.message.linear_acceleration.z  # decoded by the subscriber (decode=True)
             rec.add(time.time_ns(), sample.source_ts_ns or 0, sample.seq or 0)
 
-        subs = [node.create_subscriber(topic, IMU, on_ros, decode=True)
-                for topic in ("/bench_bot/imu_roswire", LATENCY_TOPIC)]
+        subs = [
+            node.create_subscriber(topic, IMU, on_ros, decode=True)
+            for topic in ("/bench_bot/imu_roswire", LATENCY_TOPIC)
+        ]
         closer = node
     print("ready", flush=True)
     for line in sys.stdin:
@@ -199,8 +205,9 @@ def run_subscriber(endpoint: str, kind: str) -> None:
 
 
 def child(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, __file__, *args], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            text=True, cwd=ROOT)
+    return subprocess.Popen(
+        [sys.executable, __file__, *args], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT
+    )
 
 
 def read_json(proc: subprocess.Popen[str]) -> dict[str, Any]:
@@ -235,17 +242,25 @@ def main(argv: list[str] | None = None) -> int:
 
     results: dict[str, Any] = {"payload_bytes": len(imu_payload())}
     with ZenohRouter() as router:
-        subs = {kind: child("--role", "subscriber", "--endpoint", router.endpoint, "--kind", kind)
-                for kind in ("roswire", "raw")}
+        subs = {
+            kind: child("--role", "subscriber", "--endpoint", router.endpoint, "--kind", kind)
+            for kind in ("roswire", "raw")
+        }
         for proc in subs.values():
             assert proc.stdout is not None
             if proc.stdout.readline().strip() != "ready":
                 raise RuntimeError("subscriber did not start")
         phases = [
-            ("throughput", "roswire", ["--topic", "/bench_bot/imu_roswire", "--mode", "flood",
-                                       "--count", str(args.count)]),
-            ("throughput", "raw", ["--topic", "/bench_bot/imu_raw", "--mode", "flood",
-                                   "--count", str(args.count)]),
+            (
+                "throughput",
+                "roswire",
+                ["--topic", "/bench_bot/imu_roswire", "--mode", "flood", "--count", str(args.count)],
+            ),
+            (
+                "throughput",
+                "raw",
+                ["--topic", "/bench_bot/imu_raw", "--mode", "flood", "--count", str(args.count)],
+            ),
             ("latency", None, ["--mode", "paced", "--rate", str(args.rate), "--seconds", str(args.seconds)]),
         ]
         for phase, only, extra in phases:
@@ -275,13 +290,17 @@ def main(argv: list[str] | None = None) -> int:
     print(f"throughput ({args.count} samples, publisher blocks on back-pressure):")
     for kind in ("roswire", "raw"):
         r = thr[kind]
-        print(f"  {kind:<8} received {r['received']:>7}  lost {r['lost']:>5}  "
-              f"{r['samples_per_s']:>9,.0f} samples/s")
+        print(
+            f"  {kind:<8} received {r['received']:>7}  lost {r['lost']:>5}  "
+            f"{r['samples_per_s']:>9,.0f} samples/s"
+        )
     print(f"latency at {args.rate:g} Hz for {args.seconds:g} s, both subscribers at once:")
     for kind in ("roswire", "raw"):
         r = lat[kind]
-        print(f"  {kind:<8} received {r['received']:>7}  lost {r['lost']:>5}  "
-              f"p50 {r['p50_ms']:.3f} ms  p99 {r['p99_ms']:.3f} ms")
+        print(
+            f"  {kind:<8} received {r['received']:>7}  lost {r['lost']:>5}  "
+            f"p50 {r['p50_ms']:.3f} ms  p99 {r['p99_ms']:.3f} ms"
+        )
     return 0
 
 

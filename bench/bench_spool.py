@@ -52,14 +52,20 @@ def timed(fn: Callable[[], int], repeat: int) -> tuple[int, float]:
 
 
 def spool_options(fsync: str) -> SpoolOptions:
-    return SpoolOptions(max_bytes=4 << 30, segment_bytes=64 << 20, fsync=fsync,  # type: ignore[arg-type]
-                        fsync_interval_ms=100, fsync_batch=1000)
+    return SpoolOptions(
+        max_bytes=4 << 30,
+        segment_bytes=64 << 20,
+        fsync=fsync,  # type: ignore[arg-type]
+        fsync_interval_ms=100,
+        fsync_batch=1000,
+    )
 
 
 def bench_appends(base: Path, n: int, repeat: int) -> None:
     payload = os.urandom(300)
     print(f"spool appends, 300-byte records, {n:,} per run, best of {repeat}")
     for fsync, count in (("interval", n), ("batch", n), ("always", max(n // 200, 200))):
+
         def single(fsync: str = fsync, count: int = count) -> int:
             directory = Path(tempfile.mkdtemp(dir=base))
             with Spool(directory, spool_options(fsync)) as spool:
@@ -104,6 +110,7 @@ def bench_sender(base: Path, n: int) -> None:
 
     directory = Path(tempfile.mkdtemp(dir=base))
     with Spool(directory, spool_options("interval")) as spool:
+
         def flat_out(spool: Spool = spool) -> None:
             for _ in range(n // 100):
                 spool.append_many([payload] * 100)
@@ -138,8 +145,10 @@ def bench_sender(base: Path, n: int) -> None:
             pump(spool, total // group * group, lags)
             thread.join()
             lags.sort()
-            print(f"  steady {per_second:>6,} records/s: append->read latency p50 "
-                  f"{lags[len(lags) // 2]:.2f} ms, p99 {lags[int(len(lags) * 0.99)]:.2f} ms")
+            print(
+                f"  steady {per_second:>6,} records/s: append->read latency p50 "
+                f"{lags[len(lags) // 2]:.2f} ms, p99 {lags[int(len(lags) * 0.99)]:.2f} ms"
+            )
         shutil.rmtree(directory)
 
 
@@ -169,8 +178,10 @@ def bench_reopen(base: Path, megabytes: int) -> None:
     with Spool(directory, spool_options("interval")) as spool:
         elapsed = time.perf_counter() - start
         depth = spool.stats().depth
-    print(f"  reopen {megabytes} MiB ({depth:,} unacked records): {elapsed * 1000:,.0f} ms "
-          f"({depth / elapsed:,.0f} records/s scanned)")
+    print(
+        f"  reopen {megabytes} MiB ({depth:,} unacked records): {elapsed * 1000:,.0f} ms "
+        f"({depth / elapsed:,.0f} records/s scanned)"
+    )
     shutil.rmtree(directory)
 
 
@@ -191,10 +202,19 @@ def imu_payloads(limit: int) -> tuple[list[bytes], dict[bytes, str]]:
         connections = [c for c in reader.connections if c.topic == "/imu/data"]
         for _, stamp, raw in reader.messages(connections=connections):
             value = b"\xc3\x01" + fp + codec.cdr_to_avro(raw)
-            headers = (("ros.topic", b"/husky_01/imu/data"), ("ros.type", b"sensor_msgs/msg/Imu"),
-                       ("ros.type_hash", codec.type_hash.encode()), ("site", b"warehouse-a"))
-            record = Record(kafka_topic="fleet.imu", key=b"husky_01", value=value, headers=headers,
-                            timestamp_ms=stamp // 1_000_000)
+            headers = (
+                ("ros.topic", b"/husky_01/imu/data"),
+                ("ros.type", b"sensor_msgs/msg/Imu"),
+                ("ros.type_hash", codec.type_hash.encode()),
+                ("site", b"warehouse-a"),
+            )
+            record = Record(
+                kafka_topic="fleet.imu",
+                key=b"husky_01",
+                value=value,
+                headers=headers,
+                timestamp_ms=stamp // 1_000_000,
+            )
             payloads.append(encode_payload(record))
             if len(payloads) >= limit:
                 break
@@ -211,12 +231,22 @@ def bench_wan(repeat: int) -> None:
 
         def encode(codec: Codec = codec, batches: list[list[tuple[int, bytes]]] = batches) -> int:
             for items in batches:
-                encode_batch_payloads(site="warehouse-a", edge_id="edge-1", stream="durable", items=items,
-                                      schemas=schemas, codec=codec)
+                encode_batch_payloads(
+                    site="warehouse-a",
+                    edge_id="edge-1",
+                    stream="durable",
+                    items=items,
+                    schemas=schemas,
+                    codec=codec,
+                )
             return sum(len(b) for b in batches)
 
-        encoded = [encode_batch_payloads(site="warehouse-a", edge_id="edge-1", stream="durable", items=b,
-                                         schemas=schemas, codec=codec) for b in batches]
+        encoded = [
+            encode_batch_payloads(
+                site="warehouse-a", edge_id="edge-1", stream="durable", items=b, schemas=schemas, codec=codec
+            )
+            for b in batches
+        ]
 
         def decode(encoded: list[bytes] = encoded) -> int:
             return sum(len(decode_batch(data).records) for data in encoded)
@@ -224,8 +254,10 @@ def bench_wan(repeat: int) -> None:
         done, enc_s = timed(encode, repeat)
         dec_done, dec_s = timed(decode, repeat)
         wire = sum(len(e) for e in encoded) / len(encoded)
-        print(f"  {codec:<5} {wire:>9,.0f} bytes/batch ({wire / 500:5.0f} per record)  "
-              f"encode {rate(done, enc_s)}  decode {rate(dec_done, dec_s)}")
+        print(
+            f"  {codec:<5} {wire:>9,.0f} bytes/batch ({wire / 500:5.0f} per record)  "
+            f"encode {rate(done, enc_s)}  decode {rate(dec_done, dec_s)}"
+        )
 
 
 def main() -> None:

@@ -86,13 +86,32 @@ def main() -> None:
         ),
         ("throttle first", lambda: ThrottleStage(10, "first")),
         ("throttle latest", lambda: ThrottleStage(10, "latest")),
-        ("on_change", lambda: build_stage(spec({
-            "type": "on_change", "fields": ["linear_acceleration.x"], "deadband": 0.05, "heartbeat": "5s",
-        }))),
-        ("aggregate 2x6", lambda: build_stage(spec({
-            "type": "aggregate", "window": "1s", "fields": ["linear_acceleration.x", "angular_velocity.z"],
-            "ops": ["count", "mean", "min", "max", "last", "stddev"],
-        }))),
+        (
+            "on_change",
+            lambda: build_stage(
+                spec(
+                    {
+                        "type": "on_change",
+                        "fields": ["linear_acceleration.x"],
+                        "deadband": 0.05,
+                        "heartbeat": "5s",
+                    }
+                )
+            ),
+        ),
+        (
+            "aggregate 2x6",
+            lambda: build_stage(
+                spec(
+                    {
+                        "type": "aggregate",
+                        "window": "1s",
+                        "fields": ["linear_acceleration.x", "angular_velocity.z"],
+                        "ops": ["count", "mean", "min", "max", "last", "stddev"],
+                    }
+                )
+            ),
+        ),
     ]
     baseline = naive_filter_rate(samples)
     print(f"{'stage':<18} {'samples/s':>12}")

@@ -71,14 +71,23 @@ IMU, ODOM, FIX = "/imu/data", "/husky_velocity_controller/odom", "/fix"
 TYPES = {IMU: "sensor_msgs/msg/Imu", ODOM: "nav_msgs/msg/Odometry", FIX: "sensor_msgs/msg/NavSatFix"}
 SHORT = {IMU: "imu", ODOM: "odom", FIX: "fix"}
 AGGREGATES: dict[str, dict[str, Any]] = {
-    IMU: {"fields": ["linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z",
-                     "angular_velocity.z"], "ops": ["mean", "min", "max", "stddev"]},
+    IMU: {
+        "fields": [
+            "linear_acceleration.x",
+            "linear_acceleration.y",
+            "linear_acceleration.z",
+            "angular_velocity.z",
+        ],
+        "ops": ["mean", "min", "max", "stddev"],
+    },
     ODOM: {"fields": ["twist.twist.linear.x", "twist.twist.angular.z"], "ops": ["mean", "max"]},
     FIX: {"fields": ["latitude", "longitude"], "ops": ["last"]},
 }
 RULE_KEYS = {"imu": "*/**/imu/**", "odom": "*/**/odom/**", "fix": "*/**/fix/**"}
-RATES_HZ: dict[str, dict[str, float]] = {"ds1": dict.fromkeys(RULE_KEYS, 1.0),
-                                         "ds5": {"imu": 5.0, "odom": 5.0, "fix": 1.0}}  # edge-router.json5
+RATES_HZ: dict[str, dict[str, float]] = {
+    "ds1": dict.fromkeys(RULE_KEYS, 1.0),
+    "ds5": {"imu": 5.0, "odom": 5.0, "fix": 1.0},
+}  # edge-router.json5
 LINGER_S = 0.02  # edge.config.WanSection's default
 MAPPING_LINGER_S = {"fl-raw": None, "fl-agg": 1.0, "fl-agg-20ms": 0.02, "fl-agg-10s": 10.0}
 """A mapping's linger (None: the edge's wan.linger; 1 s: what an aggregate mapping gets by default)."""
@@ -156,8 +165,9 @@ class Wan:
         wan_only = {"scouting/gossip/enabled": False, "transport/shared_memory/enabled": False}
         self.cloud = stack.enter_context(ZenohRouter(extra=wan_only))
         self.relay = stack.enter_context(TcpRelay(self.cloud.port))
-        self.site = stack.enter_context(ZenohRouter(connect=(self.relay.endpoint,),
-                                                    extra={**wan_only, **site_extra}))
+        self.site = stack.enter_context(
+            ZenohRouter(connect=(self.relay.endpoint,), extra={**wan_only, **site_extra})
+        )
         wait_for(lambda: self.relay.counters.connections >= 1 and self.bytes() > 0, 10, "the WAN link")
 
     def bytes(self) -> int:
@@ -181,8 +191,9 @@ class Wan:
 
 
 def robot(stack: ExitStack, endpoint: str) -> dict[str, RosPublisher]:
-    node = stack.enter_context(RosNode("replay", f"/{ROBOT}", config=client_config(endpoint),
-                                       typestore=load_typestore("jazzy")))
+    node = stack.enter_context(
+        RosNode("replay", f"/{ROBOT}", config=client_config(endpoint), typestore=load_typestore("jazzy"))
+    )
     return {t: node.create_publisher(f"/{ROBOT}{t}", kind, congestion="block") for t, kind in TYPES.items()}
 
 
@@ -204,9 +215,16 @@ def replay(pubs: dict[str, RosPublisher], messages: Sequence[Message], speed: fl
 def downsampling(rates_hz: dict[str, float], speed: float) -> dict[str, Any]:
     """Egress rules on every link of the site router. Robots only publish, so raw keys leave the
     site router on the WAN link only (plain TCP here, so there is no TLS link to select)."""
-    return {"downsampling": [{"id": "wan-raw-egress", "flows": ["egress"], "messages": ["put", "delete"],
-                              "rules": [{"key_expr": RULE_KEYS[k], "freq": hz * speed}
-                                        for k, hz in rates_hz.items()]}]}
+    return {
+        "downsampling": [
+            {
+                "id": "wan-raw-egress",
+                "flows": ["egress"],
+                "messages": ["put", "delete"],
+                "rules": [{"key_expr": RULE_KEYS[k], "freq": hz * speed} for k, hz in rates_hz.items()],
+            }
+        ]
+    }
 
 
 def run_raw(mode: str, messages: Sequence[Message], speed: float, idle_s: float) -> Result:
@@ -237,9 +255,18 @@ def run_raw(mode: str, messages: Sequence[Message], speed: float, idle_s: float)
         raise RuntimeError(f"{mode}: {crossed} of {len(messages)} raw samples crossed")
     per_topic = ", ".join(f"{SHORT[t]} {got[t]}" for t in TYPES)
     rules = "" if rates is None else "rules " + "/".join(f"{hz:g}" for hz in rates.values()) + " Hz; "
-    return Result(mode, up - up0, down - down0, crossed, len(messages), bag_seconds(messages), setup, idle,
-                  f"{rules}{per_topic}; {(up - up0) / max(crossed, 1):.0f} B up per sample; "
-                  f"replay late by {late * 1000:.0f} ms at worst")
+    return Result(
+        mode,
+        up - up0,
+        down - down0,
+        crossed,
+        len(messages),
+        bag_seconds(messages),
+        setup,
+        idle,
+        f"{rules}{per_topic}; {(up - up0) / max(crossed, 1):.0f} B up per sample; "
+        f"replay late by {late * 1000:.0f} ms at worst",
+    )
 
 
 def windows(messages: Sequence[Message]) -> int:
@@ -257,9 +284,13 @@ def kafka_records(bootstrap: str, topics: Sequence[str]) -> int:
 
 def schema_bytes(spool: Path, *, aggregate: bool) -> str:
     """What each schema the mode's batches carry adds to a batch: JSON size -> zstd batch growth."""
+
     def batch(schemas: dict[bytes, str]) -> int:
-        return len(encode_batch_payloads(site="s", edge_id="e", stream="durable", items=[(1, b"")],
-                                         schemas=schemas, codec="zstd"))
+        return len(
+            encode_batch_payloads(
+                site="s", edge_id="e", stream="durable", items=[(1, b"")], schemas=schemas, codec="zstd"
+            )
+        )
 
     sizes = []
     for path in sorted((spool / "schemas").glob("*.json")):
@@ -269,8 +300,16 @@ def schema_bytes(spool: Path, *, aggregate: bool) -> str:
     return ", ".join(sizes)
 
 
-def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: float, *,
-                  bootstrap: str, registry: str, work: Path) -> Result:
+def run_fleetlink(
+    mode: str,
+    messages: Sequence[Message],
+    speed: float,
+    idle_s: float,
+    *,
+    bootstrap: str,
+    registry: str,
+    work: Path,
+) -> Result:
     run, aggregate = uuid.uuid4().hex[:8], mode.startswith("fl-agg")
     linger = MAPPING_LINGER_S[mode]
     topics = {t: f"bench.wan.{run}.{SHORT[t]}{'_1s' if aggregate else ''}" for t in TYPES}
@@ -286,17 +325,33 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
     spool = work / run
     with ExitStack() as stack:
         wan = Wan(stack, {})
-        stack.enter_context(Uplink(UplinkConfig.model_validate({
-            "kafka": {"bootstrap_servers": bootstrap}, "registry": {"url": registry},
-            "zenoh": {"mode": "client", "connect": [wan.cloud.endpoint]}, "topics": side_topics})))
-        agent = stack.enter_context(EdgeAgent(EdgeConfig.model_validate({
-            "site": f"bench-{run}", "edge_id": "edge-1",
-            "zenoh": {"mode": "client", "connect": [wan.site.endpoint]},
-            "robot_types": {"husky": {"match": "/husky_*", "mappings": mappings}},
-            "spool": {"dir": str(spool)},
-            "wan": {"linger": us(LINGER_S / speed)},
-            "topics": side_topics,
-        })))
+        stack.enter_context(
+            Uplink(
+                UplinkConfig.model_validate(
+                    {
+                        "kafka": {"bootstrap_servers": bootstrap},
+                        "registry": {"url": registry},
+                        "zenoh": {"mode": "client", "connect": [wan.cloud.endpoint]},
+                        "topics": side_topics,
+                    }
+                )
+            )
+        )
+        agent = stack.enter_context(
+            EdgeAgent(
+                EdgeConfig.model_validate(
+                    {
+                        "site": f"bench-{run}",
+                        "edge_id": "edge-1",
+                        "zenoh": {"mode": "client", "connect": [wan.site.endpoint]},
+                        "robot_types": {"husky": {"match": "/husky_*", "mappings": mappings}},
+                        "spool": {"dir": str(spool)},
+                        "wan": {"linger": us(LINGER_S / speed)},
+                        "topics": side_topics,
+                    }
+                )
+            )
+        )
 
         def durable() -> dict[str, Any]:
             stream: dict[str, Any] = agent.snapshot()["streams"]["durable"]
@@ -305,8 +360,11 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
         pubs = robot(stack, wan.site.endpoint)
         wait_for(lambda: all(p.has_subscribers() for p in pubs.values()), 15, "the edge's subscriptions")
         # the robot's registration event is the first record: the path to Kafka is up once it is acked
-        wait_for(lambda: durable()["buffer"]["appended"] >= 1 and durable()["buffer"]["depth"] == 0, 30,
-                 "the registration event acknowledged")
+        wait_for(
+            lambda: durable()["buffer"]["appended"] >= 1 and durable()["buffer"]["depth"] == 0,
+            30,
+            "the registration event acknowledged",
+        )
         idle = wan.settle_and_idle(idle_s)
         setup, (up0, down0), base = wan.bytes(), wan.split(), durable()
         late = replay(pubs, messages, speed)
@@ -316,8 +374,9 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
             buffer = durable()["buffer"]
             return bool(buffer["appended"] - base["buffer"]["appended"] >= expected and buffer["depth"] == 0)
 
-        wait_for(delivered, 60 + (linger or LINGER_S) / speed,
-                 f"{mode}: {expected} records spooled and acked")
+        wait_for(
+            delivered, 60 + (linger or LINGER_S) / speed, f"{mode}: {expected} records spooled and acked"
+        )
         up, down = wan.split()
         end = durable()
         crossed = kafka_records(bootstrap, list(topics.values()))
@@ -327,11 +386,20 @@ def run_fleetlink(mode: str, messages: Sequence[Message], speed: float, idle_s: 
     if crossed != expected:
         raise RuntimeError(f"{mode}: {crossed} records in Kafka, {expected} expected")
     n = max(batches, 1)
-    return Result(mode, up - up0, down - down0, crossed, len(messages), bag_seconds(messages), setup, idle,
-                  f"{batches} batches of {crossed / n:.1f} records; per batch: {payload / n:.0f} B batch "
-                  f"payload, {(up - up0) / n:.0f} B up, {(down - down0) / n:.0f} B down (ack); "
-                  f"schemas JSON->zstd B: {schemas}; "
-                  f"replay late by {late * 1000:.0f} ms at worst")
+    return Result(
+        mode,
+        up - up0,
+        down - down0,
+        crossed,
+        len(messages),
+        bag_seconds(messages),
+        setup,
+        idle,
+        f"{batches} batches of {crossed / n:.1f} records; per batch: {payload / n:.0f} B batch "
+        f"payload, {(up - up0) / n:.0f} B up, {(down - down0) / n:.0f} B down (ack); "
+        f"schemas JSON->zstd B: {schemas}; "
+        f"replay late by {late * 1000:.0f} ms at worst",
+    )
 
 
 def us(seconds: float) -> str:
@@ -340,13 +408,17 @@ def us(seconds: float) -> str:
 
 def table(results: Sequence[Result]) -> str:
     raw = next((r for r in results if r.mode == "raw"), None)
-    rows = ["| mode | WAN bytes (up + down) | MB per robot-hour | crossing the WAN | raw / mode |",
-            "|---|---|---|---|---|"]
+    rows = [
+        "| mode | WAN bytes (up + down) | MB per robot-hour | crossing the WAN | raw / mode |",
+        "|---|---|---|---|---|",
+    ]
     for r in results:
         ratio = f"{raw.per_hour / r.per_hour:.1f}x" if raw else "n/a"
         what = "records" if r.mode.startswith("fl-") else "samples"
-        rows.append(f"| {r.mode} | {r.total:,} ({r.up:,} + {r.down:,}) | {r.per_hour / 1e6:.2f} | "
-                    f"{r.crossed:,} {what} of {r.published:,} | {ratio} |")
+        rows.append(
+            f"| {r.mode} | {r.total:,} ({r.up:,} + {r.down:,}) | {r.per_hour / 1e6:.2f} | "
+            f"{r.crossed:,} {what} of {r.published:,} | {ratio} |"
+        )
     return "\n".join(rows)
 
 
@@ -362,8 +434,10 @@ def main() -> None:
     if not modes or set(modes) - set(MODES):
         raise SystemExit(f"--modes: choose from {', '.join(MODES)}")
     messages = load_bag(args.slice)
-    print(f"bag: {len(messages):,} messages over {bag_seconds(messages):.1f} s, "
-          f"{sum(len(m[2]) for m in messages):,} CDR bytes; speed {args.speed:g}; modes run side by side")
+    print(
+        f"bag: {len(messages):,} messages over {bag_seconds(messages):.1f} s, "
+        f"{sum(len(m[2]) for m in messages):,} CDR bytes; speed {args.speed:g}; modes run side by side"
+    )
     began = time.monotonic()
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-wan-") as tmp:
         work = Path(tmp)
@@ -376,8 +450,15 @@ def main() -> None:
 
         def one(mode: str) -> Result:
             if mode.startswith("fl-"):
-                return run_fleetlink(mode, messages, args.speed, args.idle, bootstrap=bootstrap or "",
-                                     registry=registry or "", work=work)
+                return run_fleetlink(
+                    mode,
+                    messages,
+                    args.speed,
+                    args.idle,
+                    bootstrap=bootstrap or "",
+                    registry=registry or "",
+                    work=work,
+                )
             return run_raw(mode, messages, args.speed, args.idle)
 
         with ThreadPoolExecutor(max_workers=len(modes)) as pool:

@@ -48,8 +48,10 @@ def main() -> int:
     ts = load_typestore("jazzy")
     payloads = imu_payloads(2000)
     config = ros_session_config(ZenohOptions(mode="client", connect=(args.connect,)))
-    nodes = [RosNode("imu_driver", f"/{args.prefix}{i:02d}", config=config, typestore=ts).start()
-             for i in range(args.robots)]
+    nodes = [
+        RosNode("imu_driver", f"/{args.prefix}{i:02d}", config=config, typestore=ts).start()
+        for i in range(args.robots)
+    ]
     qos = QoS(history=History.KEEP_ALL, depth=1000)  # reliable and blocking: no sample dropped
     pubs = [n.create_publisher(f"/{args.prefix}{i:02d}/imu", IMU, qos) for i, n in enumerate(nodes)]
     gc.freeze()  # nothing made so far is garbage: keep full collections short while publishing

@@ -122,8 +122,13 @@ class EdgeAgent:
                 raise
             self._started = True
             self._gc_before = gc_for_throughput()
-        log.info("edge %s of site %s started: %d mapping(s), %d robot type(s)", self.config.edge_id,
-                 self.config.site, len(self.table.list()), len(self.config.robot_types))
+        log.info(
+            "edge %s of site %s started: %d mapping(s), %d robot type(s)",
+            self.config.edge_id,
+            self.config.site,
+            len(self.table.list()),
+            len(self.config.robot_types),
+        )
         return self
 
     def _start(self) -> None:
@@ -139,36 +144,67 @@ class EdgeAgent:
         self._book = book = SchemaBook(spool_dir / "schemas").load()
         book.add(EVENT_FINGERPRINT, EVENT_SCHEMA_JSON)
         self._spool = Spool(spool_dir / "durable", config.spool.options(), stream="durable").open()
-        self._memory = MemoryBuffer(stream="memory", max_bytes=int(config.memory.max_bytes),
-                                    max_records=config.memory.max_records)
+        self._memory = MemoryBuffer(
+            stream="memory", max_bytes=int(config.memory.max_bytes), max_records=config.memory.max_records
+        )
         buffers: dict[Delivery, RecordBuffer] = {"at_least_once": self._spool, "best_effort": self._memory}
-        limit = min(int(config.spool.segment_bytes) - SEGMENT_HEADER_SIZE - HEADER_SIZE,
-                    int(config.memory.max_bytes)) - _RECORD_MARGIN
-        self._maker = RecordMaker(site=config.site, edge_id=config.edge_id, match=self.table.match,
-                                  types=codecs, dead_letter_topic=config.topics.dead_letter,
-                                  max_value_bytes=max(limit, 1024), on_schema=book.add)
+        limit = (
+            min(
+                int(config.spool.segment_bytes) - SEGMENT_HEADER_SIZE - HEADER_SIZE,
+                int(config.memory.max_bytes),
+            )
+            - _RECORD_MARGIN
+        )
+        self._maker = RecordMaker(
+            site=config.site,
+            edge_id=config.edge_id,
+            match=self.table.match,
+            types=codecs,
+            dead_letter_topic=config.topics.dead_letter,
+            max_value_bytes=max(limit, 1024),
+            on_schema=book.add,
+        )
         self._session = session = open_session(edge_session_config(self.zenoh_options))
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)
         self._senders = {
-            delivery: WanSender(buffer, transport, book, site=config.site, edge_id=config.edge_id,
-                                options=options)
+            delivery: WanSender(
+                buffer, transport, book, site=config.site, edge_id=config.edge_id, options=options
+            )
             for delivery, buffer in buffers.items()
         }
         senders = self._senders
-        self._processor = Processor(self.intake, self._maker, buffers,
-                                    on_appended=lambda delivery, linger: senders[delivery].pump(linger),
-                                    default_linger_s=options.linger_s)
+        self._processor = Processor(
+            self.intake,
+            self._maker,
+            buffers,
+            on_appended=lambda delivery, linger: senders[delivery].pump(linger),
+            default_linger_s=options.linger_s,
+        )
         attachment: AttachmentVersion = 1 if config.ros.attachment == "v1" else 2
-        self._node = RosNode("fleetlink_edge", "/", domain_id=config.ros.domain_id, session=session,
-                             typestore=typestore, distro=distro, attachment_version=attachment).start()
-        self._subscriptions = SubscriptionManager(self._node, self.table, self.intake,
-                                                  known_type=lambda t: _known(codecs, t))
+        self._node = RosNode(
+            "fleetlink_edge",
+            "/",
+            domain_id=config.ros.domain_id,
+            session=session,
+            typestore=typestore,
+            distro=distro,
+            attachment_version=attachment,
+        ).start()
+        self._subscriptions = SubscriptionManager(
+            self._node, self.table, self.intake, known_type=lambda t: _known(codecs, t)
+        )
         registration = config.registration
         self._registrar = Registrar(
-            self._node, types, self._on_robot, site=config.site, edge_id=config.edge_id,
-            grace_s=registration.grace_period / _NS, discover=registration.discover,
-            register_topic=registration.topic, clock_ms=lambda: time.time_ns() // 1_000_000,
+            self._node,
+            types,
+            self._on_robot,
+            site=config.site,
+            edge_id=config.edge_id,
+            grace_s=registration.grace_period / _NS,
+            discover=registration.discover,
+            register_topic=registration.topic,
+            clock_ms=lambda: time.time_ns() // 1_000_000,
         )
         self._processor.start()
         for sender in self._senders.values():
@@ -250,8 +286,9 @@ class EdgeAgent:
             log.warning("robot %s: %s", change.robot, exc)
         if self._subscriptions is not None:
             self._subscriptions.refresh()
-        record = event_record(change, site=self.config.site, edge_id=self.config.edge_id,
-                              topic=self.config.topics.registrations)
+        record = event_record(
+            change, site=self.config.site, edge_id=self.config.edge_id, topic=self.config.topics.registrations
+        )
         self.intake.offer(Emit((Outgoing.of("at_least_once", record),)), force=True)
 
     def register_robot(self, robot_type: str, name: str) -> None:
@@ -290,8 +327,11 @@ class EdgeAgent:
     def snapshot(self) -> dict[str, Any]:
         """Every counter, as plain data (JSON-ready)."""
         out: dict[str, Any] = {
-            "site": self.config.site, "edge_id": self.config.edge_id, "running": self._started,
-            "robots": self.table.robots(), "intake": self.intake.stats().as_dict(),
+            "site": self.config.site,
+            "edge_id": self.config.edge_id,
+            "running": self._started,
+            "robots": self.table.robots(),
+            "intake": self.intake.stats().as_dict(),
             "robot_errors": self.robot_errors,
         }
         if self._processor is not None:
@@ -299,11 +339,15 @@ class EdgeAgent:
         if self._subscriptions is not None:
             out["subscriptions"] = self._subscriptions.snapshot()
         if self._registrar is not None:
-            out["registration"] = {"events": self._registrar.events,
-                                   "bad_registrations": self._registrar.bad_registrations}
+            out["registration"] = {
+                "events": self._registrar.events,
+                "bad_registrations": self._registrar.bad_registrations,
+            }
         streams: dict[str, Any] = {}
-        buffers: dict[Delivery, RecordBuffer | None] = {"at_least_once": self._spool,
-                                                        "best_effort": self._memory}
+        buffers: dict[Delivery, RecordBuffer | None] = {
+            "at_least_once": self._spool,
+            "best_effort": self._memory,
+        }
         for delivery, buffer in buffers.items():
             if buffer is None:
                 continue
@@ -314,8 +358,11 @@ class EdgeAgent:
             streams[buffer.stream] = entry
         out["streams"] = streams
         if self._book is not None:
-            out["schemas"] = {"known": len(self._book), "corrupt": self._book.corrupt,
-                              "write_errors": self._book.write_errors}
+            out["schemas"] = {
+                "known": len(self._book),
+                "corrupt": self._book.corrupt,
+                "write_errors": self._book.write_errors,
+            }
         return out
 
 

@@ -115,8 +115,10 @@ class MappingConfig(_Section):
         source = info.data.get("from_")
         if value is None:
             if source is not None and "robot" not in TopicPattern.parse(source).captures:
-                raise ValueError(f"the key defaults to '{{robot}}' but 'from' ({source!r}) captures no "
-                                 "robot; set a key (a capture, a {msg.field} or fixed text)")
+                raise ValueError(
+                    f"the key defaults to '{{robot}}' but 'from' ({source!r}) captures no "
+                    "robot; set a key (a capture, a {msg.field} or fixed text)"
+                )
             return None
         return _check_template(value, info, "key template", topic=False)
 
@@ -131,9 +133,16 @@ class MappingConfig(_Section):
         return value
 
     def spec(self) -> MappingSpec:
-        return MappingSpec(name=self.name, source=self.from_, topic=self.to, key=self.key,
-                           ros_type=self.type, delivery=self.delivery, stages=tuple(self.stages),
-                           linger_ns=aggregate_linger(self.stages) if self.linger is None else self.linger)
+        return MappingSpec(
+            name=self.name,
+            source=self.from_,
+            topic=self.to,
+            key=self.key,
+            ros_type=self.type,
+            delivery=self.delivery,
+            stages=tuple(self.stages),
+            linger_ns=aggregate_linger(self.stages) if self.linger is None else self.linger,
+        )
 
 
 MAX_LINGER_NS = 60 * _NS
@@ -166,8 +175,9 @@ class RobotMappingConfig(MappingConfig):
     @classmethod
     def _robot(cls, value: str) -> str:
         if not TopicPattern.parse(value).is_single("robot"):
-            raise ValueError(f"{value!r}: a robot type's mappings capture the robot as one segment, "
-                             "e.g. '/{robot}/imu'")
+            raise ValueError(
+                f"{value!r}: a robot type's mappings capture the robot as one segment, e.g. '/{{robot}}/imu'"
+            )
         return value
 
 
@@ -220,9 +230,13 @@ class SpoolSection(_Section):
 
     def options(self) -> SpoolOptions:
         return SpoolOptions(
-            max_bytes=int(self.max_bytes), segment_bytes=int(self.segment_bytes), policy=self.policy,
-            block_timeout_s=self.block_timeout / _NS, fsync=self.fsync,
-            fsync_interval_ms=max(1, self.fsync_interval // 1_000_000), fsync_batch=self.fsync_batch,
+            max_bytes=int(self.max_bytes),
+            segment_bytes=int(self.segment_bytes),
+            policy=self.policy,
+            block_timeout_s=self.block_timeout / _NS,
+            fsync=self.fsync,
+            fsync_interval_ms=max(1, self.fsync_interval // 1_000_000),
+            fsync_batch=self.fsync_batch,
         )
 
 
@@ -324,18 +338,25 @@ class EdgeConfig(_Section):
     def _unique_names(self) -> EdgeConfig:
         seen: dict[str, str] = {}
         places = [(m.name, f"mappings[{i}]") for i, m in enumerate(self.mappings)]
-        places += [(m.name, f"robot_types.{t}.mappings[{i}]")
-                   for t, rt in self.robot_types.items() for i, m in enumerate(rt.mappings)]
+        places += [
+            (m.name, f"robot_types.{t}.mappings[{i}]")
+            for t, rt in self.robot_types.items()
+            for i, m in enumerate(rt.mappings)
+        ]
         for name, where in places:
             if name in seen:
-                raise ValueError(f"mapping name {name!r} is used twice ({seen[name]} and {where}); "
-                                 "names must be unique per edge")
+                raise ValueError(
+                    f"mapping name {name!r} is used twice ({seen[name]} and {where}); "
+                    "names must be unique per edge"
+                )
             seen[name] = where
         return self
 
     def robot_type_specs(self) -> list[RobotTypeSpec]:
-        return [RobotTypeSpec(name=n, match=t.match, mappings=tuple(m.spec() for m in t.mappings))
-                for n, t in self.robot_types.items()]
+        return [
+            RobotTypeSpec(name=n, match=t.match, mappings=tuple(m.spec() for m in t.mappings))
+            for n, t in self.robot_types.items()
+        ]
 
     def mapping_table(self) -> MappingTable:
         """A fresh mapping table with every declared mapping (no robots registered yet)."""

@@ -27,6 +27,7 @@ from fleetlink.schemas.typestore import Distro
 
 _CHUNK = re.compile(r"[A-Za-z0-9_.-]+")
 
+
 def default_repeater_id() -> str:
     host = re.sub(r"[^A-Za-z0-9_.-]", "_", socket.gethostname()) or "repeater"
     return host[:100]

@@ -27,8 +27,15 @@ from fleetlink.wire.commands import CommandEnvelope
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-_READ_ERRORS = (SchemaResolutionError, EOFError, ValueError, TypeError, KeyError, IndexError,
-                UnicodeDecodeError)
+_READ_ERRORS = (
+    SchemaResolutionError,
+    EOFError,
+    ValueError,
+    TypeError,
+    KeyError,
+    IndexError,
+    UnicodeDecodeError,
+)
 
 
 class Converter:
@@ -55,14 +62,16 @@ class Converter:
         body = env.body
         if env.schema_fp != self._fingerprint(codec):
             if writer_schema is None:
-                raise ConversionError(env.command_id, env.ros_type,
-                                      f"writer schema {env.schema_fp.hex()} is unknown here")
+                raise ConversionError(
+                    env.command_id, env.ros_type, f"writer schema {env.schema_fp.hex()} is unknown here"
+                )
             writer = self._writer(env, writer_schema)
             try:
                 datum = fastavro.schemaless_reader(io.BytesIO(body), writer, codec.parsed_schema)
             except _READ_ERRORS as exc:
-                raise ConversionError(env.command_id, env.ros_type,
-                                      f"value does not resolve to the type's schema: {exc}") from None
+                raise ConversionError(
+                    env.command_id, env.ros_type, f"value does not resolve to the type's schema: {exc}"
+                ) from None
             if not isinstance(datum, dict):
                 raise ConversionError(env.command_id, env.ros_type, "value is not a record")
             try:

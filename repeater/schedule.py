@@ -108,8 +108,9 @@ class Schedule:
 
     # -- inputs ---------------------------------------------------------------------------
 
-    def offer(self, command: Command, now: float, *, delivered: bool = False,
-              received_at: float | None = None) -> Outcome:
+    def offer(
+        self, command: Command, now: float, *, delivered: bool = False, received_at: float | None = None
+    ) -> Outcome:
         """A command arrived (or was restored from the journal with ``received_at``)."""
         if command.ident in self._seen:
             return Outcome(Offer.DUPLICATE, detail="command id already applied")
@@ -117,20 +118,22 @@ class Schedule:
         received = now if received_at is None else received_at
         deadline = min(command.lease_until, received + command.lease)
         if now >= deadline:
-            detail = f"lease ended {now - command.lease_until:.3f} s before it could be applied" \
-                if now >= command.lease_until else "lease already used up since its receipt"
+            detail = (
+                f"lease ended {now - command.lease_until:.3f} s before it could be applied"
+                if now >= command.lease_until
+                else "lease already used up since its receipt"
+            )
             return Outcome(Offer.EXPIRED, [Change(command, "expired", now, detail)], detail=detail)
         current = self._active.get(command.slot)
         changes: list[Change] = []
         if current is not None:
             if current.command.newer_than(command):
                 detail = f"a newer command {current.command.command_id} is already active"
-                return Outcome(Offer.SUPERSEDED, [Change(command, "superseded", now, detail)],
-                               detail=detail)
-            changes.append(Change(current.command, "superseded", now,
-                                  f"superseded by {command.command_id}"))
-        self._active[command.slot] = _Active(command, received, deadline, now + command.period,
-                                             delivered=delivered)
+                return Outcome(Offer.SUPERSEDED, [Change(command, "superseded", now, detail)], detail=detail)
+            changes.append(Change(current.command, "superseded", now, f"superseded by {command.command_id}"))
+        self._active[command.slot] = _Active(
+            command, received, deadline, now + command.period, delivered=delivered
+        )
         return Outcome(Offer.APPLIED, changes, [Publish(command, "first")])
 
     def remember(self, command: Command) -> None:
@@ -150,8 +153,11 @@ class Schedule:
 
     def subscriber_appeared(self, ros_topic: str, now: float) -> list[Publish]:
         """A subscriber appeared on ``ros_topic``: the active commands there go out at once."""
-        return [Publish(a.command, "late-joiner") for a in self._active.values()
-                if a.command.ros_topic == ros_topic and now < a.deadline]
+        return [
+            Publish(a.command, "late-joiner")
+            for a in self._active.values()
+            if a.command.ros_topic == ros_topic and now < a.deadline
+        ]
 
     def link_up(self) -> None:
         self._link_lost_since = None

@@ -62,7 +62,9 @@ log = logging.getLogger(__name__)
 MAX_WAIT_S = 0.5
 _FINAL = frozenset({"superseded", "expired", "rejected"})
 _RESULT: dict[Offer, Result] = {
-    Offer.APPLIED: "applied", Offer.DUPLICATE: "duplicate", Offer.EXPIRED: "expired",
+    Offer.APPLIED: "applied",
+    Offer.DUPLICATE: "duplicate",
+    Offer.EXPIRED: "expired",
     Offer.SUPERSEDED: "superseded",
 }
 
@@ -84,8 +86,15 @@ class RepeaterStats:
 
 
 def to_command(env: CommandEnvelope) -> Command:
-    return Command(env.command_id, env.robot, env.ros_topic, env.issued_at_ms / 1000,
-                   env.lease_until_ms / 1000, env.period_ms / 1000, env.order)
+    return Command(
+        env.command_id,
+        env.robot,
+        env.ros_topic,
+        env.issued_at_ms / 1000,
+        env.lease_until_ms / 1000,
+        env.period_ms / 1000,
+        env.order,
+    )
 
 
 class Repeater:
@@ -135,13 +144,26 @@ class Repeater:
         with self._lock:
             self._restore()
         self._session = open_session(ros_session_config(self._options))
-        self._node = RosNode("fleetlink_repeater", "/", domain_id=ros.domain_id, session=self._session,
-                             typestore=typestore, distro=ros.distro).start()
+        self._node = RosNode(
+            "fleetlink_repeater",
+            "/",
+            domain_id=ros.domain_id,
+            session=self._session,
+            typestore=typestore,
+            distro=ros.distro,
+        ).start()
         self._publishers = Publishers(self._node)
         self._watcher = GraphWatcher(self._session, ros.domain_id, listeners=(self._on_graph,)).start()
         cfg = self.config.repeater
-        self._link = StatusLink(self._session, self.site, self.id, heartbeat=cfg.heartbeat,
-                                timeout=cfg.status_timeout, on_link=self._on_link, on_acked=self._on_acked)
+        self._link = StatusLink(
+            self._session,
+            self.site,
+            self.id,
+            heartbeat=cfg.heartbeat,
+            timeout=cfg.status_timeout,
+            on_link=self._on_link,
+            on_acked=self._on_acked,
+        )
         for number, event in sorted(self.store.pending.items()):
             self._link.submit(number, event)
         self._link.start()
@@ -253,8 +275,9 @@ class Repeater:
         if outcome.offer is Offer.DUPLICATE:
             self.stats.duplicates += 1
             return reply("duplicate", outcome.detail)
-        self.store.command(env if schema is None else env.with_schema(schema), now,
-                           ended=outcome.offer is not Offer.APPLIED)
+        self.store.command(
+            env if schema is None else env.with_schema(schema), now, ended=outcome.offer is not Offer.APPLIED
+        )
         if outcome.offer is Offer.APPLIED:
             self.stats.applied += 1
         elif outcome.offer is Offer.EXPIRED:
@@ -293,8 +316,9 @@ class Repeater:
                 self.schedule.remember(command)
                 self._record([Change(command, "rejected", now, f"after restart: {problem}")])
                 continue
-            outcome = self.schedule.offer(command, now, delivered=stored.delivered,
-                                          received_at=stored.received_at)
+            outcome = self.schedule.offer(
+                command, now, delivered=stored.delivered, received_at=stored.received_at
+            )
             changes = outcome.changes
             if outcome.offer is Offer.EXPIRED:
                 changes = [Change(command, "expired", now, "lease ended while the repeater was down")]
@@ -309,8 +333,15 @@ class Repeater:
         for change in changes:
             cmd = change.command
             ident = cmd.ident
-            event = StatusEvent(cmd.command_id, cmd.robot, cmd.ros_topic, change.status,
-                                int(change.at * 1000), self.site, change.detail)
+            event = StatusEvent(
+                cmd.command_id,
+                cmd.robot,
+                cmd.ros_topic,
+                change.status,
+                int(change.at * 1000),
+                self.site,
+                change.detail,
+            )
             if change.status in _FINAL:
                 self.store.mark(ident, "end")
                 self._cdr.pop(ident, None)
@@ -321,8 +352,14 @@ class Repeater:
             number = self.store.status(event)
             if self._link is not None:
                 self._link.submit(number, event)
-            log.info("command %s robot=%s topic=%s: %s (%s)", cmd.command_id, cmd.robot, cmd.ros_topic,
-                     change.status, change.detail)
+            log.info(
+                "command %s robot=%s topic=%s: %s (%s)",
+                cmd.command_id,
+                cmd.robot,
+                cmd.ros_topic,
+                change.status,
+                change.detail,
+            )
 
     def _on_acked(self, numbers: list[int]) -> None:
         with self._lock:

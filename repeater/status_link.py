@@ -107,8 +107,12 @@ class StatusLink:
                 if backoff > 0 or not self._pending:
                     self._cond.wait(backoff if backoff > 0 else self._heartbeat)
                 # linger a little so events close in time share one batch (one query on the WAN)
-                while (self._pending and self._oldest is not None and len(self._pending) < MAX_BATCH
-                       and not self._stop.is_set()):
+                while (
+                    self._pending
+                    and self._oldest is not None
+                    and len(self._pending) < MAX_BATCH
+                    and not self._stop.is_set()
+                ):
                     left = self._oldest + self._linger - time.monotonic()
                     if left <= 0:
                         break
@@ -135,8 +139,9 @@ class StatusLink:
         problem = "no uplink answered"
         contact = False
         try:
-            replies = self._session.get(self._key, payload=payload, timeout=self._timeout,
-                                        target=zenoh.QueryTarget.BEST_MATCHING)
+            replies = self._session.get(
+                self._key, payload=payload, timeout=self._timeout, target=zenoh.QueryTarget.BEST_MATCHING
+            )
             for reply in replies:
                 if reply.ok is None:
                     # zenoh reports a timeout as an error reply too: no proof of an uplink
@@ -154,7 +159,8 @@ class StatusLink:
             problem = str(exc)
         self.failures += 1
         if events:
-            self._limiter.log(logging.WARNING, "status", "status batch of %d not acknowledged: %s",
-                              len(events), problem)
+            self._limiter.log(
+                logging.WARNING, "status", "status batch of %d not acknowledged: %s", len(events), problem
+            )
         self._on_link(contact)
         return False

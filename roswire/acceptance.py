@@ -105,8 +105,19 @@ class SampleAcceptor:
         if gid is not None and seq is not None:
             self._observe(gid, seq)
         stats.delivered += 1
-        return RosSample(parsed.topic, parsed.ros_type, parsed.type_hash, payload, seq, ts, gid, key,
-                         received_ns, version, message)
+        return RosSample(
+            parsed.topic,
+            parsed.ros_type,
+            parsed.type_hash,
+            payload,
+            seq,
+            ts,
+            gid,
+            key,
+            received_ns,
+            version,
+            message,
+        )
 
     def _data_key(self, key: str) -> DataKey:
         try:

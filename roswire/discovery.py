@@ -93,8 +93,9 @@ class GraphWatcher:
                 self.stats.malformed += 1
                 self.stats.last_malformed = key
                 level = logging.WARNING if self.stats.malformed == 1 else logging.DEBUG
-                log.log(level, "ignoring malformed liveliness token (%d so far): %s",
-                        self.stats.malformed, exc)
+                log.log(
+                    level, "ignoring malformed liveliness token (%d so far): %s", self.stats.malformed, exc
+                )
                 return
             for event in events:
                 for listener in self._listeners:

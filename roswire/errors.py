@@ -70,8 +70,7 @@ class PayloadError(RoswireError):
 
     def __init__(self, key: str, typename: str | None, raw: bytes, reason: str) -> None:
         super().__init__(
-            f"bad payload on {key!r} (type {typename or '?'}, {len(raw)} bytes "
-            f"{raw[:16].hex()}): {reason}"
+            f"bad payload on {key!r} (type {typename or '?'}, {len(raw)} bytes {raw[:16].hex()}): {reason}"
         )
         self.key = key
         self.typename = typename

@@ -129,7 +129,8 @@ class Graph:
     def endpoints(self, kinds: Iterable[EntityKind] | None = None) -> list[EndpointInfo]:
         wanted = set(kinds) if kinds is not None else None
         found = [
-            e for e in self._entities.values()
+            e
+            for e in self._entities.values()
             if isinstance(e, EndpointInfo) and (wanted is None or e.kind in wanted)
         ]
         return sorted(found, key=lambda e: (e.topic, e.kind.value, e.zid, e.eid))
@@ -140,28 +141,42 @@ class Graph:
 
     def topics(self) -> dict[str, TopicInfo]:
         """Topic name -> types, publishers and subscribers (MP/MS endpoints)."""
-        return _collect(self.endpoints((EntityKind.PUBLISHER, EntityKind.SUBSCRIPTION)),
-                        EntityKind.PUBLISHER)
+        return _collect(self.endpoints((EntityKind.PUBLISHER, EntityKind.SUBSCRIPTION)), EntityKind.PUBLISHER)
 
     def services(self) -> dict[str, TopicInfo]:
         """Service name -> types, servers (``publishers``) and clients (``subscribers``)."""
-        return _collect(self.endpoints((EntityKind.SERVICE_SERVER, EntityKind.SERVICE_CLIENT)),
-                        EntityKind.SERVICE_SERVER)
+        return _collect(
+            self.endpoints((EntityKind.SERVICE_SERVER, EntityKind.SERVICE_CLIENT)), EntityKind.SERVICE_SERVER
+        )
 
     def in_namespace(self, namespace: str) -> list[Entity]:
         """Every node and endpoint whose namespace is ``namespace`` or below it."""
         prefix = namespace.rstrip("/") + "/"
         return [
-            e for e in self._entities.values()
+            e
+            for e in self._entities.values()
             if e.namespace == namespace or e.namespace.startswith(prefix) or namespace == "/"
         ]
 
 
 def _implicit_node(endpoint: EndpointInfo) -> NodeInfo:
-    key = node_token(endpoint.domain, endpoint.zid, endpoint.nid, endpoint.namespace,
-                     endpoint.node_name, enclave=endpoint.enclave)
-    return NodeInfo(endpoint.domain, endpoint.zid, endpoint.nid, endpoint.enclave,
-                    endpoint.namespace, endpoint.node_name, key)
+    key = node_token(
+        endpoint.domain,
+        endpoint.zid,
+        endpoint.nid,
+        endpoint.namespace,
+        endpoint.node_name,
+        enclave=endpoint.enclave,
+    )
+    return NodeInfo(
+        endpoint.domain,
+        endpoint.zid,
+        endpoint.nid,
+        endpoint.enclave,
+        endpoint.namespace,
+        endpoint.node_name,
+        key,
+    )
 
 
 def _collect(endpoints: list[EndpointInfo], first_kind: EntityKind) -> dict[str, TopicInfo]:

@@ -166,9 +166,7 @@ class RosNode:
 
     # --- factories --------------------------------------------------------------------------
 
-    def create_publisher(
-        self, topic: str, typename: str, qos: QoS = DEFAULT, **kwargs: Any
-    ) -> RosPublisher:
+    def create_publisher(self, topic: str, typename: str, qos: QoS = DEFAULT, **kwargs: Any) -> RosPublisher:
         from fleetlink.roswire.publisher import RosPublisher
 
         return RosPublisher(self, topic, typename, qos, **kwargs).start()

@@ -85,23 +85,33 @@ class RosPublisher:
         self.key = data_key(self.node.domain_id, self.topic, self.typename, self.type_hash)
         self.eid = next_entity_id()
         self.token_key = endpoint_token(
-            domain=self.node.domain_id, zid=self.node.zid, nid=self.node.nid, eid=self.eid,
-            kind=EntityKind.PUBLISHER, namespace=self.node.namespace, node_name=self.node.name,
-            topic=self.topic, typename=self.typename, type_hash=self.type_hash, qos=self.qos,
+            domain=self.node.domain_id,
+            zid=self.node.zid,
+            nid=self.node.nid,
+            eid=self.eid,
+            kind=EntityKind.PUBLISHER,
+            namespace=self.node.namespace,
+            node_name=self.node.name,
+            topic=self.topic,
+            typename=self.typename,
+            type_hash=self.type_hash,
+            qos=self.qos,
             enclave=self.node.enclave,
         )
         self.gid = entity_gid(self.token_key)
-        reliability = (
-            zenoh.Reliability.BEST_EFFORT if self.qos.best_effort else zenoh.Reliability.RELIABLE
-        )
+        reliability = zenoh.Reliability.BEST_EFFORT if self.qos.best_effort else zenoh.Reliability.RELIABLE
         if self.qos.transient_local:
             miss = None
             if not self.qos.best_effort:
                 miss = zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=SPORADIC_HEARTBEAT_S)
             self._publisher = zenoh.ext.declare_advanced_publisher(
-                session, self.key, congestion_control=self._congestion(), reliability=reliability,
+                session,
+                self.key,
+                congestion_control=self._congestion(),
+                reliability=reliability,
                 cache=zenoh.ext.CacheConfig(max_samples=max(self.qos.depth, 1)),
-                sample_miss_detection=miss, publisher_detection=True,
+                sample_miss_detection=miss,
+                publisher_detection=True,
             )
         else:
             self._publisher = session.declare_publisher(
@@ -155,8 +165,10 @@ class RosPublisher:
         matching = self.matching
         if matching is not None:
             return matching
-        pattern = (f"@ros2_lv/{self.node.domain_id}/*/*/*/{EntityKind.SUBSCRIPTION.value}/*/*/*/"
-                   f"{mangle(self.topic)}/**")
+        pattern = (
+            f"@ros2_lv/{self.node.domain_id}/*/*/*/{EntityKind.SUBSCRIPTION.value}/*/*/*/"
+            f"{mangle(self.topic)}/**"
+        )
         replies = self.node.session.liveliness().get(pattern, timeout=timeout)
         return any(reply.ok is not None for reply in replies)
 

@@ -48,10 +48,16 @@ def qos_from_bag(profiles: Sequence[Any]) -> QoS:
     def num(value: Any) -> int:  # rosbags uses plain Enums for the policies
         return int(getattr(value, "value", value))
 
-    reliability = Reliability.BEST_EFFORT if num(prof.reliability) == Reliability.BEST_EFFORT else (
-        Reliability.RELIABLE)
-    durability = Durability.TRANSIENT_LOCAL if num(prof.durability) == Durability.TRANSIENT_LOCAL else (
-        Durability.VOLATILE)
+    reliability = (
+        Reliability.BEST_EFFORT
+        if num(prof.reliability) == Reliability.BEST_EFFORT
+        else (Reliability.RELIABLE)
+    )
+    durability = (
+        Durability.TRANSIENT_LOCAL
+        if num(prof.durability) == Durability.TRANSIENT_LOCAL
+        else (Durability.VOLATILE)
+    )
     history = History.KEEP_ALL if num(prof.history) == History.KEEP_ALL else History.KEEP_LAST
     depth = num(prof.depth) if num(prof.depth) > 0 else DEFAULT.depth
     return QoS(reliability=reliability, durability=durability, history=history, depth=depth)
@@ -112,7 +118,10 @@ class BagReplayer:
         self.clock = clock
         self.stats = ReplayStats()
         self._node_args: dict[str, Any] = {
-            "namespace": f"/{robot}", "domain_id": domain_id, "config": config, "session": session,
+            "namespace": f"/{robot}",
+            "domain_id": domain_id,
+            "config": config,
+            "session": session,
         }
         self._node_name = node_name
         self.node: RosNode | None = None
@@ -134,23 +143,24 @@ class BagReplayer:
             self._reader.open()
         except ReaderError as exc:
             raise BagError(f"cannot open bag {self.bag}: {exc}") from exc
-        connections = [c for c in self._reader.connections
-                       if self.topics is None or c.topic in self.topics]
+        connections = [c for c in self._reader.connections if self.topics is None or c.topic in self.topics]
         if not connections:
             raise BagError(f"bag {self.bag} has none of the requested topics {sorted(self.topics or [])}")
         for conn in connections:
             fmt = getattr(conn.ext, "serialization_format", "cdr")
             if fmt != "cdr":
                 raise BagError(f"{self.bag}: topic {conn.topic} is stored as {fmt!r}, not cdr")
-        self.node = RosNode(self._node_name, typestore=typestore, distro=self.distro,
-                            **self._node_args).start()
+        self.node = RosNode(
+            self._node_name, typestore=typestore, distro=self.distro, **self._node_args
+        ).start()
         congestion = "block" if self.rate == 0 else None
         for conn in connections:
             if conn.topic in self.publishers:
                 continue
             qos = qos_from_bag(getattr(conn.ext, "offered_qos_profiles", []))
             self.publishers[conn.topic] = self.node.create_publisher(
-                robot_topic(self.robot, conn.topic), conn.msgtype, qos, congestion=congestion)
+                robot_topic(self.robot, conn.topic), conn.msgtype, qos, congestion=congestion
+            )
         self._connections = connections
         return self
 

@@ -38,15 +38,21 @@ class RateMeter:
 
 def _endpoint(ep: EndpointInfo) -> dict[str, Any]:
     return {
-        "node": ep.node_fqn, "zid": ep.zid, "type": ep.ros_type, "type_hash": ep.type_hash,
-        "qos": ep.qos.to_keyexpr(), "gid": ep.gid.hex(),
+        "node": ep.node_fqn,
+        "zid": ep.zid,
+        "type": ep.ros_type,
+        "type_hash": ep.type_hash,
+        "qos": ep.qos.to_keyexpr(),
+        "gid": ep.gid.hex(),
     }
 
 
 def _topic(info: TopicInfo, rate: float | None, first: str, second: str) -> dict[str, Any]:
     entry: dict[str, Any] = {
-        "name": info.name, "types": list(info.types),
-        first: [_endpoint(e) for e in info.publishers], second: [_endpoint(e) for e in info.subscribers],
+        "name": info.name,
+        "types": list(info.types),
+        first: [_endpoint(e) for e in info.publishers],
+        second: [_endpoint(e) for e in info.subscribers],
     }
     if rate is not None:
         entry["rate_hz"] = round(rate, 2)
@@ -65,12 +71,25 @@ def graph_report(
 ) -> dict[str, Any]:
     return {
         "domain_id": domain_id,
-        "robots": [{"name": r.name, "type": r.robot_type, "entities": len(r.entities),
-                    "explicit": r.explicit} for r in robots],
-        "nodes": [{"name": n.name, "namespace": n.namespace, "fqn": n.fqn, "zid": n.zid, "nid": n.nid,
-                   "enclave": n.enclave} for n in nodes],
-        "topics": [_topic(t, None if rates is None else rates.get(name, 0.0), "publishers", "subscribers")
-                   for name, t in topics.items()],
+        "robots": [
+            {"name": r.name, "type": r.robot_type, "entities": len(r.entities), "explicit": r.explicit}
+            for r in robots
+        ],
+        "nodes": [
+            {
+                "name": n.name,
+                "namespace": n.namespace,
+                "fqn": n.fqn,
+                "zid": n.zid,
+                "nid": n.nid,
+                "enclave": n.enclave,
+            }
+            for n in nodes
+        ],
+        "topics": [
+            _topic(t, None if rates is None else rates.get(name, 0.0), "publishers", "subscribers")
+            for name, t in topics.items()
+        ],
         "services": [_topic(s, None, "servers", "clients") for s in services.values()],
         "malformed_tokens": malformed_tokens,
     }
@@ -79,19 +98,26 @@ def graph_report(
 def render_text(report: Mapping[str, Any]) -> str:
     lines = [f"domain {report['domain_id']}"]
     lines.append(f"robots ({len(report['robots'])}):")
-    lines += [f"  {r['name']:<16} type={r['type']} entities={r['entities']}"
-              + (" (registered)" if r["explicit"] else "") for r in report["robots"]]
+    lines += [
+        f"  {r['name']:<16} type={r['type']} entities={r['entities']}"
+        + (" (registered)" if r["explicit"] else "")
+        for r in report["robots"]
+    ]
     lines.append(f"nodes ({len(report['nodes'])}):")
     lines += [f"  {n['fqn']:<32} zid={n['zid']}" for n in report["nodes"]]
     lines.append(f"topics ({len(report['topics'])}):")
     for t in report["topics"]:
         qos = sorted({e["qos"] for e in t["publishers"]})
         rate = f" {t['rate_hz']:.1f} Hz" if "rate_hz" in t else ""
-        lines.append(f"  {t['name']:<32} {', '.join(t['types'])}  pub={len(t['publishers'])} "
-                     f"sub={len(t['subscribers'])}{rate}" + (f"  qos={' '.join(qos)}" if qos else ""))
+        lines.append(
+            f"  {t['name']:<32} {', '.join(t['types'])}  pub={len(t['publishers'])} "
+            f"sub={len(t['subscribers'])}{rate}" + (f"  qos={' '.join(qos)}" if qos else "")
+        )
     lines.append(f"services ({len(report['services'])}):")
-    lines += [f"  {s['name']:<32} {', '.join(s['types'])}  servers={len(s['servers'])} "
-              f"clients={len(s['clients'])}" for s in report["services"]]
+    lines += [
+        f"  {s['name']:<32} {', '.join(s['types'])}  servers={len(s['servers'])} clients={len(s['clients'])}"
+        for s in report["services"]
+    ]
     if report.get("malformed_tokens"):
         lines.append(f"malformed liveliness tokens ignored: {report['malformed_tokens']}")
     return "\n".join(lines)

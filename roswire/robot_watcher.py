@@ -44,8 +44,14 @@ RobotListener = Callable[[RobotEvent], object]
 
 def event_json(event: RobotEvent) -> str:
     """The JSON text published on the events topic for one registry event."""
-    return json.dumps({"event": event.kind.value, "robot": event.robot, "robot_type": event.robot_type,
-                       "reason": event.reason.value})
+    return json.dumps(
+        {
+            "event": event.kind.value,
+            "robot": event.robot,
+            "robot_type": event.robot_type,
+            "reason": event.reason.value,
+        }
+    )
 
 
 class RobotWatcher:
@@ -86,12 +92,15 @@ class RobotWatcher:
         self._stop.clear()
         if self.events_topic is not None:
             self._events_pub = self.node.create_publisher(
-                self.events_topic, STRING_TYPE, type_hash=STRING_HASHES.get(self.node.distro))
+                self.events_topic, STRING_TYPE, type_hash=STRING_HASHES.get(self.node.distro)
+            )
         self.watcher = GraphWatcher(self.node.session, self.node.domain_id, listeners=(self._on_graph,))
         self.watcher.start()
         if self.registrations:
             self._register_sub = self.node.create_subscriber(
-                REGISTER_TOPIC, STRING_TYPE, self._on_registration,
+                REGISTER_TOPIC,
+                STRING_TYPE,
+                self._on_registration,
                 type_hash=STRING_HASHES.get(self.node.distro),
             )
         self._thread = threading.Thread(target=self._run, name="robot-watcher", daemon=True)
@@ -151,8 +160,13 @@ class RobotWatcher:
 
     def _emit(self, events: list[RobotEvent]) -> None:
         for event in events:
-            log.info("robot %s %s type=%s reason=%s", event.robot, event.kind.value, event.robot_type,
-                     event.reason.value)
+            log.info(
+                "robot %s %s type=%s reason=%s",
+                event.robot,
+                event.kind.value,
+                event.robot_type,
+                event.reason.value,
+            )
             if self._events_pub is not None:
                 self._events_pub.publish_cdr(cdr.encode_string(event_json(event)))
             for listener in self._listeners:

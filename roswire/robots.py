@@ -149,7 +149,8 @@ class RobotRegistry:
     def tick(self, now: float) -> list[RobotEvent]:
         """Deregister robots whose last entity disappeared at least ``grace_s`` ago."""
         gone = [
-            r for r in self._robots.values()
+            r
+            for r in self._robots.values()
             if r.empty_since is not None and now - r.empty_since >= self.grace_s
         ]
         for robot in gone:

@@ -93,8 +93,9 @@ class RosSubscriber:
         self.declare_token = declare_token
         self.ring = ring
         self.on_samples = on_samples
-        self._acceptor = SampleAcceptor(accept_missing_attachment=accept_missing_attachment,
-                                        decoder=self._decode if decode else None)
+        self._acceptor = SampleAcceptor(
+            accept_missing_attachment=accept_missing_attachment, decoder=self._decode if decode else None
+        )
         self._sub: Any = None  # a (possibly advanced) subscriber, with a callback or a ring
         self._thread: threading.Thread | None = None
         self._token: zenoh.LivelinessToken | None = None
@@ -113,18 +114,25 @@ class RosSubscriber:
         handler: Any = self._on_sample if self.ring is None else zenoh.handlers.RingChannel(self.ring)
         if self.qos.transient_local:
             depth = max(self.qos.depth, 1)
-            recovery = None if self.qos.best_effort else zenoh.ext.RecoveryConfig(
-                periodic_queries=None, heartbeat=True)
+            recovery = (
+                None
+                if self.qos.best_effort
+                else zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True)
+            )
             self._sub = zenoh.ext.declare_advanced_subscriber(
-                session, self.key_expr, handler,
+                session,
+                self.key_expr,
+                handler,
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=depth),
-                recovery=recovery, subscriber_detection=True,
+                recovery=recovery,
+                subscriber_detection=True,
             )
         else:
             self._sub = session.declare_subscriber(self.key_expr, handler)
         if self.ring is not None:
-            self._thread = threading.Thread(target=self._drain, args=(self._sub.handler,), daemon=True,
-                                            name=f"recv{self.topic}")
+            self._thread = threading.Thread(
+                target=self._drain, args=(self._sub.handler,), daemon=True, name=f"recv{self.topic}"
+            )
             self._thread.start()
         token_hash = self.type_hash
         if self.declare_token and self.typename is not None and token_hash is None and self.node.typestore:
@@ -133,9 +141,17 @@ class RosSubscriber:
             from fleetlink.roswire.node import next_entity_id
 
             self.token_key = endpoint_token(
-                domain=self.node.domain_id, zid=self.node.zid, nid=self.node.nid, eid=next_entity_id(),
-                kind=EntityKind.SUBSCRIPTION, namespace=self.node.namespace, node_name=self.node.name,
-                topic=self.topic, typename=self.typename, type_hash=token_hash, qos=self.qos,
+                domain=self.node.domain_id,
+                zid=self.node.zid,
+                nid=self.node.nid,
+                eid=next_entity_id(),
+                kind=EntityKind.SUBSCRIPTION,
+                namespace=self.node.namespace,
+                node_name=self.node.name,
+                topic=self.topic,
+                typename=self.typename,
+                type_hash=token_hash,
+                qos=self.qos,
                 enclave=self.node.enclave,
             )
             self._token = session.liveliness().declare_token(self.token_key)
@@ -199,8 +215,12 @@ class RosSubscriber:
                 while sample is not None:
                     raw_attachment = sample.attachment
                     try:
-                        out = accept(str(sample.key_expr), sample.payload.to_bytes(),
-                                     None if raw_attachment is None else raw_attachment.to_bytes(), time_ns())
+                        out = accept(
+                            str(sample.key_expr),
+                            sample.payload.to_bytes(),
+                            None if raw_attachment is None else raw_attachment.to_bytes(),
+                            time_ns(),
+                        )
                     except RoswireError as exc:
                         self._report(exc)
                     else:

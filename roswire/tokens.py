@@ -106,9 +106,7 @@ class EndpointInfo:
 Entity = NodeInfo | EndpointInfo
 
 
-def node_token(
-    domain: int, zid: str, nid: int, namespace: str, name: str, *, enclave: str = "/"
-) -> str:
+def node_token(domain: int, zid: str, nid: int, namespace: str, name: str, *, enclave: str = "/") -> str:
     validate_namespace(namespace)
     validate_node_name(name)
     return (
@@ -196,6 +194,18 @@ def parse_token(key: str) -> NodeInfo | EndpointInfo:
     except QosParseError as exc:
         raise TokenError(key, exc.reason) from None
     return EndpointInfo(
-        domain, zid, nid, eid, kind, enclave, namespace, node_name, topic, dds_type, ros_type,
-        type_hash, qos, key,
+        domain,
+        zid,
+        nid,
+        eid,
+        kind,
+        enclave,
+        namespace,
+        node_name,
+        topic,
+        dds_type,
+        ros_type,
+        type_hash,
+        qos,
+        key,
     )

@@ -143,8 +143,14 @@ class BatchJob:
                 else:
                     value = head + value[10:]
             try:
-                produce(topic, record.key, value, headers=list(record.headers),
-                        timestamp_ms=record.timestamp_ms, callback=partial(report, index))
+                produce(
+                    topic,
+                    record.key,
+                    value,
+                    headers=list(record.headers),
+                    timestamp_ms=record.timestamp_ms,
+                    callback=partial(report, index),
+                )
             except ProduceError as exc:
                 self._failed(record, exc)
             except Exception as exc:  # noqa: BLE001 - an unexpected producer error: the edge retries the batch
@@ -169,8 +175,12 @@ class BatchJob:
             if done:
                 self._finish()
             return
-        self._failed(record, ProduceError(f"{error.name()}: {error.str()}", code=error.name(),
-                                          retriable=bool(error.retriable())))
+        self._failed(
+            record,
+            ProduceError(
+                f"{error.name()}: {error.str()}", code=error.name(), retriable=bool(error.retriable())
+            ),
+        )
 
     def _failed(self, record: Record, error: ProduceError) -> None:
         if error.retriable or error.code.startswith("_"):
@@ -184,8 +194,14 @@ class BatchJob:
             self._settle(record, retry=f"dead-letter topic refused the record: {reason}")
             return
         dl = dead_letter(
-            dlq_topic=self._dlq, stage=stage, reason=reason, intended_topic=record.kafka_topic,
-            key=record.key, raw=record.value, headers=record.headers, timestamp_ms=record.timestamp_ms,
+            dlq_topic=self._dlq,
+            stage=stage,
+            reason=reason,
+            intended_topic=record.kafka_topic,
+            key=record.key,
+            raw=record.value,
+            headers=record.headers,
+            timestamp_ms=record.timestamp_ms,
             max_value_bytes=self._dlq_max,
         )
 
@@ -198,8 +214,14 @@ class BatchJob:
                 self._settle(record, retry=f"{reason}; dead-letter write failed: {delivery.error}")
 
         try:
-            self._sink.produce(dl.topic, dl.key, dl.value, headers=dl.headers,
-                               timestamp_ms=dl.timestamp_ms, on_delivery=on_dlq)
+            self._sink.produce(
+                dl.topic,
+                dl.key,
+                dl.value,
+                headers=dl.headers,
+                timestamp_ms=dl.timestamp_ms,
+                on_delivery=on_dlq,
+            )
         except Exception as exc:  # noqa: BLE001 - keep the batch at the edge
             self._settle(record, retry=f"{reason}; dead-letter write failed: {exc}")
 
@@ -224,7 +246,14 @@ class BatchJob:
                 self._stats.batches_ok += 1
             else:
                 self._stats.batches_failed += 1
-        self._on_done(Ack(
-            edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
-            last_seq=batch.last_seq, status=status, failures=failures, detail=detail[:1000],
-        ))
+        self._on_done(
+            Ack(
+                edge_id=batch.edge_id,
+                stream=batch.stream,
+                first_seq=batch.first_seq,
+                last_seq=batch.last_seq,
+                status=status,
+                failures=failures,
+                detail=detail[:1000],
+            )
+        )

@@ -95,9 +95,7 @@ class KafkaSettings(BaseModel):
 
     @field_validator("producer_overrides")
     @classmethod
-    def _no_weakening(
-        cls, value: dict[str, str | int | float | bool]
-    ) -> dict[str, str | int | float | bool]:
+    def _no_weakening(cls, value: dict[str, str | int | float | bool]) -> dict[str, str | int | float | bool]:
         for key, raw in value.items():
             if key in _NOT_OVERRIDABLE:
                 raise ValueError(f"{key!r} cannot be overridden: {_NOT_OVERRIDABLE[key]}")

@@ -59,9 +59,13 @@ class DeliveryLatency:
             values = sorted(v for _, v in samples)
         if not values:
             return None
-        return {"batches": len(values), "p50_ms": round(percentile(values, 0.5) * 1000, 1),
-                "p95_ms": round(percentile(values, 0.95) * 1000, 1), "max_ms": round(values[-1] * 1000, 1),
-                "window_s": self.window_s}
+        return {
+            "batches": len(values),
+            "p50_ms": round(percentile(values, 0.5) * 1000, 1),
+            "p95_ms": round(percentile(values, 0.95) * 1000, 1),
+            "max_ms": round(values[-1] * 1000, 1),
+            "window_s": self.window_s,
+        }
 
     def sites(self) -> list[str]:
         with self._lock:

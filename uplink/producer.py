@@ -41,9 +41,7 @@ RawCallback = Callable[[KafkaError | None, Message], None]
 
 
 def _produce_error(err: KafkaError) -> ProduceError:
-    return ProduceError(
-        f"{err.name()}: {err.str()}", code=err.name(), retriable=bool(err.retriable())
-    )
+    return ProduceError(f"{err.name()}: {err.str()}", code=err.name(), retriable=bool(err.retriable()))
 
 
 def _exception_error(exc: KafkaException) -> ProduceError:
@@ -125,19 +123,25 @@ class KafkaSink:
             latency = time.monotonic() - began
             error = _produce_error(err) if err is not None else None
             partition, offset = msg.partition(), msg.offset()
-            on_delivery(Delivery(
-                topic,
-                -1 if partition is None else partition,
-                -1 if offset is None else offset,
-                error,
-                latency,
-            ))
+            on_delivery(
+                Delivery(
+                    topic,
+                    -1 if partition is None else partition,
+                    -1 if offset is None else offset,
+                    error,
+                    latency,
+                )
+            )
 
         deadline = began + self._queue_wait_s
         while True:
             try:
                 producer.produce(
-                    topic, value=value, key=key, headers=list(headers), timestamp=timestamp_ms,
+                    topic,
+                    value=value,
+                    key=key,
+                    headers=list(headers),
+                    timestamp=timestamp_ms,
                     on_delivery=report,
                 )
                 return
@@ -145,7 +149,8 @@ class KafkaSink:
                 if time.monotonic() > deadline:
                     raise ProduceError(
                         f"librdkafka queue stayed full for {self._queue_wait_s:.0f} s",
-                        code="_QUEUE_FULL", retriable=True,
+                        code="_QUEUE_FULL",
+                        retriable=True,
                     ) from None
                 producer.poll(0.05)
             except KafkaException as exc:
@@ -186,14 +191,16 @@ class KafkaSink:
         while True:
             producer.poll(0.05)
             try:
-                producer.produce(topic, value, key, headers=headers, timestamp=timestamp_ms,
-                                 on_delivery=callback)
+                producer.produce(
+                    topic, value, key, headers=headers, timestamp=timestamp_ms, on_delivery=callback
+                )
                 return
             except BufferError:
                 if time.monotonic() > deadline:
                     raise ProduceError(
                         f"librdkafka queue stayed full for {self._queue_wait_s:.0f} s",
-                        code="_QUEUE_FULL", retriable=True,
+                        code="_QUEUE_FULL",
+                        retriable=True,
                     ) from None
             except KafkaException as exc:
                 raise _exception_error(exc) from None

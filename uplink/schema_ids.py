@@ -40,8 +40,9 @@ and an edge that left one out is asked for it again."""
 
 
 class SchemaIds:
-    def __init__(self, registry: Registry, *, compatibility: str | None = None,
-                 max_texts: int = MAX_TEXTS) -> None:
+    def __init__(
+        self, registry: Registry, *, compatibility: str | None = None, max_texts: int = MAX_TEXTS
+    ) -> None:
         self._registry = registry
         self._compatibility = compatibility
         self._ids: dict[tuple[str, bytes], int] = {}

@@ -59,8 +59,11 @@ class Uplink:
         # Without a metrics endpoint nobody can read them: counting every delivery report would
         # cost some 3-5 us a record (a third of the uplink's work per record) for nothing.
         self.metrics: PrometheusMetrics | NullMetrics = (
-            metrics if metrics is not None
-            else PrometheusMetrics("uplink") if config.metrics is not None else NullMetrics()
+            metrics
+            if metrics is not None
+            else PrometheusMetrics("uplink")
+            if config.metrics is not None
+            else NullMetrics()
         )
         self._metrics_server: HttpServer | None = None
         self._gc_before: tuple[int, int, int] | None = None
@@ -101,8 +104,9 @@ class Uplink:
             self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
             log.info("serving edge batches on %s", key)
         if cfg.commands:
-            self._commands = CommandRouter(cfg, session=self._session, sink=self._sink,
-                                           registry=self._registry).start()
+            self._commands = CommandRouter(
+                cfg, session=self._session, sink=self._sink, registry=self._registry
+            ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
             self._metrics_server = serve_metrics(host, port, self.metrics)
@@ -203,8 +207,9 @@ class Uplink:
         try:
             batch = decode_batch(data)
         except WireError as exc:
-            self._limiter.log(logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s",
-                              str(query.key_expr), exc)
+            self._limiter.log(
+                logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s", str(query.key_expr), exc
+            )
             self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
             self._finish(query, error=f"malformed batch: {exc}")
             return
@@ -216,29 +221,58 @@ class Uplink:
         missing = ids.unknown(batch.elided) if batch.elided else ()
         if missing:  # before anything is produced: the edge sends the batch again, with them
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
-            log.info("batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
-                     batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, len(missing))
-            self._finish(query, Ack(edge_id=batch.edge_id, stream=batch.stream, first_seq=batch.first_seq,
-                                    last_seq=batch.last_seq, status="need_schemas", missing_schemas=missing,
-                                    detail="send the batch again with these schemas"))
+            log.info(
+                "batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
+                batch.edge_id,
+                batch.stream,
+                batch.first_seq,
+                batch.last_seq,
+                len(missing),
+            )
+            self._finish(
+                query,
+                Ack(
+                    edge_id=batch.edge_id,
+                    stream=batch.stream,
+                    first_seq=batch.first_seq,
+                    last_seq=batch.last_seq,
+                    status="need_schemas",
+                    missing_schemas=missing,
+                    detail="send the batch again with these schemas",
+                ),
+            )
             return
 
         def done(ack: Ack) -> None:
-            self.metrics.on_ingested(batch.site, ack.status, len(batch.records),
-                                     sum(f.dead_lettered for f in ack.failures))
+            self.metrics.on_ingested(
+                batch.site, ack.status, len(batch.records), sum(f.dead_lettered for f in ack.failures)
+            )
             if ack.status == "ok":
                 self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
             if ack.status == "error":
-                self._limiter.log(logging.WARNING, "batch-error",
-                                  "batch %s/%s %d..%d not fully delivered: %s",
-                                  ack.edge_id, ack.stream, ack.first_seq, ack.last_seq, ack.detail)
+                self._limiter.log(
+                    logging.WARNING,
+                    "batch-error",
+                    "batch %s/%s %d..%d not fully delivered: %s",
+                    ack.edge_id,
+                    ack.stream,
+                    ack.first_seq,
+                    ack.last_seq,
+                    ack.detail,
+                )
             self._finish(query, ack)
 
         metered = not isinstance(self.metrics, NullMetrics)
-        BatchJob(batch, sink=sink, schema_ids=ids, dead_letter_topic=self.config.topics.dead_letter,
-                 on_done=done, stats=self.stats, dead_letter_max_bytes=self._dlq_max,
-                 on_delivery=self.metrics.on_delivered if metered else None).run()
-
+        BatchJob(
+            batch,
+            sink=sink,
+            schema_ids=ids,
+            dead_letter_topic=self.config.topics.dead_letter,
+            on_done=done,
+            stats=self.stats,
+            dead_letter_max_bytes=self._dlq_max,
+            on_delivery=self.metrics.on_delivered if metered else None,
+        ).run()
 
     def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:
         """Answer a batch taken by ``_on_query`` (its ack, or ``error``) and free its slot."""

@@ -21,8 +21,12 @@ def ensure_topics(kafka: KafkaSettings, topics: TopicSettings, timeout_s: float 
     """
     admin = AdminClient(kafka.common_config())
     wanted = [
-        NewTopic(topics.registrations, num_partitions=1, replication_factor=-1,
-                 config={"cleanup.policy": "compact"}),
+        NewTopic(
+            topics.registrations,
+            num_partitions=1,
+            replication_factor=-1,
+            config={"cleanup.policy": "compact"},
+        ),
         NewTopic(topics.dead_letter, num_partitions=1, replication_factor=-1),
         NewTopic(topics.command_dead_letter, num_partitions=1, replication_factor=-1),
         NewTopic(topics.command_status, num_partitions=1, replication_factor=-1),

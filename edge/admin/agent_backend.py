@@ -32,8 +32,15 @@ if TYPE_CHECKING:
     from fleetlink.edge.agent import EdgeAgent
 
 _COUNTS = ("received", "emitted", "dropped", "dead_lettered", "type_mismatch")
-_WAN = ("batches_sent", "records_sent", "bytes_sent", "batches_acked", "records_acked", "batches_retried",
-        "in_flight")
+_WAN = (
+    "batches_sent",
+    "records_sent",
+    "bytes_sent",
+    "batches_acked",
+    "records_acked",
+    "batches_retried",
+    "in_flight",
+)
 
 
 def _int(value: Any) -> int:
@@ -48,9 +55,13 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
     """``EdgeAgent.snapshot()`` (plain data) -> ``EdgeSnapshot``; missing parts stay neutral."""
     stages = _dict(data.get("stages"))
     mappings = {
-        str(name): MappingCounts(**{k: _int(_dict(counts).get(k)) for k in _COUNTS},
-                                 stages={str(s): {str(k): _int(v) for k, v in _dict(c).items()}
-                                         for s, c in _dict(stages.get(name)).items()})
+        str(name): MappingCounts(
+            **{k: _int(_dict(counts).get(k)) for k in _COUNTS},
+            stages={
+                str(s): {str(k): _int(v) for k, v in _dict(c).items()}
+                for s, c in _dict(stages.get(name)).items()
+            },
+        )
         for name, counts in _dict(data.get("mappings")).items()
     }
     capacity = {"durable": int(config.spool.max_bytes), "memory": int(config.memory.max_bytes)}
@@ -72,14 +83,22 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
     subscriptions = _dict(data.get("subscriptions"))
     gaps = {str(topic): _int(_dict(sub).get("missing")) for topic, sub in subscriptions.items()}
     issues = {
-        str(name): [MappingIssue(reason=str(i.get("reason", "")), detail=str(i.get("detail", "")))
-                    for i in found if isinstance(i, Mapping)]
-        for name, found in _dict(data.get("issues")).items() if isinstance(found, list)
+        str(name): [
+            MappingIssue(reason=str(i.get("reason", "")), detail=str(i.get("detail", "")))
+            for i in found
+            if isinstance(i, Mapping)
+        ]
+        for name, found in _dict(data.get("issues")).items()
+        if isinstance(found, list)
     }
     running = data.get("running")
     return EdgeSnapshot(
-        mappings=mappings, issues=issues, buffers=tuple(buffers), wan=wan,
-        wan_link_up=all(healthy) if healthy else None, sequence_gaps=gaps,
+        mappings=mappings,
+        issues=issues,
+        buffers=tuple(buffers),
+        wan=wan,
+        wan_link_up=all(healthy) if healthy else None,
+        sequence_gaps=gaps,
         failure=None if running is not False else "the edge agent is not running",
     )
 
@@ -93,9 +112,15 @@ def robots_from_agent(data: Mapping[str, Any], robots: Mapping[str, str]) -> lis
         detail = _dict(details.get(robot))
         at_ms = detail.get("registered_at_ms")
         state: RobotState = "lost" if detail.get("state") == "lost" else "registered"
-        out.append(RobotStatus(robot=robot, robot_type=kind,
-                               registered_at=at_ms / 1000 if isinstance(at_ms, int | float) else None,
-                               state=state, explicit=bool(detail.get("explicit", False))))
+        out.append(
+            RobotStatus(
+                robot=robot,
+                robot_type=kind,
+                registered_at=at_ms / 1000 if isinstance(at_ms, int | float) else None,
+                state=state,
+                explicit=bool(detail.get("explicit", False)),
+            )
+        )
     return out
 
 

@@ -52,8 +52,10 @@ def effective(base: dict[str, Any], overlay: Overlay, *, source: str = "overlay"
         config = None
     if problems or config is None:
         listing = "\n  ".join(problems)
-        raise OverlayError(f"{source}: the admin changes saved here no longer fit the config file "
-                           f"(fix or delete the file to start from the config file alone):\n  {listing}")
+        raise OverlayError(
+            f"{source}: the admin changes saved here no longer fit the config file "
+            f"(fix or delete the file to start from the config file alone):\n  {listing}"
+        )
     return config
 
 
@@ -119,7 +121,8 @@ def remove_robot_type(base: dict[str, Any], overlay: Overlay, name: str) -> Prop
     if name not in current.get("robot_types", {}):
         raise NotFoundError(f"no robot type named {name!r}")
     in_base = name in apply_overlay(base, Overlay(removed_robot_types=overlay.removed_robot_types)).get(
-        "robot_types", {})
+        "robot_types", {}
+    )
     return Proposal(*_validated(base, overlay.without_robot_type(name, removed=in_base), None))
 
 
@@ -147,9 +150,11 @@ def _mapping_entry(body: Any, *, name: str | None, where: tuple[PathPart, ...] =
     if not isinstance(given, str) or not given:
         raise _shape(format_path((*where, "name")), "a mapping name (text) is required")
     if name is not None and given != name:
-        raise _shape(format_path((*where, "name")),
-                     f"the body names {given!r} but the URL names {name!r}; a mapping cannot be renamed "
-                     "(add the new one and remove the old one)")
+        raise _shape(
+            format_path((*where, "name")),
+            f"the body names {given!r} but the URL names {name!r}; a mapping cannot be renamed "
+            "(add the new one and remove the old one)",
+        )
     robot_type = body.get("robot_type")
     if robot_type is not None and not isinstance(robot_type, str):
         raise _shape(format_path((*where, "robot_type")), "a robot type name (text) or null")
@@ -176,16 +181,23 @@ def _check_type_mappings(current: dict[str, Any], name: str, entries: Iterable[d
     seen: set[str] = set()
     for index, entry in enumerate(entries):
         if "robot_type" in entry and entry["robot_type"] not in (None, name):
-            problems.append(FieldProblem(f"mappings[{index}].robot_type",
-                                         f"must be {name!r} (or left out) in this robot type"))
+            problems.append(
+                FieldProblem(
+                    f"mappings[{index}].robot_type", f"must be {name!r} (or left out) in this robot type"
+                )
+            )
         mapping = entry["name"]
         owner = owner_of(current, mapping)
         elsewhere = locate_mapping(current, mapping) is not None and owner != name
         if mapping in seen or elsewhere:
             place = format_path(locate_mapping(current, mapping) or ())
             where = "twice in this request" if mapping in seen else f"already by {place}"
-            problems.append(FieldProblem(f"mappings[{index}].name", f"the name {mapping!r} is used {where}; "
-                                         "mapping names are unique per edge"))
+            problems.append(
+                FieldProblem(
+                    f"mappings[{index}].name",
+                    f"the name {mapping!r} is used {where}; mapping names are unique per edge",
+                )
+            )
         seen.add(mapping)
     if problems:
         raise InvalidChangeError("invalid robot type", tuple(problems))
@@ -223,8 +235,11 @@ def _check_stages(config: EdgeConfig, prefix: tuple[PathPart, ...] | None) -> No
     declared: list[tuple[tuple[PathPart, ...], MappingConfig]] = [
         (("mappings", i), m) for i, m in enumerate(config.mappings)
     ]
-    declared += [(("robot_types", t, "mappings", i), m)
-                 for t, rt in config.robot_types.items() for i, m in enumerate(rt.mappings)]
+    declared += [
+        (("robot_types", t, "mappings", i), m)
+        for t, rt in config.robot_types.items()
+        for i, m in enumerate(rt.mappings)
+    ]
     for where, mapping in declared:
         if prefix is not None and where[: len(prefix)] != prefix:
             continue
@@ -232,7 +247,7 @@ def _check_stages(config: EdgeConfig, prefix: tuple[PathPart, ...] | None) -> No
             build_pipeline(list(mapping.stages), name=mapping.name)
         except StageConfigError as exc:
             full = (*where, "stages")
-            rel = full[len(prefix):] if prefix is not None else full
+            rel = full[len(prefix) :] if prefix is not None else full
             problems.append(FieldProblem(format_path(rel), str(exc), format_path(full)))
     if problems:
         raise InvalidChangeError("the change does not validate", tuple(problems))

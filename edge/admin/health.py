@@ -43,22 +43,46 @@ def assess(
     window = f"{rules.dead_letter_window_s:g} s"
     for mapping, count in sorted(recent_dead_letters.items()):
         if count > 0:
-            problems.append(Problem("mapping", mapping, "dead_letters",
-                                    f"{count} record(s) dead-lettered in the last {window}"))
+            problems.append(
+                Problem(
+                    "mapping",
+                    mapping,
+                    "dead_letters",
+                    f"{count} record(s) dead-lettered in the last {window}",
+                )
+            )
     fill: dict[str, float] = {}
     for buffer in snapshot.buffers:
         stats = buffer.stats
         ratio = stats.bytes / buffer.capacity_bytes if buffer.capacity_bytes > 0 else 0.0
         fill[stats.stream] = round(ratio, 4)
         if stats.blocked_appenders > 0:
-            problems.append(Problem("spool", stats.stream, "spool_full",
-                                    f"{stats.blocked_appenders} appender(s) wait for room"))
+            problems.append(
+                Problem(
+                    "spool",
+                    stats.stream,
+                    "spool_full",
+                    f"{stats.blocked_appenders} appender(s) wait for room",
+                )
+            )
         elif ratio >= rules.spool_fill:
-            problems.append(Problem("spool", stats.stream, "spool_filling",
-                                    f"{ratio:.0%} of {buffer.capacity_bytes} bytes used; the oldest "
-                                    f"record is {stats.oldest_age_ms(now_ms) / 1000:.1f} s old"))
+            problems.append(
+                Problem(
+                    "spool",
+                    stats.stream,
+                    "spool_filling",
+                    f"{ratio:.0%} of {buffer.capacity_bytes} bytes used; the oldest "
+                    f"record is {stats.oldest_age_ms(now_ms) / 1000:.1f} s old",
+                )
+            )
     if snapshot.wan_link_up is False:
         held = sum(b.stats.depth for b in snapshot.buffers)
-        problems.append(Problem("wan", "uplink", "wan_down",
-                                f"the uplink does not answer; {held} record(s) held in the buffers"))
+        problems.append(
+            Problem(
+                "wan",
+                "uplink",
+                "wan_down",
+                f"the uplink does not answer; {held} record(s) held in the buffers",
+            )
+        )
     return Health.of(problems, spool_fill=fill, wan_link_up=snapshot.wan_link_up, robots=robots)

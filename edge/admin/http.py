@@ -61,9 +61,12 @@ def create_app(
     service: AdminService, *, token: SecretStr | None = None, metrics: PrometheusMetrics | None = None
 ) -> FastAPI:
     app = FastAPI(
-        title="fleetlink edge admin", version=__version__, docs_url=None, redoc_url=None,
+        title="fleetlink edge admin",
+        version=__version__,
+        docs_url=None,
+        redoc_url=None,
         description="Robots, topics and mappings of one fleetlink edge; change mappings and robot types "
-                    "at runtime (validated like the config file, saved, applied atomically).",
+        "at runtime (validated like the config file, saved, applied atomically).",
     )
 
     def require_token(request: Request) -> None:

@@ -57,18 +57,31 @@ def mapping_views(
             stages.append(StageView(name=name, type=spec.type, **numbers))
         issues = [IssueView(reason=i.reason, detail=i.detail) for i in snapshot.issues.get(mapping.name, ())]
         counters = MappingCountersView(
-            received=counts.received, emitted=counts.emitted, dropped=counts.dropped,
-            dead_lettered=counts.dead_lettered, type_mismatch=counts.type_mismatch,
+            received=counts.received,
+            emitted=counts.emitted,
+            dropped=counts.dropped,
+            dead_lettered=counts.dead_lettered,
+            type_mismatch=counts.type_mismatch,
         )
-        views.append(MappingView.model_validate({
-            "name": mapping.name, "robot_type": owner,
-            "origin": "admin" if overlay.mapping(mapping.name) is not None else "config",
-            "from": mapping.from_, "to": mapping.to, "key": mapping.key, "type": mapping.type,
-            "delivery": mapping.delivery,
-            "stages": [s.model_dump(mode="json", exclude_none=True) for s in mapping.stages],
-            "robots": robots.get(mapping.name, []), "counters": counters, "stage_counters": stages,
-            "issues": issues,
-        }))
+        views.append(
+            MappingView.model_validate(
+                {
+                    "name": mapping.name,
+                    "robot_type": owner,
+                    "origin": "admin" if overlay.mapping(mapping.name) is not None else "config",
+                    "from": mapping.from_,
+                    "to": mapping.to,
+                    "key": mapping.key,
+                    "type": mapping.type,
+                    "delivery": mapping.delivery,
+                    "stages": [s.model_dump(mode="json", exclude_none=True) for s in mapping.stages],
+                    "robots": robots.get(mapping.name, []),
+                    "counters": counters,
+                    "stage_counters": stages,
+                    "issues": issues,
+                }
+            )
+        )
     return views
 
 
@@ -79,27 +92,44 @@ def robot_views(robots: Iterable[RobotStatus]) -> list[RobotView]:
         if robot.registered_at is not None:
             when = dt.datetime.fromtimestamp(robot.registered_at, tz=dt.UTC)
             since = when.isoformat(timespec="milliseconds")
-        out.append(RobotView(robot=robot.robot, robot_type=robot.robot_type,
-                             registered_at=robot.registered_at, registered_since=since, state=robot.state,
-                             explicit=robot.explicit))
+        out.append(
+            RobotView(
+                robot=robot.robot,
+                robot_type=robot.robot_type,
+                registered_at=robot.registered_at,
+                registered_since=since,
+                state=robot.state,
+                explicit=robot.explicit,
+            )
+        )
     return out
 
 
 def _match_view(bound: BoundMapping) -> TopicMatchView:
-    return TopicMatchView(mapping=bound.name, robot=bound.robot,
-                          kafka_topic=bound.kafka_topic or bound.topic_template.text,
-                          key=bound.key if bound.key is not None else bound.key_template.text)
+    return TopicMatchView(
+        mapping=bound.name,
+        robot=bound.robot,
+        kafka_topic=bound.kafka_topic or bound.topic_template.text,
+        key=bound.key if bound.key is not None else bound.key_template.text,
+    )
 
 
 def topic_views(topics: Mapping[str, TopicInfo], table: MappingTable) -> list[TopicView]:
     out = []
     for name in sorted(topics):
         info = topics[name]
-        publishers = [PublisherView(node=p.node_fqn, type=p.ros_type, type_hash=p.type_hash)
-                      for p in info.publishers]
-        out.append(TopicView(topic=name, types=list(info.types), publishers=publishers,
-                             subscribers=len(info.subscribers),
-                             mappings=[_match_view(b) for b in table.match(name)]))
+        publishers = [
+            PublisherView(node=p.node_fqn, type=p.ros_type, type_hash=p.type_hash) for p in info.publishers
+        ]
+        out.append(
+            TopicView(
+                topic=name,
+                types=list(info.types),
+                publishers=publishers,
+                subscribers=len(info.subscribers),
+                mappings=[_match_view(b) for b in table.match(name)],
+            )
+        )
     return out
 
 
@@ -128,8 +158,15 @@ def dry_run_matches(
         info = topics[topic]
         for bound in table.match(topic):
             view = _match_view(bound)
-            matches.append(DryRunMatchView(
-                topic=topic, types=list(info.types), robot=bound.robot,
-                registered=owner is None or bound.robot in registered, kafka_topic=view.kafka_topic,
-                key=view.key, type_ok=spec.ros_type is None or spec.ros_type in info.types))
+            matches.append(
+                DryRunMatchView(
+                    topic=topic,
+                    types=list(info.types),
+                    robot=bound.robot,
+                    registered=owner is None or bound.robot in registered,
+                    kafka_topic=view.kafka_topic,
+                    key=view.key,
+                    type_ok=spec.ros_type is None or spec.ros_type in info.types,
+                )
+            )
     return DryRunView(mapping=name, robot_type=owner, matches=matches)

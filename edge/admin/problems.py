@@ -55,7 +55,8 @@ def problems_from(
     for error in exc.errors(include_url=False):
         full = document_path(error["loc"], data)
         inside = body_prefix is not None and full[: len(body_prefix)] == body_prefix
-        rel = full[len(body_prefix):] if inside and body_prefix is not None else full
-        out.append(FieldProblem(path=format_path(rel), message=message_of(error),
-                                config_path=format_path(full)))
+        rel = full[len(body_prefix) :] if inside and body_prefix is not None else full
+        out.append(
+            FieldProblem(path=format_path(rel), message=message_of(error), config_path=format_path(full))
+        )
     return tuple(out)

@@ -91,8 +91,9 @@ class EdgeAdmin:
         if self.service is not None:
             return self
         overlay = self._overlay if self._overlay is not None else self.store.load()
-        service = AdminService(self.base, backend, overlay=overlay, store=self.store,
-                               telemetry=EdgeTelemetry(self.metrics))
+        service = AdminService(
+            self.base, backend, overlay=overlay, store=self.store, telemetry=EdgeTelemetry(self.metrics)
+        )
         raw = self._agent_backend.agent.snapshot if self._agent_backend is not None else None
         self.extensions = [make(service, backend.snapshot, raw) for make in self.extension_factories]
         try:

@@ -86,10 +86,16 @@ class AdminService:
         with self._lock:
             config, overlay = self._config, self._overlay
         robots = self.backend.mapping_table().robots()
-        return [RobotTypeView(name=name, match=rt.match, mappings=[m.name for m in rt.mappings],
-                              robots=sorted(r for r, t in robots.items() if t == name),
-                              origin="admin" if name in overlay.robot_types else "config")
-                for name, rt in config.robot_types.items()]
+        return [
+            RobotTypeView(
+                name=name,
+                match=rt.match,
+                mappings=[m.name for m in rt.mappings],
+                robots=sorted(r for r, t in robots.items() if t == name),
+                origin="admin" if name in overlay.robot_types else "config",
+            )
+            for name, rt in config.robot_types.items()
+        ]
 
     def robots(self) -> list[RobotView]:
         return robot_views(self.backend.robots())
@@ -158,8 +164,12 @@ class AdminService:
         self._overlay, self._config = proposal.overlay, proposal.config
         self.changes += 1
         log.info("admin: %s %s %s", kind, name, status)
-        return ChangeView(status=status, kind=kind, name=name,
-                          overlay=str(self.store.path) if self.store is not None else None)
+        return ChangeView(
+            status=status,
+            kind=kind,
+            name=name,
+            overlay=str(self.store.path) if self.store is not None else None,
+        )
 
     def _restore(self, previous: Overlay) -> None:
         if self.store is not None:

@@ -84,7 +84,7 @@ def targets(
 
 
 def _one(prefix: str, key: str, op: str | None, has_payload: bool) -> Target:
-    rest = key[len(prefix) + 1:] if key.startswith(prefix + "/") else ""
+    rest = key[len(prefix) + 1 :] if key.startswith(prefix + "/") else ""
     parts = rest.split("/") if rest else []
     if len(parts) == 1 and parts[0] in (*COLLECTIONS, "dry-run"):
         resource, name = parts[0], None
@@ -103,9 +103,14 @@ def _one(prefix: str, key: str, op: str | None, has_payload: bool) -> Target:
         ("robot_types", "item"): {"get", "put", "delete"},
     }.get((resource, None if name is None else "item"), {"get"})
     if chosen not in allowed:
-        return Target(key, resource, name, status=405,
-                      error=f"op {chosen!r} is not possible on {resource}{'/<name>' if name else ''} "
-                            f"(possible: {', '.join(sorted(allowed))})")
+        return Target(
+            key,
+            resource,
+            name,
+            status=405,
+            error=f"op {chosen!r} is not possible on {resource}{'/<name>' if name else ''} "
+            f"(possible: {', '.join(sorted(allowed))})",
+        )
     if chosen in ("add", "put", "dry-run") and not has_payload:
         return Target(key, resource, name, status=400, error=f"op {chosen!r} needs a JSON payload")
     return Target(key, resource, name, chosen)
@@ -138,8 +143,11 @@ def _run(service: AdminService, target: Target, body: Any) -> tuple[int, Any]:  
             health = service.health()
             return health.http_status, {"body": health.as_dict()}
         reads: dict[str, Callable[[], Any]] = {
-            "robots": service.robots, "topics": service.topics, "mappings": service.mappings,
-            "robot_types": service.robot_types, "overlay": lambda: service.overlay,
+            "robots": service.robots,
+            "topics": service.topics,
+            "mappings": service.mappings,
+            "robot_types": service.robot_types,
+            "overlay": lambda: service.overlay,
         }
         return 200, {"body": _json(reads[resource]())}
     if op == "get" and name is not None:

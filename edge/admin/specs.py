@@ -27,6 +27,8 @@ def declarations(
             return dataclasses.replace(fresh, stages=kept)
         return fresh
 
-    types = [RobotTypeSpec(name=name, match=rt.match, mappings=tuple(spec(m, name) for m in rt.mappings))
-             for name, rt in config.robot_types.items()]
+    types = [
+        RobotTypeSpec(name=name, match=rt.match, mappings=tuple(spec(m, name) for m in rt.mappings))
+        for name, rt in config.robot_types.items()
+    ]
     return types, [spec(m, None) for m in config.mappings]

@@ -74,8 +74,9 @@ class OverlayStore:
             finally:
                 os.close(dir_fd)
         except OSError as exc:
-            raise PersistError(f"cannot save the admin overlay to {self.path}: {exc.strerror}; "
-                               "the change was not applied") from None
+            raise PersistError(
+                f"cannot save the admin overlay to {self.path}: {exc.strerror}; the change was not applied"
+            ) from None
         finally:
             if tmp is not None:
                 Path(tmp).unlink(missing_ok=True)

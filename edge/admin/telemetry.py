@@ -16,8 +16,12 @@ from fleetlink.edge.admin.backend import EdgeSnapshot
 from fleetlink.edge.admin.health import HealthRules, assess
 
 _STAGE_DROPS = (("dropped", "dropped"), ("late", "late"), ("errors", "error"))
-_SPOOL_DROPS = (("dropped_oldest", "dropped_oldest"), ("dropped_newest", "dropped_newest"),
-                ("corrupt_skipped", "corrupt"), ("block_timeouts", "block_timeout"))
+_SPOOL_DROPS = (
+    ("dropped_oldest", "dropped_oldest"),
+    ("dropped_newest", "dropped_newest"),
+    ("corrupt_skipped", "corrupt"),
+    ("block_timeouts", "block_timeout"),
+)
 
 
 class EdgeTelemetry:
@@ -63,16 +67,23 @@ class EdgeTelemetry:
         for buffer in snapshot.buffers:
             stats = buffer.stats
             stream = stats.stream
-            m.on_spooled(d(("appended", stream), stats.appended),
-                         d(("appended_bytes", stream), buffer.appended_bytes), stream)
+            m.on_spooled(
+                d(("appended", stream), stats.appended),
+                d(("appended_bytes", stream), buffer.appended_bytes),
+                stream,
+            )
             for field, reason in _SPOOL_DROPS:
                 m.on_spool_dropped(stream, reason, d((field, stream), getattr(stats, field)))
         for stream, wan in snapshot.wan.items():
-            m.on_sent(d(("batches_sent", stream), wan.batches_sent),
-                      d(("records_sent", stream), wan.records_sent),
-                      d(("bytes_sent", stream), wan.bytes_sent))
-            m.on_acked(d(("batches_acked", stream), wan.batches_acked),
-                       d(("records_acked", stream), wan.records_acked))
+            m.on_sent(
+                d(("batches_sent", stream), wan.batches_sent),
+                d(("records_sent", stream), wan.records_sent),
+                d(("bytes_sent", stream), wan.bytes_sent),
+            )
+            m.on_acked(
+                d(("batches_acked", stream), wan.batches_acked),
+                d(("records_acked", stream), wan.records_acked),
+            )
             m.on_wan_failure("retry", d(("batches_retried", stream), wan.batches_retried))
         for topic, missing in snapshot.sequence_gaps.items():
             m.on_gap(topic, d(("gap", topic), missing))
@@ -81,9 +92,14 @@ class EdgeTelemetry:
         now_ms = int(now * 1000)
         for buffer in snapshot.buffers:
             stats = buffer.stats
-            self.metrics.set_spool(stats.stream, nbytes=stats.bytes, capacity_bytes=buffer.capacity_bytes,
-                                   depth=stats.depth, in_flight=stats.in_flight,
-                                   oldest_age_s=stats.oldest_age_ms(now_ms) / 1000)
+            self.metrics.set_spool(
+                stats.stream,
+                nbytes=stats.bytes,
+                capacity_bytes=buffer.capacity_bytes,
+                depth=stats.depth,
+                in_flight=stats.in_flight,
+                oldest_age_s=stats.oldest_age_ms(now_ms) / 1000,
+            )
         in_flight = sum(w.in_flight for w in snapshot.wan.values())
         if snapshot.wan_link_up is not None or snapshot.wan:
             self.metrics.set_wan(in_flight=in_flight, link_up=snapshot.wan_link_up is not False)
@@ -94,8 +110,9 @@ class EdgeTelemetry:
         for name, counts in snapshot.mappings.items():
             tracker = self._recent.get(name)
             if tracker is None:
-                tracker = self._recent[name] = RecentIncrease(self.rules.dead_letter_window_s,
-                                                              created_s=self._created)
+                tracker = self._recent[name] = RecentIncrease(
+                    self.rules.dead_letter_window_s, created_s=self._created
+                )
             out[name] = tracker.update(now, counts.dead_lettered)
         for gone in set(self._recent) - set(snapshot.mappings):
             del self._recent[gone]

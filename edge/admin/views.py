@@ -54,7 +54,8 @@ class MappingView(_View):
     name: str
     robot_type: str | None = Field(description="the robot type whose template this is; null: site-level")
     origin: Literal["config", "admin"] = Field(
-        description="from the config file, or added/changed at runtime")
+        description="from the config file, or added/changed at runtime"
+    )
     source: str = Field(alias="from")
     to: str
     key: str | None
@@ -113,7 +114,8 @@ class DryRunMatchView(_View):
     kafka_topic: str
     key: str
     type_ok: bool = Field(
-        description="false: the topic's type differs from the mapping's 'type' (not mapped)")
+        description="false: the topic's type differs from the mapping's 'type' (not mapped)"
+    )
 
 
 class DryRunView(_View):

@@ -64,9 +64,12 @@ class ZenohAdmin:
             if not found:
                 return
             if not authorized(self.token, attachment):
-                self._reply(query, Target(found[0].key, ""), 401,
-                            {"error": "missing or wrong admin token (attachment 'Bearer <token>')",
-                             "problems": []})
+                self._reply(
+                    query,
+                    Target(found[0].key, ""),
+                    401,
+                    {"error": "missing or wrong admin token (attachment 'Bearer <token>')", "problems": []},
+                )
                 return
             body, problem = parse_body(payload)
             for target in found:

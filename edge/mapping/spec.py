@@ -90,7 +90,8 @@ def check_captures(template: Template, pattern: TopicPattern, what: str, mapping
         raise MappingError(
             f"{what} {template.text!r} uses {{{name}}}, which the pattern {pattern.text!r} does not "
             f"capture (it captures: {have}; message fields are written {{msg.field}})",
-            mapping=mapping, template=template.text,
+            mapping=mapping,
+            template=template.text,
         )
 
 
@@ -98,19 +99,25 @@ def check_topic_literal(template: Template, mapping: str) -> None:
     if template.is_literal:
         problem = kafka_topic_problem(template.literal_text)
         if problem:
-            raise MappingError(f"Kafka topic {template.text!r}: {problem}", mapping=mapping,
-                               template=template.text)
+            raise MappingError(
+                f"Kafka topic {template.text!r}: {problem}", mapping=mapping, template=template.text
+            )
         return
     literal = template.literal_text
     bad = sorted({c for c in literal if _KAFKA_CHAR.fullmatch(c) is None})
     if bad:
         raise MappingError(
             f"Kafka topic template {template.text!r}: Kafka topic names use only [a-zA-Z0-9._-]; "
-            f"{''.join(bad)!r} is not allowed", mapping=mapping, template=template.text,
+            f"{''.join(bad)!r} is not allowed",
+            mapping=mapping,
+            template=template.text,
         )
     if len(literal) >= KAFKA_TOPIC_MAX:
-        raise MappingError(f"Kafka topic template {template.text!r} is too long (max {KAFKA_TOPIC_MAX})",
-                           mapping=mapping, template=template.text)
+        raise MappingError(
+            f"Kafka topic template {template.text!r} is too long (max {KAFKA_TOPIC_MAX})",
+            mapping=mapping,
+            template=template.text,
+        )
 
 
 def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> CompiledMapping:
@@ -127,7 +134,9 @@ def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> Comp
     if robot_type is not None and not pattern.is_single("robot"):
         raise MappingError(
             f"topic pattern {spec.source!r}: mappings of robot type {robot_type!r} must capture the "
-            "robot as one segment, e.g. '/{robot}/imu'", mapping=name, template=spec.source,
+            "robot as one segment, e.g. '/{robot}/imu'",
+            mapping=name,
+            template=spec.source,
         )
     topic = Template.parse(spec.topic, mapping=name, what="Kafka topic template")
     check_captures(topic, pattern, "Kafka topic template", name)
@@ -136,7 +145,9 @@ def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> Comp
         if "robot" not in pattern.captures:
             raise MappingError(
                 f"the key defaults to '{{robot}}' but the pattern {spec.source!r} captures no robot; "
-                "set 'key' (a capture, a {msg.field} or fixed text)", mapping=name, template=spec.source,
+                "set 'key' (a capture, a {msg.field} or fixed text)",
+                mapping=name,
+                template=spec.source,
             )
         key_text = "{robot}"
     else:
@@ -144,8 +155,9 @@ def compile_mapping(spec: MappingSpec, *, robot_type: str | None = None) -> Comp
     key = Template.parse(key_text, mapping=name, what="key template")
     check_captures(key, pattern, "key template", name)
     paths = topic.field_paths + tuple(p for p in key.field_paths if p not in topic.field_paths)
-    return CompiledMapping(spec=spec, robot_type=robot_type, pattern=pattern, topic=topic, key=key,
-                           field_paths=paths)
+    return CompiledMapping(
+        spec=spec, robot_type=robot_type, pattern=pattern, topic=topic, key=key, field_paths=paths
+    )
 
 
 def check_unique_names(specs: Sequence[MappingSpec]) -> None:

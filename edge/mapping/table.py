@@ -77,8 +77,12 @@ class BoundMapping:
         topic = self.topic_template.render(fields, mapping=self.name)
         problem = kafka_topic_problem(topic)
         if problem is not None:
-            raise RenderError(f"rendered {topic!r}: {problem}", mapping=self.name,
-                              template=self.topic_template.text, value=topic)
+            raise RenderError(
+                f"rendered {topic!r}: {problem}",
+                mapping=self.name,
+                template=self.topic_template.text,
+                value=topic,
+            )
         return topic
 
     def render_key(self, fields: Mapping[str, Any] | None = None) -> str:
@@ -145,10 +149,19 @@ def _bind(entry: _Entry, topic: str, captures: dict[str, str]) -> BoundMapping:
         else:
             error = f"rendered {topic_t.literal_text!r}: {problem}"
     return BoundMapping(
-        name=compiled.name, robot=robot, robot_type=compiled.robot_type, source_topic=topic,
-        ros_type=compiled.spec.ros_type, delivery=compiled.spec.delivery, stages=compiled.spec.stages,
-        captures=captures, topic_template=topic_t, key_template=key_t, kafka_topic=kafka_topic,
-        key=key_t.literal_text if key_t.is_literal else None, topic_error=error,
+        name=compiled.name,
+        robot=robot,
+        robot_type=compiled.robot_type,
+        source_topic=topic,
+        ros_type=compiled.spec.ros_type,
+        delivery=compiled.spec.delivery,
+        stages=compiled.spec.stages,
+        captures=captures,
+        topic_template=topic_t,
+        key_template=key_t,
+        kafka_topic=kafka_topic,
+        key=key_t.literal_text if key_t.is_literal else None,
+        topic_error=error,
         linger_s=None if compiled.spec.linger_ns is None else compiled.spec.linger_ns / 1e9,
     )
 
@@ -183,8 +196,9 @@ class MappingTable:
                 raise MappingError(f"robot type {name!r} is declared twice")
         check_unique_names([*mappings, *(m for t in robot_types for m in t.mappings)])
         site = {m.name: compile_mapping(m) for m in mappings}
-        templates = {t.name: {m.name: compile_mapping(m, robot_type=t.name) for m in t.mappings}
-                     for t in robot_types}
+        templates = {
+            t.name: {m.name: compile_mapping(m, robot_type=t.name) for m in t.mappings} for t in robot_types
+        }
         self._types = {t.name: t for t in robot_types}
         self._templates = templates
         self._site = site
@@ -281,9 +295,17 @@ class MappingTable:
     @staticmethod
     def _info(compiled: CompiledMapping, robots: tuple[str, ...]) -> MappingInfo:
         spec = compiled.spec
-        return MappingInfo(name=spec.name, robot_type=compiled.robot_type, source=spec.source,
-                           topic=spec.topic, key=compiled.key.text, ros_type=spec.ros_type,
-                           delivery=spec.delivery, robots=robots, stages=spec.stages)
+        return MappingInfo(
+            name=spec.name,
+            robot_type=compiled.robot_type,
+            source=spec.source,
+            topic=spec.topic,
+            key=compiled.key.text,
+            ros_type=spec.ros_type,
+            delivery=spec.delivery,
+            robots=robots,
+            stages=spec.stages,
+        )
 
     def match(self, topic: str) -> tuple[BoundMapping, ...]:
         """Every mapping ``topic`` feeds, in declaration order (empty tuple: none)."""
@@ -315,8 +337,13 @@ class MappingTable:
                 entry = self._bound.get((robot, m.name))
                 if entry is None or entry.compiled is not m:
                     bound = {"robot": robot}
-                    entry = _Entry(compiled=m, robot=robot, pattern=m.pattern.bind(bound),
-                                   topic=m.topic.bind(bound, for_topic=True), key=m.key.bind(bound))
+                    entry = _Entry(
+                        compiled=m,
+                        robot=robot,
+                        pattern=m.pattern.bind(bound),
+                        topic=m.topic.bind(bound, for_topic=True),
+                        key=m.key.bind(bound),
+                    )
                 reused[(robot, m.name)] = entry
                 entries.append(entry)
         self._bound = reused

@@ -177,16 +177,21 @@ class Template:
                 continue
             path = part.field_path
             if path is None:
-                raise RenderError(f"capture {{{part.name}}} was never bound",
-                                  mapping=mapping, template=self.text)
+                raise RenderError(
+                    f"capture {{{part.name}}} was never bound", mapping=mapping, template=self.text
+                )
             if fields is None:
-                raise RenderError(f"needs message field {part.name} but no message was given",
-                                  mapping=mapping, template=self.text)
+                raise RenderError(
+                    f"needs message field {part.name} but no message was given",
+                    mapping=mapping,
+                    template=self.text,
+                )
             try:
                 out.append(format_field(lookup_field(fields, path)))
             except KeyError as exc:
-                raise RenderError(f"the message has no field {exc.args[0]}",
-                                  mapping=mapping, template=self.text) from None
+                raise RenderError(
+                    f"the message has no field {exc.args[0]}", mapping=mapping, template=self.text
+                ) from None
             except ValueError as exc:
                 raise RenderError(f"field {part.name}: {exc}", mapping=mapping, template=self.text) from None
         return "".join(out)

@@ -117,8 +117,10 @@ class Intake(Generic[T]):
             return taken
 
     def _fits(self, pairs: Sequence[tuple[T, int]]) -> bool:
-        return (len(self._items) + len(pairs) <= self.max_items
-                and self._bytes + sum(size for _item, size in pairs) <= self.max_bytes)
+        return (
+            len(self._items) + len(pairs) <= self.max_items
+            and self._bytes + sum(size for _item, size in pairs) <= self.max_bytes
+        )
 
     def take(self, max_items: int, timeout: float) -> list[T]:
         """Up to ``max_items`` items, waiting at most ``timeout`` s for the first one."""
@@ -159,6 +161,12 @@ class Intake(Generic[T]):
 
     def stats(self) -> IntakeStats:
         with self._lock:
-            return IntakeStats(offered=self._offered, taken=self._taken, dropped=self._dropped,
-                               dropped_bytes=self._dropped_bytes, queued=len(self._items),
-                               queued_bytes=self._bytes, high_water=self._high_water)
+            return IntakeStats(
+                offered=self._offered,
+                taken=self._taken,
+                dropped=self._dropped,
+                dropped_bytes=self._dropped_bytes,
+                queued=len(self._items),
+                queued_bytes=self._bytes,
+                high_water=self._high_water,
+            )

@@ -139,8 +139,13 @@ class Processor:
                 self._append(out)
             except Exception as exc:  # noqa: BLE001 - one bad chunk must not stop the edge; logged, counted
                 self.stats.errors += 1
-                self._limiter.log(logging.ERROR, "chunk", "edge processor: a chunk of %d item(s) failed: %r",
-                                  len(items), exc)
+                self._limiter.log(
+                    logging.ERROR,
+                    "chunk",
+                    "edge processor: a chunk of %d item(s) failed: %r",
+                    len(items),
+                    exc,
+                )
 
     def _records(self, items: list[Item], now_ns: int) -> list[Outgoing]:
         out: list[Outgoing] = []
@@ -182,9 +187,14 @@ class Processor:
         except SpoolFullError as exc:
             stats.appended += exc.taken
             stats.spool_refused += len(payloads) - exc.taken
-            self._limiter.log(logging.WARNING, f"full-{delivery}",
-                              "%s buffer full: %d record(s) refused (%s)", delivery,
-                              len(payloads) - exc.taken, exc)
+            self._limiter.log(
+                logging.WARNING,
+                f"full-{delivery}",
+                "%s buffer full: %d record(s) refused (%s)",
+                delivery,
+                len(payloads) - exc.taken,
+                exc,
+            )
             return
         except SpoolError:  # a record above the buffer's size limit: append one by one
             results = []
@@ -193,9 +203,14 @@ class Processor:
                     results.extend(buffer.append_many([payload]))
                 except SpoolError as exc:
                     stats.spool_refused += 1
-                    self._limiter.log(logging.WARNING, f"refused-{delivery}",
-                                      "%s buffer refused a record of %d bytes: %s", delivery, len(payload),
-                                      exc)
+                    self._limiter.log(
+                        logging.WARNING,
+                        f"refused-{delivery}",
+                        "%s buffer refused a record of %d bytes: %s",
+                        delivery,
+                        len(payload),
+                        exc,
+                    )
         taken = sum(1 for r in results if r is not None)
         stats.appended += taken
         stats.spool_dropped += len(results) - taken

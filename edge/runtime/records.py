@@ -161,16 +161,30 @@ class RecordMaker:
                 mismatched.append(self._counters(bound.name))
                 continue
             route = self._route(bound, sample.typename)
-            if (route is None or route.problem is not None or not route.fast or bound.topic_error is not None
-                    or bound.kafka_topic is None or bound.key is None):
+            if (
+                route is None
+                or route.problem is not None
+                or not route.fast
+                or bound.topic_error is not None
+                or bound.kafka_topic is None
+                or bound.key is None
+            ):
                 plan = FastPlan(sample.topic, bounds, None)
                 break
             origin = Origin(sample.topic, sample.typename, sample.type_hash, None, sample.key, 0, None)
             headers = self._headers(bound, origin)  # all but fleetlink.seq: it comes with each sample
             template = PayloadTemplate(bound.kafka_topic, bound.key.encode("utf-8"), headers)
-            lanes.append(Lane(bound, self._counters(bound.name), route.codec.cdr_to_avro,
-                              SINGLE_OBJECT_MAGIC + route.source.fingerprint, template, bound.delivery,
-                              bound.linger_s))
+            lanes.append(
+                Lane(
+                    bound,
+                    self._counters(bound.name),
+                    route.codec.cdr_to_avro,
+                    SINGLE_OBJECT_MAGIC + route.source.fingerprint,
+                    template,
+                    bound.delivery,
+                    bound.linger_s,
+                )
+            )
         if plan is None:
             plan = FastPlan(sample.topic, bounds, tuple(lanes), tuple(mismatched))
         if len(self._plans) >= _PLAN_CACHE_SIZE:
@@ -215,8 +229,9 @@ class RecordMaker:
     # -- one mapping, one sample -----------------------------------------------------------------
     def _one(self, bound: BoundMapping, sample: RosSample, now_ns: int, out: list[Outgoing]) -> None:
         stamp_ns = sample.source_ts_ns if sample.source_ts_ns else sample.received_ns
-        origin = Origin(sample.topic, sample.typename, sample.type_hash, sample.seq, sample.key, stamp_ns,
-                        sample.payload)
+        origin = Origin(
+            sample.topic, sample.typename, sample.type_hash, sample.seq, sample.key, stamp_ns, sample.payload
+        )
         route = self._route(bound, sample.typename)
         problem = self._problem(bound, route, sample.typename)
         if problem is not None:
@@ -239,9 +254,17 @@ class RecordMaker:
         except SchemaError as exc:
             self._dead("decode", str(exc), origin, bound, out)
             return
-        wire = WireSample(robot=bound.robot or "", topic=sample.topic, stamp_ns=stamp_ns, value=decoded,
-                          raw=sample.payload, typename=sample.typename, type_hash=sample.type_hash,
-                          seq=sample.seq, key_expr=sample.key)
+        wire = WireSample(
+            robot=bound.robot or "",
+            topic=sample.topic,
+            stamp_ns=stamp_ns,
+            value=decoded,
+            raw=sample.payload,
+            typename=sample.typename,
+            type_hash=sample.type_hash,
+            seq=sample.seq,
+            key_expr=sample.key,
+        )
         if route.pipeline is None:
             self._emit(bound, route, wire, out)
             return
@@ -258,8 +281,11 @@ class RecordMaker:
                 self._counters(bound.name).dropped += 1
                 return None
             self._unknown_types.add(typename)
-            return ("decode", f"unknown ROS type {typename!r}: not in the edge's type store (add its "
-                              "package to ros.message_paths); further samples are only counted")
+            return (
+                "decode",
+                f"unknown ROS type {typename!r}: not in the edge's type store (add its "
+                "package to ros.message_paths); further samples are only counted",
+            )
         if route.problem is None:
             return None
         if route.dead_lettered_problem:
@@ -268,24 +294,42 @@ class RecordMaker:
         route.dead_lettered_problem = True
         return ("setup", route.problem)
 
-    def _dead(self, stage: str, reason: str, origin: Origin, bound: BoundMapping,
-              out: list[Outgoing]) -> None:
+    def _dead(
+        self, stage: str, reason: str, origin: Origin, bound: BoundMapping, out: list[Outgoing]
+    ) -> None:
         self._counters(bound.name).dead_lettered += 1
         out.append(self._dead_letter(stage, reason, origin, bound, bound.delivery))
 
     def _emit(self, bound: BoundMapping, route: _Route, result: Sample, out: list[Outgoing]) -> None:
         """Encode one stage output (or an unstaged decoded sample) and add its record."""
         if isinstance(result, WireSample):
-            origin = Origin(result.topic, result.typename, result.type_hash, result.seq, result.key_expr,
-                            result.stamp_ns, result.raw)
+            origin = Origin(
+                result.topic,
+                result.typename,
+                result.type_hash,
+                result.seq,
+                result.key_expr,
+                result.stamp_ns,
+                result.raw,
+            )
         else:  # made by a stage (aggregate, project): no wire identity of its own
-            origin = Origin(result.topic, route.codec.typename, route.codec.type_hash, None, "",
-                            result.stamp_ns, result.raw)
+            origin = Origin(
+                result.topic,
+                route.codec.typename,
+                route.codec.type_hash,
+                None,
+                "",
+                result.stamp_ns,
+                result.raw,
+            )
         raw = result.raw
         try:
             if route.writer is None:
-                body = (route.codec.cdr_to_avro(raw) if raw is not None
-                        else route.codec.encode_datum(dict(result.value)))
+                body = (
+                    route.codec.cdr_to_avro(raw)
+                    if raw is not None
+                    else route.codec.encode_datum(dict(result.value))
+                )
                 value = single_object(route.source.fingerprint, body)
             else:
                 value = single_object(route.writer.fingerprint, route.writer.body(result.value))
@@ -293,30 +337,56 @@ class RecordMaker:
             key = bound.render_key(result.value)
         except (SchemaError, EncodingError, RenderError) as exc:
             if raw is None:
-                origin = Origin(origin.topic, origin.typename, origin.type_hash, origin.seq, origin.key_expr,
-                                origin.stamp_ns, repr(result.value).encode("utf-8", "replace"))
+                origin = Origin(
+                    origin.topic,
+                    origin.typename,
+                    origin.type_hash,
+                    origin.seq,
+                    origin.key_expr,
+                    origin.stamp_ns,
+                    repr(result.value).encode("utf-8", "replace"),
+                )
             self._dead("map" if isinstance(exc, RenderError) else "encode", str(exc), origin, bound, out)
             return
         self._finish(bound, (topic, key, value), origin, out)
 
-    def _finish(self, bound: BoundMapping, made: tuple[str, str, bytes], origin: Origin,
-                out: list[Outgoing]) -> None:
+    def _finish(
+        self, bound: BoundMapping, made: tuple[str, str, bytes], origin: Origin, out: list[Outgoing]
+    ) -> None:
         """Add the record ``made`` = (Kafka topic, key, value), or a dead letter when too large."""
         topic, key, value = made
         if len(value) > self.max_value_bytes:
-            reason = (f"Avro value of {len(value)} bytes exceeds the edge's record limit of "
-                      f"{self.max_value_bytes} bytes")
+            reason = (
+                f"Avro value of {len(value)} bytes exceeds the edge's record limit of "
+                f"{self.max_value_bytes} bytes"
+            )
             if origin.raw is None:
-                origin = Origin(origin.topic, origin.typename, origin.type_hash, origin.seq, origin.key_expr,
-                                origin.stamp_ns, value)
+                origin = Origin(
+                    origin.topic,
+                    origin.typename,
+                    origin.type_hash,
+                    origin.seq,
+                    origin.key_expr,
+                    origin.stamp_ns,
+                    value,
+                )
             self._counters(bound.name).dead_lettered += 1
             out.append(self._dead_letter("size", reason, origin, bound, bound.delivery, intended=topic))
             return
         self._counters(bound.name).emitted += 1
-        out.append(Outgoing.of(bound.delivery, Record(
-            kafka_topic=topic, key=key.encode("utf-8"), value=value, headers=self._headers(bound, origin),
-            timestamp_ms=origin.stamp_ns // 1_000_000,
-        ), bound.linger_s))
+        out.append(
+            Outgoing.of(
+                bound.delivery,
+                Record(
+                    kafka_topic=topic,
+                    key=key.encode("utf-8"),
+                    value=value,
+                    headers=self._headers(bound, origin),
+                    timestamp_ms=origin.stamp_ns // 1_000_000,
+                ),
+                bound.linger_s,
+            )
+        )
 
     # -- routes ----------------------------------------------------------------------------------
     def _route(self, bound: BoundMapping, typename: str) -> _Route | None:
@@ -343,8 +413,15 @@ class RecordMaker:
             except StageConfigError as exc:
                 problem = f"mapping {bound.name!r} cannot handle {typename}: {exc}"
                 pipeline = None
-        route = _Route(stages=bound.stages, codec=codec, source=source, pipeline=pipeline, writer=writer,
-                       fast=fast, problem=problem)
+        route = _Route(
+            stages=bound.stages,
+            codec=codec,
+            source=source,
+            pipeline=pipeline,
+            writer=writer,
+            fast=fast,
+            problem=problem,
+        )
         self._routes[(bound.name, typename)] = route
         return route
 
@@ -395,8 +472,16 @@ class RecordMaker:
             headers.append((H_MAPPING, bound.name.encode()))
         return tuple(headers)
 
-    def _dead_letter(self, stage: str, reason: str, origin: Origin, bound: BoundMapping | None,
-                     delivery: Delivery, *, intended: str | None = None) -> Outgoing:
+    def _dead_letter(
+        self,
+        stage: str,
+        reason: str,
+        origin: Origin,
+        bound: BoundMapping | None,
+        delivery: Delivery,
+        *,
+        intended: str | None = None,
+    ) -> Outgoing:
         if intended is None and bound is not None:
             intended = bound.kafka_topic or bound.topic_template.text
         raw = origin.raw or b""
@@ -413,10 +498,17 @@ class RecordMaker:
             headers += [(H_DLQ_SHA256, hashlib.sha256(raw).hexdigest().encode()), (H_DLQ_TRUNCATED, b"true")]
             value = b""
         robot = bound.robot if bound is not None else None
-        return Outgoing.of(delivery, Record(
-            kafka_topic=self.dead_letter_topic, key=robot.encode() if robot else None, value=value,
-            headers=tuple(headers), timestamp_ms=origin.stamp_ns // 1_000_000, raw_value=True,
-        ))
+        return Outgoing.of(
+            delivery,
+            Record(
+                kafka_topic=self.dead_letter_topic,
+                key=robot.encode() if robot else None,
+                value=value,
+                headers=tuple(headers),
+                timestamp_ms=origin.stamp_ns // 1_000_000,
+                raw_value=True,
+            ),
+        )
 
 
 def _delivery_of(bounds: Sequence[BoundMapping]) -> Delivery:

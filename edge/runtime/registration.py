@@ -46,10 +46,11 @@ EVENT_SCHEMA: dict[str, Any] = {
         {"name": "robot_type", "type": "string"},
         {"name": "site", "type": "string"},
         {"name": "edge_id", "type": "string"},
-        {"name": "event", "type": {"type": "enum", "name": "RobotEventKind",
-                                   "symbols": ["registered", "deregistered"]}},
-        {"name": "reason", "type": "string",
-         "doc": "discovered | explicit | liveliness_lost | config"},
+        {
+            "name": "event",
+            "type": {"type": "enum", "name": "RobotEventKind", "symbols": ["registered", "deregistered"]},
+        },
+        {"name": "reason", "type": "string", "doc": "discovered | explicit | liveliness_lost | config"},
         {"name": "timestamp", "type": {"type": "long", "logicalType": "timestamp-millis"}},
     ],
 }
@@ -74,20 +75,34 @@ class RobotChange:
 
     @classmethod
     def from_event(cls, event: RobotEvent, timestamp_ms: int) -> RobotChange:
-        return cls(event.robot, event.robot_type, event.kind is RobotEventKind.REGISTERED, event.reason.value,
-                   timestamp_ms)
+        return cls(
+            event.robot,
+            event.robot_type,
+            event.kind is RobotEventKind.REGISTERED,
+            event.reason.value,
+            timestamp_ms,
+        )
 
 
 def event_datum(change: RobotChange, site: str, edge_id: str) -> dict[str, Any]:
-    return {"robot": change.robot, "robot_type": change.robot_type, "site": site, "edge_id": edge_id,
-            "event": change.event, "reason": change.reason, "timestamp": change.timestamp_ms}
+    return {
+        "robot": change.robot,
+        "robot_type": change.robot_type,
+        "site": site,
+        "edge_id": edge_id,
+        "event": change.event,
+        "reason": change.reason,
+        "timestamp": change.timestamp_ms,
+    }
 
 
 def event_record(change: RobotChange, *, site: str, edge_id: str, topic: str) -> Record:
     """The Kafka record of one change (key = robot)."""
     body = _WRITER.body(event_datum(change, site, edge_id))
     return Record(
-        kafka_topic=topic, key=change.robot.encode(), value=single_object(EVENT_FINGERPRINT, body),
+        kafka_topic=topic,
+        key=change.robot.encode(),
+        value=single_object(EVENT_FINGERPRINT, body),
         headers=((H_SITE, site.encode()), (H_ROBOT, change.robot.encode()), (H_EDGE, edge_id.encode())),
         timestamp_ms=change.timestamp_ms,
     )
@@ -137,10 +152,14 @@ class Registrar:
     def start(self) -> Registrar:
         distro_hash = STRING_HASHES.get(self.node.distro)
         self._publisher = self.node.create_publisher(
-            ROBOTS_TOPIC, STRING_TYPE, QoS(durability=Durability.TRANSIENT_LOCAL, depth=100),
-            type_hash=distro_hash)
+            ROBOTS_TOPIC,
+            STRING_TYPE,
+            QoS(durability=Durability.TRANSIENT_LOCAL, depth=100),
+            type_hash=distro_hash,
+        )
         self._subscriber = self.node.create_subscriber(
-            self.register_topic, STRING_TYPE, self._on_registration, DEFAULT, type_hash=distro_hash)
+            self.register_topic, STRING_TYPE, self._on_registration, DEFAULT, type_hash=distro_hash
+        )
         self._watcher.start()
         return self
 
@@ -207,7 +226,8 @@ class Registrar:
         publisher = self._publisher
         if publisher is not None:
             try:
-                publisher.publish_cdr(cdr.encode_string(event_json(change, site=self.site,
-                                                                   edge_id=self.edge_id)))
+                publisher.publish_cdr(
+                    cdr.encode_string(event_json(change, site=self.site, edge_id=self.edge_id))
+                )
             except Exception as exc:  # noqa: BLE001 - the ROS copy is informative; the Kafka one counts
                 log.warning("cannot publish on %s: %r", ROBOTS_TOPIC, exc)

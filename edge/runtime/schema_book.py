@@ -73,8 +73,12 @@ class SchemaBook:
                     _write_durably(self.directory / f"{fp.hex()}.json", text.encode("utf-8"))
                 except OSError as exc:  # kept in memory: records still flow while this process lives
                     self.write_errors += 1
-                    log.warning("schema book: cannot persist schema %s in %s: %s", fp.hex(),
-                                self.directory, exc.strerror or exc)
+                    log.warning(
+                        "schema book: cannot persist schema %s in %s: %s",
+                        fp.hex(),
+                        self.directory,
+                        exc.strerror or exc,
+                    )
             self._schemas[fp] = text
 
     def lookup(self, fps: Iterable[bytes]) -> tuple[dict[bytes, str], list[bytes]]:
@@ -97,7 +101,7 @@ def _write_durably(final: Path, data: bytes) -> None:
     try:
         view = memoryview(data)
         while view:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
         os.fsync(fd)
     finally:
         os.close(fd)

@@ -58,9 +58,13 @@ class SenderOptions:
     def from_wan(cls, wan: WanSection) -> SenderOptions:
         """From the config's ``wan:`` section (durations there are nanoseconds)."""
         return cls(
-            batch_max_records=wan.batch_max_records, batch_max_bytes=int(wan.batch_max_bytes),
-            linger_s=wan.linger / _NS, ack_timeout_s=wan.ack_timeout / _NS, max_in_flight=wan.max_in_flight,
-            backoff_min_s=wan.retry_backoff_min / _NS, backoff_max_s=wan.retry_backoff_max / _NS,
+            batch_max_records=wan.batch_max_records,
+            batch_max_bytes=int(wan.batch_max_bytes),
+            linger_s=wan.linger / _NS,
+            ack_timeout_s=wan.ack_timeout / _NS,
+            max_in_flight=wan.max_in_flight,
+            backoff_min_s=wan.retry_backoff_min / _NS,
+            backoff_max_s=wan.retry_backoff_max / _NS,
             codec=wan.codec,
         )
 
@@ -191,12 +195,17 @@ class WanSender:
             self._due = due
         if self._mutex.acquire(blocking=False):  # else the sender's thread is at it
             try:
-                while not self._closed and self._clock() >= self._retry_at and (
-                    len(self._in_flight) < self._window()
-                    and self._unsent() >= self.options.batch_max_records
+                while (
+                    not self._closed
+                    and self._clock() >= self._retry_at
+                    and (
+                        len(self._in_flight) < self._window()
+                        and self._unsent() >= self.options.batch_max_records
+                    )
                 ):
-                    batch = self.buffer.read_unacked(self.options.batch_max_records,
-                                                     self.options.batch_max_bytes)
+                    batch = self.buffer.read_unacked(
+                        self.options.batch_max_records, self.options.batch_max_bytes
+                    )
                     if batch is None:
                         break
                     self._last_send = self._clock()
@@ -305,23 +314,38 @@ class WanSender:
         schemas, missing = self.schemas.lookup(fps - elided if elided else fps)
         if missing:
             self.stats.missing_schemas += len(missing)
-            self._limiter.log(logging.WARNING, "missing-schema",
-                              "stream %s: no schema known for fingerprint(s) %s; the uplink will "
-                              "dead-letter those records", self.stream, ", ".join(m.hex() for m in missing))
+            self._limiter.log(
+                logging.WARNING,
+                "missing-schema",
+                "stream %s: no schema known for fingerprint(s) %s; the uplink will dead-letter those records",
+                self.stream,
+                ", ".join(m.hex() for m in missing),
+            )
         try:
             data = encode_batch_payloads(
-                site=self.site, edge_id=self.edge_id, stream=self.stream,
-                items=[(r.seq, r.payload) for r in batch.records], schemas=schemas, elided=elided,
+                site=self.site,
+                edge_id=self.edge_id,
+                stream=self.stream,
+                items=[(r.seq, r.payload) for r in batch.records],
+                schemas=schemas,
+                elided=elided,
                 codec=self.options.codec,
             )
         except WireError as exc:  # cannot happen for what the spool hands out; never loop on it
-            log.error("stream %s: cannot encode batch %d..%d: %s", self.stream, batch.first_seq,
-                      batch.last_seq, exc)
+            log.error(
+                "stream %s: cannot encode batch %d..%d: %s", self.stream, batch.first_seq, batch.last_seq, exc
+            )
             self.buffer.release(batch.first_seq)
             self._failed(f"batch encoding: {exc}")
             return
-        self._in_flight[batch.first_seq] = _Flight(batch.first_seq, batch.last_seq, len(batch.records),
-                                                   self._clock(), frozenset(schemas), frozenset(elided))
+        self._in_flight[batch.first_seq] = _Flight(
+            batch.first_seq,
+            batch.last_seq,
+            len(batch.records),
+            self._clock(),
+            frozenset(schemas),
+            frozenset(elided),
+        )
         stats = self.stats
         stats.schemas_elided += len(elided)
         stats.batches_sent += 1
@@ -356,10 +380,15 @@ class WanSender:
         except WireError as exc:
             return f"unreadable acknowledgement: {exc}"
         if (ack.edge_id, ack.stream, ack.first_seq, ack.last_seq) != (
-            self.edge_id, self.stream, flight.first_seq, flight.last_seq,
+            self.edge_id,
+            self.stream,
+            flight.first_seq,
+            flight.last_seq,
         ):
-            return (f"acknowledgement for {ack.edge_id}/{ack.stream} {ack.first_seq}..{ack.last_seq} "
-                    f"does not match batch {flight.first_seq}..{flight.last_seq}")
+            return (
+                f"acknowledgement for {ack.edge_id}/{ack.stream} {ack.first_seq}..{ack.last_seq} "
+                f"does not match batch {flight.first_seq}..{flight.last_seq}"
+            )
         if ack.status == "need_schemas":
             return self._resend_with_schemas(flight, ack.missing_schemas)
         if ack.status != "ok":
@@ -373,9 +402,16 @@ class WanSender:
         dead = sum(1 for f in ack.failures if f.dead_lettered)
         if dead:
             stats.records_dead_lettered += dead
-            self._limiter.log(logging.WARNING, "dead-lettered",
-                              "stream %s: the uplink dead-lettered %d record(s) of batch %d..%d: %s",
-                              self.stream, dead, flight.first_seq, flight.last_seq, ack.failures[0].reason)
+            self._limiter.log(
+                logging.WARNING,
+                "dead-lettered",
+                "stream %s: the uplink dead-lettered %d record(s) of batch %d..%d: %s",
+                self.stream,
+                dead,
+                flight.first_seq,
+                flight.last_seq,
+                ack.failures[0].reason,
+            )
         self._succeeded()
         return None
 
@@ -389,15 +425,24 @@ class WanSender:
         self._known.difference_update(asked)
         self.stats.schema_requests += 1
         self.buffer.release(flight.first_seq)
-        log.info("stream %s: the uplink asks for %d schema(s) again (restarted, or another uplink); "
-                 "batch %d..%d goes again with them", self.stream, len(asked), flight.first_seq,
-                 flight.last_seq)
+        log.info(
+            "stream %s: the uplink asks for %d schema(s) again (restarted, or another uplink); "
+            "batch %d..%d goes again with them",
+            self.stream,
+            len(asked),
+            flight.first_seq,
+            flight.last_seq,
+        )
         return None
 
     def _succeeded(self) -> None:
         if self._outage_since is not None:
-            log.warning("stream %s: the uplink acknowledges again after %.1f s (%d batch(es) retried)",
-                        self.stream, self._clock() - self._outage_since, self.stats.batches_retried)
+            log.warning(
+                "stream %s: the uplink acknowledges again after %.1f s (%d batch(es) retried)",
+                self.stream,
+                self._clock() - self._outage_since,
+                self.stats.batches_retried,
+            )
         self._outage_since = None
         self._healthy = True
         self._backoff.reset()
@@ -411,11 +456,20 @@ class WanSender:
         if self._outage_since is None:
             self._outage_since = now
             self.stats.outages += 1
-            log.warning("stream %s: batch not acknowledged (%s); records stay in the buffer and are "
-                        "retried with backoff (up to %g s)", self.stream, error, self.options.backoff_max_s)
+            log.warning(
+                "stream %s: batch not acknowledged (%s); records stay in the buffer and are "
+                "retried with backoff (up to %g s)",
+                self.stream,
+                error,
+                self.options.backoff_max_s,
+            )
         else:
             self._limiter.log(logging.DEBUG, "retry", "stream %s: still failing: %s", self.stream, error)
 
     def snapshot(self) -> dict[str, object]:
-        return {**self.stats.as_dict(), "healthy": self._healthy, "outage_s": round(self.outage_s, 3),
-                "last_error": self._last_error}
+        return {
+            **self.stats.as_dict(),
+            "healthy": self._healthy,
+            "outage_s": round(self.outage_s, 3),
+            "last_error": self._last_error,
+        }

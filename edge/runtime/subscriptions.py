@@ -175,8 +175,12 @@ class SubscriptionManager:
         for topic, entry in sorted(active.items()):
             stats = entry.subscriber.stats
             out[topic] = {
-                "type": entry.typename, "received": stats.received, "delivered": stats.delivered,
-                "rejected": stats.rejected, "gaps": stats.gaps, "missing": stats.missing,
+                "type": entry.typename,
+                "received": stats.received,
+                "delivered": stats.delivered,
+                "rejected": stats.rejected,
+                "gaps": stats.gaps,
+                "missing": stats.missing,
                 "duplicates": stats.duplicates,
             }
         return out
@@ -243,8 +247,16 @@ class SubscriptionManager:
 
         token = typename is not None and self._known_type(typename)
         # any type hash: a robot built against another revision of the type is still received
-        return RosSubscriber(self.node, topic, typename, None, on_samples=on_samples, on_error=on_error,
-                             ring=self.capacity, declare_token=token).start()
+        return RosSubscriber(
+            self.node,
+            topic,
+            typename,
+            None,
+            on_samples=on_samples,
+            on_error=on_error,
+            ring=self.capacity,
+            declare_token=token,
+        ).start()
 
     @staticmethod
     def _close(subscriber: RosSubscriber) -> None:

@@ -39,8 +39,10 @@ class ZenohTransport:
                 if reply.ok is not None:
                     got["reply"] = reply.ok.payload.to_bytes()
                 elif reply.err is not None:
-                    got.setdefault("error", "uplink error reply: "
-                                   + reply.err.payload.to_bytes().decode("utf-8", "replace"))
+                    got.setdefault(
+                        "error",
+                        "uplink error reply: " + reply.err.payload.to_bytes().decode("utf-8", "replace"),
+                    )
 
         def on_finished() -> None:
             with lock:
@@ -51,11 +53,17 @@ class ZenohTransport:
                 return
             if not isinstance(error, str):
                 waited = time.monotonic() - began
-                error = (f"no acknowledgement within {timeout_s:g} s" if waited >= timeout_s * 0.9
-                         else f"no uplink answered on {self.key}")
+                error = (
+                    f"no acknowledgement within {timeout_s:g} s"
+                    if waited >= timeout_s * 0.9
+                    else f"no uplink answered on {self.key}"
+                )
             done(None, error)
 
         self.session.get(
-            self.key, zenoh.handlers.Callback(on_reply, on_finished), payload=payload,
-            target=zenoh.QueryTarget.BEST_MATCHING, timeout=timeout_s,
+            self.key,
+            zenoh.handlers.Callback(on_reply, on_finished),
+            payload=payload,
+            target=zenoh.QueryTarget.BEST_MATCHING,
+            timeout=timeout_s,
         )

@@ -100,8 +100,10 @@ class SpoolOptions:
         if self.segment_bytes < 4096:
             raise SpoolError(f"segment_bytes must be at least 4096, got {self.segment_bytes}")
         if self.max_bytes < 2 * self.segment_bytes:
-            raise SpoolError(f"max_bytes ({self.max_bytes}) must be at least twice segment_bytes "
-                             f"({self.segment_bytes}) so that acked segments can free room")
+            raise SpoolError(
+                f"max_bytes ({self.max_bytes}) must be at least twice segment_bytes "
+                f"({self.segment_bytes}) so that acked segments can free room"
+            )
         if self.fsync_interval_ms <= 0 or self.fsync_batch <= 0 or self.block_timeout_s < 0:
             raise SpoolError("fsync_interval_ms and fsync_batch must be positive, block_timeout_s >= 0")
 

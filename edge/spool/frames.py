@@ -91,9 +91,7 @@ def _header_problem(magic: int, flags: int, length: int, max_len: int) -> str | 
     return None
 
 
-def frame_at(
-    buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True
-) -> Frame | _NeedMore | str:
+def frame_at(buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True) -> Frame | _NeedMore | str:
     """The frame at ``off``; ``_NeedMore`` if it runs past ``end``; else the reason it is bad."""
     if end - off < HEADER_SIZE:
         return _NeedMore(off + HEADER_SIZE)

@@ -100,8 +100,12 @@ class Ledger:
             data = b""
         state = parse_ledger(data)
         if state.damaged_at is not None:
-            log.warning("spool ledger %s: entry at offset %d fails its checksum; %d trailing bytes ignored",
-                        self.path, state.damaged_at, len(data) - state.damaged_at)
+            log.warning(
+                "spool ledger %s: entry at offset %d fails its checksum; %d trailing bytes ignored",
+                self.path,
+                state.damaged_at,
+                len(data) - state.damaged_at,
+            )
         self._ack_mark, self._reserved = state.ack_mark, state.reserved
         self._rewrite(strict=True)
         return state
@@ -153,8 +157,11 @@ class Ledger:
             except OSError:
                 self._needs_rewrite = True  # a partial entry may remain: replace the file next time
             if self.failures == 1 or self.failures % 1000 == 0:  # a full disk must not flood the log
-                log.warning("spool ledger %s: could not append an entry (disk full?); %d failures so far",
-                            self.path, self.failures)
+                log.warning(
+                    "spool ledger %s: could not append an entry (disk full?); %d failures so far",
+                    self.path,
+                    self.failures,
+                )
             return False
         self._size += len(entry)
         self._dirty = True

@@ -22,8 +22,15 @@ from fleetlink.edge.spool.spool import wall_ms
 class MemoryBuffer:
     """A ``RecordBuffer`` in memory. Thread-safe."""
 
-    def __init__(self, *, stream: str = "memory", max_bytes: int = 64 << 20, max_records: int = 100_000,
-                 clock: Callable[[], int] = wall_ms, first_seq: int | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        stream: str = "memory",
+        max_bytes: int = 64 << 20,
+        max_records: int = 100_000,
+        clock: Callable[[], int] = wall_ms,
+        first_seq: int | None = None,
+    ) -> None:
         if max_bytes < 1 or max_records < 1:
             raise SpoolError("max_bytes and max_records must be positive")
         self._stream = stream
@@ -66,8 +73,9 @@ class MemoryBuffer:
     def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
         for payload in payloads:
             if len(payload) > self._max_bytes:
-                raise SpoolError(f"record of {len(payload)} bytes exceeds the buffer "
-                                 f"({self._max_bytes} bytes)")
+                raise SpoolError(
+                    f"record of {len(payload)} bytes exceeds the buffer ({self._max_bytes} bytes)"
+                )
         out: list[int | None] = []
         with self._lock:
             self._check_open()
@@ -160,8 +168,16 @@ class MemoryBuffer:
             if self._pending:
                 heads.append(self._pending[0].timestamp_ms)
             return SpoolStats(
-                stream=self._stream, corrupt_skipped=0, block_timeouts=0, disk_full=0, fsyncs=0, **self._c,
-                bytes=self._bytes, depth=self._records,
+                stream=self._stream,
+                corrupt_skipped=0,
+                block_timeouts=0,
+                disk_full=0,
+                fsyncs=0,
+                **self._c,
+                bytes=self._bytes,
+                depth=self._records,
                 in_flight=sum(len(r) for r in self._in_flight.values()),
-                oldest_append_ms=min(heads, default=None), segments=0, next_seq=self._next_seq,
+                oldest_append_ms=min(heads, default=None),
+                segments=0,
+                next_seq=self._next_seq,
             )

@@ -64,8 +64,9 @@ def read_frames(
             if pending is not None:
                 result.lost += max(1, event.seq - after_seq - 1) - 1  # refine the gap estimate
                 pending = None
-            result.frames.append(Frame(start + event.offset, start + event.end, event.seq,
-                                       event.timestamp_ms, event.payload))
+            result.frames.append(
+                Frame(start + event.offset, start + event.end, event.seq, event.timestamp_ms, event.payload)
+            )
             total += len(event.payload)
             after_seq = event.seq
             result.end = start + event.end
@@ -74,13 +75,19 @@ def read_frames(
         size = limit - start  # nothing complete in the chunk: read everything that is left
 
 
-def _note_damage(segment: Segment, start: int, event: Damage, result: ReadResult,
-                 pending: Damage | None) -> Damage | None:
+def _note_damage(
+    segment: Segment, start: int, event: Damage, result: ReadResult, pending: Damage | None
+) -> Damage | None:
     absolute = Damage(start + event.offset, start + event.end, event.reason)
     if segment.damage_at(absolute.offset) is not None:
         return pending
     segment.damage.append(absolute)
     result.lost += 1
-    log.error("spool: corrupt data in %s at offset %d (%d bytes: %s); skipped",
-              segment.path, absolute.offset, absolute.end - absolute.offset, absolute.reason)
+    log.error(
+        "spool: corrupt data in %s at offset %d (%d bytes: %s); skipped",
+        segment.path,
+        absolute.offset,
+        absolute.end - absolute.offset,
+        absolute.reason,
+    )
     return absolute

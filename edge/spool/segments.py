@@ -87,8 +87,17 @@ def _scan_file(
     events: list[Frame | Damage] = []
     if decode_segment_header(data) is None:
         events.append(Damage(0, min(len(data), SEGMENT_HEADER_SIZE), "not a spool segment header"))
-    events.extend(scan(data, SEGMENT_HEADER_SIZE, len(data), max_len=max_len, final=True,
-                       after_seq=max(after_seq, first_seq - 1), copy=False))
+    events.extend(
+        scan(
+            data,
+            SEGMENT_HEADER_SIZE,
+            len(data),
+            max_len=max_len,
+            final=True,
+            after_seq=max(after_seq, first_seq - 1),
+            copy=False,
+        )
+    )
     lost = 0
     logged = 0
     previous = after_seq
@@ -106,8 +115,15 @@ def _scan_file(
         torn_tail = newest and at_end and event.offset >= SEGMENT_HEADER_SIZE
         if logged < MAX_DAMAGE_LOGS_PER_FILE:
             what = "torn tail" if torn_tail else "corrupt data"
-            log.error("spool: %s in %s at offset %d (%d bytes: %s); %d record(s) skipped",
-                      what, path, event.offset, event.end - event.offset, event.reason, records)
+            log.error(
+                "spool: %s in %s at offset %d (%d bytes: %s); %d record(s) skipped",
+                what,
+                path,
+                event.offset,
+                event.end - event.offset,
+                event.reason,
+                records,
+            )
             logged += 1
         if torn_tail:
             with path.open("r+b") as handle:

@@ -37,8 +37,17 @@ RECENT_BYTES = 32 << 20
 60,000 IMU records (41 MB) sent the sender back to the file for part of it."""
 RESERVE_BLOCK = 1 << 20
 """Seqs reserved (one fsynced ledger entry) at a time; an unclean restart skips to the bound."""
-COUNTERS = ("appended", "acked", "dropped_oldest", "dropped_newest", "corrupt_skipped",
-            "block_timeouts", "disk_full", "stale_acks", "fsyncs")
+COUNTERS = (
+    "appended",
+    "acked",
+    "dropped_oldest",
+    "dropped_newest",
+    "corrupt_skipped",
+    "block_timeouts",
+    "disk_full",
+    "stale_acks",
+    "fsyncs",
+)
 
 Item = tuple[int, int, bytes]  # seq, append time ms, frame
 
@@ -51,8 +60,14 @@ class Spool:
     """The durable spool of one stream in one directory (a ``RecordBuffer``). Use it as a
     context manager, or ``open()`` / ``close()``; the constructor touches nothing on disk."""
 
-    def __init__(self, directory: Path | str, options: SpoolOptions | None = None, *,
-                 stream: str = "durable", clock: Callable[[], int] = wall_ms) -> None:
+    def __init__(
+        self,
+        directory: Path | str,
+        options: SpoolOptions | None = None,
+        *,
+        stream: str = "durable",
+        clock: Callable[[], int] = wall_ms,
+    ) -> None:
         self.directory = Path(directory)
         self.options = options or SpoolOptions()
         self._stream = stream
@@ -108,9 +123,14 @@ class Spool:
         else:  # unclean stop: seqs up to the reservation may have left before a power loss
             self._next_seq = max(resume, state.reserved)
         self._reserved = max(state.reserved, self._next_seq)
-        log.info("spool %s opened: %d records unacked in %d segments, next seq %d%s", self.directory,
-                 self._depth, len(self._segments), self._next_seq,
-                 " (after an unclean stop)" if state.clean_next_seq is None and not state.fresh else "")
+        log.info(
+            "spool %s opened: %d records unacked in %d segments, next seq %d%s",
+            self.directory,
+            self._depth,
+            len(self._segments),
+            self._next_seq,
+            " (after an unclean stop)" if state.clean_next_seq is None and not state.fresh else "",
+        )
         self._state = "open"
         if self.options.fsync != "always":
             self._flusher = threading.Thread(target=self._flush_loop, name="spool-fsync", daemon=True)
@@ -243,8 +263,12 @@ class Spool:
                 self._check_open()
                 return True
             self._c["block_timeouts"] += 1
-            self._warn("block", "spool %s: full for %ss; refusing records", self.directory,
-                       self.options.block_timeout_s)
+            self._warn(
+                "block",
+                "spool %s: full for %ss; refusing records",
+                self.directory,
+                self.options.block_timeout_s,
+            )
             raise SpoolFullError("the spool is full", path=self.directory)
         self._c["dropped_newest"] += 1
         self._warn("drop_newest", "spool %s: full; dropping new records (counted)", self.directory)
@@ -334,8 +358,15 @@ class Spool:
                 self._release_all_locked()
             queued = self._tracker.take_retry()
             if queued is not None:
-                found = read_frames(queued.segment, queued.offset, queued.end, after_seq=queued.first_seq - 1,
-                                    max_records=queued.count, max_bytes=1 << 62, max_len=self._max_len)
+                found = read_frames(
+                    queued.segment,
+                    queued.offset,
+                    queued.end,
+                    after_seq=queued.first_seq - 1,
+                    max_records=queued.count,
+                    max_bytes=1 << 62,
+                    max_len=self._max_len,
+                )
                 return self._batch(queued, found.frames)
             cursor = self._tracker.cursor
             while cursor.index < len(self._segments):
@@ -345,34 +376,52 @@ class Spool:
                         return None
                     cursor.index, cursor.offset, cursor.consumed = cursor.index + 1, SEGMENT_HEADER_SIZE, 0
                     continue
-                recent = self._recent.read(segment, cursor.offset, cursor.next_seq, max_records=max_records,
-                                           max_bytes=max_bytes)
+                recent = self._recent.read(
+                    segment, cursor.offset, cursor.next_seq, max_records=max_records, max_bytes=max_bytes
+                )
                 if recent is not None:  # appended lately: from memory, as written
                     records, end = recent
                     head, tail = records[0], records[-1]
-                    piece = Slice(head.seq, tail.seq, len(records), segment, cursor.offset, end,
-                                  head.timestamp_ms)
+                    piece = Slice(
+                        head.seq, tail.seq, len(records), segment, cursor.offset, end, head.timestamp_ms
+                    )
                     self._tracker.start(piece, len(records))
-                    return SpoolBatch(stream=self._stream, first_seq=head.seq, last_seq=tail.seq,
-                                      records=tuple(records))
-                found = read_frames(segment, cursor.offset, segment.size, after_seq=cursor.next_seq - 1,
-                                    max_records=max_records, max_bytes=max_bytes, max_len=self._max_len)
+                    return SpoolBatch(
+                        stream=self._stream, first_seq=head.seq, last_seq=tail.seq, records=tuple(records)
+                    )
+                found = read_frames(
+                    segment,
+                    cursor.offset,
+                    segment.size,
+                    after_seq=cursor.next_seq - 1,
+                    max_records=max_records,
+                    max_bytes=max_bytes,
+                    max_len=self._max_len,
+                )
                 self._c["corrupt_skipped"] += found.lost
                 self._depth -= found.lost
                 if not found.frames:
                     cursor.offset = found.end
                     continue
                 first, last = found.frames[0], found.frames[-1]
-                piece = Slice(first.seq, last.seq, len(found.frames), segment, cursor.offset, found.end,
-                              first.timestamp_ms)
+                piece = Slice(
+                    first.seq,
+                    last.seq,
+                    len(found.frames),
+                    segment,
+                    cursor.offset,
+                    found.end,
+                    first.timestamp_ms,
+                )
                 self._tracker.start(piece, len(found.frames))
                 return self._batch(piece, found.frames)
             return None
 
     def _batch(self, piece: Slice, frames: Sequence[Frame]) -> SpoolBatch:
         records = tuple(SpoolRecord(f.seq, f.timestamp_ms, f.payload) for f in frames)
-        return SpoolBatch(stream=self._stream, first_seq=piece.first_seq, last_seq=piece.last_seq,
-                          records=records)
+        return SpoolBatch(
+            stream=self._stream, first_seq=piece.first_seq, last_seq=piece.last_seq, records=records
+        )
 
     def ack(self, first_seq: int) -> bool:
         """The batch starting at ``first_seq`` is in Kafka; False (counted) if unknown."""
@@ -455,9 +504,15 @@ class Spool:
         with self._lock:
             stamps = [t for t in (self._tracker.oldest_ts(), self._cursor_ts()) if t is not None]
             return SpoolStats(
-                stream=self._stream, **self._c, bytes=self._bytes, depth=self._depth,
-                in_flight=self._tracker.in_flight_records(), oldest_append_ms=min(stamps, default=None),
-                segments=len(self._segments), next_seq=self._next_seq, blocked_appenders=self._blocked,
+                stream=self._stream,
+                **self._c,
+                bytes=self._bytes,
+                depth=self._depth,
+                in_flight=self._tracker.in_flight_records(),
+                oldest_append_ms=min(stamps, default=None),
+                segments=len(self._segments),
+                next_seq=self._next_seq,
+                blocked_appenders=self._blocked,
             )
 
     def _cursor_ts(self) -> int | None:

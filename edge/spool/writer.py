@@ -66,15 +66,19 @@ class SegmentWriter:
             written = os.write(self._fd, data)
         except OSError as exc:
             if exc.errno not in SPACE_ERRORS:
-                raise SpoolError(f"cannot write: {exc.strerror}", path=segment.path,
-                                 offset=segment.size) from exc
+                raise SpoolError(
+                    f"cannot write: {exc.strerror}", path=segment.path, offset=segment.size
+                ) from exc
             written = -1
         if written != len(data):
             try:
                 os.ftruncate(self._fd, segment.size)
             except OSError as exc:
-                raise SpoolError(f"cannot roll back a partial write: {exc.strerror}", path=segment.path,
-                                 offset=segment.size) from exc
+                raise SpoolError(
+                    f"cannot roll back a partial write: {exc.strerror}",
+                    path=segment.path,
+                    offset=segment.size,
+                ) from exc
             raise DiskFull
         for seq, ts, length in items:
             if segment.first_ts is None:

@@ -99,8 +99,7 @@ def lightring_schema(settings: FaultDetectionSettings) -> dict[str, Any]:
 
 def _classifier(sensor: Sensor, config: RuleConfig) -> Callable[[Any, Any, int, Any], dict[str, Any]]:
     def classify(record: Any, _key: Any, timestamp_ms: int, _headers: Any) -> dict[str, Any]:
-        return {"sensor": sensor.value, "failure": event_failure(sensor, record, config),
-                "ts": timestamp_ms}
+        return {"sensor": sensor.value, "failure": event_failure(sensor, record, config), "ts": timestamp_ms}
 
     return classify
 

@@ -37,9 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Connect fleets of ROS 2 robots (rmw_zenoh) to Apache Kafka.",
     )
     parser.add_argument("--version", action="version", version=f"fleetlink {__version__}")
-    parser.add_argument(
-        "-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)"
-    )
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)

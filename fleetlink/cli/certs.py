@@ -39,11 +39,21 @@ def register(sub: Any) -> None:
 
     init = actions.add_parser("init", help="new CA + cloud, uplink and per-site edge certificates")
     init.add_argument("dir", type=Path, help="output directory")
-    init.add_argument("--site", action="append", default=[], metavar="SITE",
-                      help="a site to issue edge-SITE for (repeatable)")
-    init.add_argument("--host", action="append", default=[], metavar="HOST",
-                      help="DNS name or IP the edges use to reach the cloud router (repeatable; "
-                      "default: localhost and 127.0.0.1)")
+    init.add_argument(
+        "--site",
+        action="append",
+        default=[],
+        metavar="SITE",
+        help="a site to issue edge-SITE for (repeatable)",
+    )
+    init.add_argument(
+        "--host",
+        action="append",
+        default=[],
+        metavar="HOST",
+        help="DNS name or IP the edges use to reach the cloud router (repeatable; "
+        "default: localhost and 127.0.0.1)",
+    )
     init.add_argument("--force", action="store_true", help="replace an existing CA in DIR")
     init.set_defaults(handler=_init)
 
@@ -79,8 +89,15 @@ def _issue(args: argparse.Namespace) -> int:
     name = edge_name(args.site) if args.site else args.name
     client = args.client or bool(args.site)
     ca = load_ca(args.dir)
-    ident = issue(ca, name, now=datetime.now(UTC), server=args.server, client=client,
-                  hosts=args.host, valid_days=args.days)
+    ident = issue(
+        ca,
+        name,
+        now=datetime.now(UTC),
+        server=args.server,
+        client=client,
+        hosts=args.host,
+        valid_days=args.days,
+    )
     files = write_identity(ident, args.dir)
     print(f"{name}  {files.certificate}  (key {files.key.name}, mode 0600)")
     return 0

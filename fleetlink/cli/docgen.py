@@ -36,9 +36,13 @@ def attribute_docs(cls: type) -> dict[str, str]:
             continue
         body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
         for node, following in zip(body, [*body[1:], None], strict=True):
-            if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
-                    and isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant)
-                    and isinstance(following.value.value, str)):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(following, ast.Expr)
+                and isinstance(following.value, ast.Constant)
+                and isinstance(following.value.value, str)
+            ):
                 docs[node.target.id] = " ".join(following.value.value.split())
     return docs
 
@@ -52,7 +56,8 @@ def type_text(annotation: Any) -> str:  # noqa: PLR0911 - one return per kind of
         return " \\| ".join(f"`{a}`" for a in args)
     if origin in (typing.Union, types.UnionType):
         return " or ".join(type_text(a) for a in args if a is not type(None)) + (
-            " (optional)" if type(None) in args else "")
+            " (optional)" if type(None) in args else ""
+        )
     if origin in (list, tuple, set, frozenset):
         return f"list of {type_text(args[0])}" if args else "list"
     if origin is dict:
@@ -86,8 +91,11 @@ def _field_type(field: Any) -> str:
         return "size"
     models = _models_in(field.annotation)
     if len(models) > 1:
-        kinds = [str(typing.get_args(m.model_fields["type"].annotation)[0])
-                 for m in models if "type" in m.model_fields]
+        kinds = [
+            str(typing.get_args(m.model_fields["type"].annotation)[0])
+            for m in models
+            if "type" in m.model_fields
+        ]
         what = "stage" if kinds else "section"
         listed = f" ({', '.join(kinds)}: see docs/stages.md)" if kinds else ""
         return f"list of {what}{listed}" if typing.get_origin(field.annotation) is list else what

@@ -29,12 +29,26 @@ def register(sub: Any) -> None:
     edge.set_defaults(handler=lambda _args: _usage(edge))
     run = edge_sub.add_parser("run", help="run the edge agent")
     run.add_argument("-c", "--config", type=Path, required=True, metavar="FILE", help="edge YAML config")
-    run.add_argument("--stop-timeout", type=float, default=5.0, metavar="S",
-                     help="on SIGTERM, how long unacknowledged batches may still be sent (default 5 s)")
-    run.add_argument("--stats-file", type=Path, metavar="FILE",
-                     help="write the agent's counters as JSON to FILE every --stats-interval seconds")
-    run.add_argument("--stats-interval", type=float, default=1.0, metavar="S",
-                     help="how often to write --stats-file (default 1 s)")
+    run.add_argument(
+        "--stop-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="on SIGTERM, how long unacknowledged batches may still be sent (default 5 s)",
+    )
+    run.add_argument(
+        "--stats-file",
+        type=Path,
+        metavar="FILE",
+        help="write the agent's counters as JSON to FILE every --stats-interval seconds",
+    )
+    run.add_argument(
+        "--stats-interval",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="how often to write --stats-file (default 1 s)",
+    )
     add_zenoh_arguments(run, ros=False)
     run.set_defaults(handler=run_command)
 

@@ -13,7 +13,8 @@ from fleetlink.repeater.config import RepeaterConfig
 
 def register(sub: Any) -> None:
     add_service_command(
-        sub, "repeater",
+        sub,
+        "repeater",
         help_text="near the robots: publish commands from Kafka as ROS messages under a lease",
         description="Run a repeater: take commands routed by the uplink, publish them as an rmw_zenoh "
         "publisher, repeat them every period until their lease ends, serve late joiners.",
@@ -26,7 +27,9 @@ def _run(args: argparse.Namespace) -> int:
 
     config = load_config(RepeaterConfig, args.config)
     with Repeater(config, config.zenoh.merged_with(options_from_args(args))) as repeater:
-        print(f"repeater {repeater.id} running for site {repeater.site}, state in "
-              f"{config.repeater.state_dir}", flush=True)
+        print(
+            f"repeater {repeater.id} running for site {repeater.site}, state in {config.repeater.state_dir}",
+            flush=True,
+        )
         wait_for_stop()
     return 0

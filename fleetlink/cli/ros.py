@@ -29,14 +29,29 @@ def register(sub: Any) -> None:
     ros.set_defaults(handler=lambda _args: _usage(ros))
     graph = ros_sub.add_parser("graph", help="robots, nodes, topics, types, QoS and rates")
     graph.add_argument("--json", action="store_true", help="print JSON instead of text")
-    graph.add_argument("--duration", type=float, default=2.0, metavar="S",
-                       help="how long to listen before reporting (default 2 s)")
+    graph.add_argument(
+        "--duration",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="how long to listen before reporting (default 2 s)",
+    )
     graph.add_argument("--watch", type=float, metavar="S", help="report again every S seconds")
-    graph.add_argument("--count", type=int, default=0, metavar="N",
-                       help="with --watch: stop after N reports (default: until interrupted)")
-    graph.add_argument("--robot-type", action="append", default=[], metavar="NAME=PATTERN",
-                       help="robot type by namespace pattern, e.g. turtlebot4=/tb4_* (repeatable; "
-                            "default: every top-level namespace is a robot)")
+    graph.add_argument(
+        "--count",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --watch: stop after N reports (default: until interrupted)",
+    )
+    graph.add_argument(
+        "--robot-type",
+        action="append",
+        default=[],
+        metavar="NAME=PATTERN",
+        help="robot type by namespace pattern, e.g. turtlebot4=/tb4_* (repeatable; "
+        "default: every top-level namespace is a robot)",
+    )
     add_zenoh_arguments(graph)
     graph.set_defaults(handler=graph_command)
 
@@ -45,10 +60,14 @@ def register(sub: Any) -> None:
     sim.add_argument("--prefix", default="tb4_", help="robot name prefix (default tb4_: tb4_01, tb4_02 …)")
     sim.add_argument("--rate", type=float, default=10.0, metavar="HZ", help="sensor rate (default 10 Hz)")
     sim.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    sim.add_argument("--fault", action="append", default=[], metavar="ROBOT",
-                     help="start ROBOT picked up (repeatable)")
-    sim.add_argument("--stdin", action="store_true",
-                     help="read commands from stdin: fault R, heal R, add [R], remove R, led R, list, quit")
+    sim.add_argument(
+        "--fault", action="append", default=[], metavar="ROBOT", help="start ROBOT picked up (repeatable)"
+    )
+    sim.add_argument(
+        "--stdin",
+        action="store_true",
+        help="read commands from stdin: fault R, heal R, add [R], remove R, led R, list, quit",
+    )
     _add_types_arguments(sim)
     add_zenoh_arguments(sim)
     sim.set_defaults(handler=sim_command)
@@ -56,13 +75,23 @@ def register(sub: Any) -> None:
     replay = sub.add_parser("replay", help="publish a rosbag2 recording as a robot would")
     replay.add_argument("bag", type=Path, help="rosbag2 directory or file (sqlite3 or MCAP)")
     replay.add_argument("--robot", required=True, help="robot name: topics are published under /NAME")
-    replay.add_argument("--rate", type=float, default=1.0, metavar="X",
-                        help="speed factor of the recorded timing (default 1; 0 = as fast as possible)")
+    replay.add_argument(
+        "--rate",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="speed factor of the recorded timing (default 1; 0 = as fast as possible)",
+    )
     replay.add_argument("--fast", action="store_true", help="as fast as possible (same as --rate 0)")
     replay.add_argument("--loop", action="store_true", help="start over at the end")
     replay.add_argument("--topic", action="append", metavar="TOPIC", help="only these bag topics")
-    replay.add_argument("--wait-subscribers", type=float, default=0.0, metavar="S",
-                        help="wait up to S seconds for a subscriber on every topic before starting")
+    replay.add_argument(
+        "--wait-subscribers",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="wait up to S seconds for a subscriber on every topic before starting",
+    )
     _add_types_arguments(replay)
     add_zenoh_arguments(replay)
     replay.set_defaults(handler=replay_command)
@@ -74,10 +103,20 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 
 
 def _add_types_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--distro", choices=DISTROS, default="jazzy",
-                        help="ROS 2 distro whose type hashes to publish (default jazzy)")
-    parser.add_argument("--msg-path", action="append", type=Path, default=[], metavar="DIR",
-                        help=f"package folder with msg/*.msg (repeatable; also ${MSG_PATH_ENV})")
+    parser.add_argument(
+        "--distro",
+        choices=DISTROS,
+        default="jazzy",
+        help="ROS 2 distro whose type hashes to publish (default jazzy)",
+    )
+    parser.add_argument(
+        "--msg-path",
+        action="append",
+        type=Path,
+        default=[],
+        metavar="DIR",
+        help=f"package folder with msg/*.msg (repeatable; also ${MSG_PATH_ENV})",
+    )
 
 
 def _msg_paths(args: argparse.Namespace) -> list[Path]:
@@ -132,8 +171,11 @@ def graph_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                     if watcher is None:
                         break
                     report = graph_report(
-                        domain_id=args.domain_id, robots=robots.robots(), nodes=watcher.nodes(),
-                        topics=watcher.topics(), services=watcher.services(),
+                        domain_id=args.domain_id,
+                        robots=robots.robots(),
+                        nodes=watcher.nodes(),
+                        topics=watcher.topics(),
+                        services=watcher.services(),
                         rates=meter.rates(time.monotonic() - started),
                         malformed_tokens=watcher.stats.malformed,
                     )
@@ -163,8 +205,10 @@ def sim_command(args: argparse.Namespace, out: TextIO = sys.stdout, inp: TextIO 
     # the Create 3 definitions ship with fleetlink; --msg-path adds (or overrides) packages
     ts = load_typestore(args.distro, [*bundled_message_paths(), *_msg_paths(args)])
     if IR_VECTOR not in ts.fielddefs:
-        raise ConfigError("the simulator needs the irobot_create_msgs definitions: pass "
-                          f"--msg-path DIR/irobot_create_msgs (or set ${MSG_PATH_ENV})")
+        raise ConfigError(
+            "the simulator needs the irobot_create_msgs definitions: pass "
+            f"--msg-path DIR/irobot_create_msgs (or set ${MSG_PATH_ENV})"
+        )
     lock = threading.Lock()
 
     def say(text: str) -> None:
@@ -175,12 +219,22 @@ def sim_command(args: argparse.Namespace, out: TextIO = sys.stdout, inp: TextIO 
         say(f"{robot} light ring: {state.name}")
 
     config = ros_session_config(options_from_args(args))
-    with Fleet(config, ts, robots=args.robots, prefix=args.prefix, rate=args.rate,
-               domain_id=args.domain_id, distro=args.distro, on_led=on_led) as fleet:
+    with Fleet(
+        config,
+        ts,
+        robots=args.robots,
+        prefix=args.prefix,
+        rate=args.rate,
+        domain_id=args.domain_id,
+        distro=args.distro,
+        on_led=on_led,
+    ) as fleet:
         for robot in args.fault:
             fleet.inject_fault(robot)
-        say(f"simulating {', '.join(fleet.names()) or 'no robots'} at {args.rate:g} Hz "
-            f"on domain {args.domain_id}")
+        say(
+            f"simulating {', '.join(fleet.names()) or 'no robots'} at {args.rate:g} Hz "
+            f"on domain {args.domain_id}"
+        )
         if args.stdin:
             _command_loop(fleet, inp, say, args.duration)
         elif args.duration:
@@ -261,8 +315,17 @@ def replay_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     if rate < 0:
         raise ConfigError("--rate must be >= 0 (0 = as fast as possible)")
     config = ros_session_config(options_from_args(args))
-    with BagReplayer(args.bag, args.robot, config=config, domain_id=args.domain_id, distro=args.distro,
-                     msg_paths=_msg_paths(args), rate=rate, loop=args.loop, topics=args.topic) as replayer:
+    with BagReplayer(
+        args.bag,
+        args.robot,
+        config=config,
+        domain_id=args.domain_id,
+        distro=args.distro,
+        msg_paths=_msg_paths(args),
+        rate=rate,
+        loop=args.loop,
+        topics=args.topic,
+    ) as replayer:
         topics = ", ".join(p.topic for p in replayer.publishers.values())
         print(f"replaying {args.bag} as /{args.robot}: {topics}", file=out, flush=True)
         if args.wait_subscribers > 0 and not replayer.wait_for_subscribers(args.wait_subscribers):
@@ -272,6 +335,10 @@ def replay_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         except KeyboardInterrupt:
             replayer.request_stop()
             stats = replayer.stats
-    print(f"published {stats.total} messages on {len(stats.published)} topics in {stats.elapsed_s:.2f} s"
-          f" ({stats.loops} pass{'es' if stats.loops != 1 else ''})", file=out, flush=True)
+    print(
+        f"published {stats.total} messages on {len(stats.published)} topics in {stats.elapsed_s:.2f} s"
+        f" ({stats.loops} pass{'es' if stats.loops != 1 else ''})",
+        file=out,
+        flush=True,
+    )
     return 0

@@ -29,9 +29,7 @@ def register(sub: Any) -> None:
     up.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="state folder (default: %(default)s)")
     up.add_argument("--kafka-port", type=int, default=9092, help="broker port (default: %(default)s)")
     up.add_argument("--registry-port", type=int, default=8081, help="registry port (default: %(default)s)")
-    up.add_argument(
-        "--foreground", action="store_true", help="stay attached; Ctrl-C stops both services"
-    )
+    up.add_argument("--foreground", action="store_true", help="stay attached; Ctrl-C stops both services")
     up.set_defaults(handler=_up)
 
     down = actions.add_parser("down", help="stop a stack started with `stack up`")

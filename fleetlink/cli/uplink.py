@@ -13,7 +13,9 @@ from fleetlink.uplink.config import UplinkConfig
 
 def register(sub: Any) -> None:
     add_service_command(
-        sub, "uplink", help_text="the cloud side: edge batches → Kafka (Avro), commands → sites",
+        sub,
+        "uplink",
+        help_text="the cloud side: edge batches → Kafka (Avro), commands → sites",
         description="Run the uplink: receive batches from edge agents over Zenoh and produce them to "
         "Kafka with acks=all; answer each batch once Kafka acknowledged every record.",
         handler=_run,
@@ -27,7 +29,9 @@ def _run(args: argparse.Namespace) -> int:
     config = load_config(UplinkConfig, args.config)
     options = config.zenoh.merged_with(options_from_args(args))
     with Uplink(config, options, extensions=console_extensions(config)):
-        print(f"uplink running: Kafka {config.kafka.bootstrap_servers}, registry {config.registry.url}",
-              flush=True)
+        print(
+            f"uplink running: Kafka {config.kafka.bootstrap_servers}, registry {config.registry.url}",
+            flush=True,
+        )
         wait_for_stop()
     return 0

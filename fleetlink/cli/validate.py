@@ -28,7 +28,8 @@ KINDS: dict[str, tuple[str, str, frozenset[str]]] = {
 
 def register(sub: Any) -> None:
     parser: argparse.ArgumentParser = sub.add_parser(
-        "validate", help="check a fleetlink config file (edge, uplink, repeater) without connecting",
+        "validate",
+        help="check a fleetlink config file (edge, uplink, repeater) without connecting",
         description="Validate a config file; print each problem with its YAML path. Exit 0 if valid.",
     )
     parser.add_argument("file", type=Path, help="the YAML config file")
@@ -60,8 +61,10 @@ def validate_file(path: Path, kind: str | None = None) -> tuple[str, BaseModel]:
     kind = kind or guess_kind(data)
     if kind is None:
         hints = "; ".join(f"{k}: {', '.join(sorted(m))}" for k, (_a, _b, m) in KINDS.items())
-        raise ConfigError(f"{path}: cannot tell which kind of config this is (top-level keys expected — "
-                          f"{hints}); pass --kind")
+        raise ConfigError(
+            f"{path}: cannot tell which kind of config this is (top-level keys expected — "
+            f"{hints}); pass --kind"
+        )
     return kind, validate_data(model_for(kind), data, source=str(path), lines=lines)
 
 

@@ -20,9 +20,14 @@ class ConsoleSettings(BaseModel):
         "is sent to the sites' admin spaces (the same token as the edges' admin API)",
     )
     token_file: Path | None = Field(
-        default=None, description="file holding the access token (wins over token_env)")
+        default=None, description="file holding the access token (wins over token_env)"
+    )
     query_timeout_s: float = Field(
-        default=3.0, gt=0, le=60, description="how long to wait for the sites' answers over Zenoh")
+        default=3.0, gt=0, le=60, description="how long to wait for the sites' answers over Zenoh"
+    )
     poll_interval_s: float = Field(
-        default=1.0, ge=0.2, le=60,
-        description="how often the pages refresh (rates are computed between polls)")
+        default=1.0,
+        ge=0.2,
+        le=60,
+        description="how often the pages refresh (rates are computed between polls)",
+    )

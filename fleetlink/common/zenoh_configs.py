@@ -66,13 +66,24 @@ Value = str | Sequence[str]
 
 #: Every message kind zenoh's ACL knows (1.x).
 ALL_MESSAGES: tuple[str, ...] = (
-    "put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
-    "liveliness_token", "liveliness_query", "declare_liveliness_subscriber",
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_liveliness_subscriber",
 )
 _DATA_OUT = ("put", "delete", "reply")
 _INTEREST = (
-    "declare_subscriber", "declare_queryable", "query", "liveliness_token",
-    "liveliness_query", "declare_liveliness_subscriber",
+    "declare_subscriber",
+    "declare_queryable",
+    "query",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_liveliness_subscriber",
 )
 
 #: ACL subject ids the templates define: the cloud's own services, the edge's WAN link.
@@ -157,7 +168,8 @@ def render_text(text: str, values: Mapping[str, Value], *, source: str = "<text>
             raise RouterConfigError(
                 f"placeholder ${{{name}}} is part of a longer string, so its value must be a "
                 f"string, got a list",
-                source=source, name=name,
+                source=source,
+                name=name,
             )
         return json.dumps(value)[1:-1]
 
@@ -182,7 +194,8 @@ def _check_site(site: str, *, source: str) -> None:
         raise RouterConfigError(
             f"site name {site!r}: use 1-58 letters, digits, '.', '_' or '-', starting with a "
             "letter or digit (it becomes one key-expression chunk and part of a certificate name)",
-            source=source, name="SITE",
+            source=source,
+            name="SITE",
         )
 
 
@@ -191,18 +204,25 @@ def _check_raw_keys(keys: Sequence[str], *, source: str, what: str) -> None:
         try:
             zenoh.KeyExpr(key)
         except zenoh.ZError as exc:
-            raise RouterConfigError(f"{what}: invalid key expression {key!r}: {exc}", source=source,
-                                    name=key) from None
+            raise RouterConfigError(
+                f"{what}: invalid key expression {key!r}: {exc}", source=source, name=key
+            ) from None
         if key == "**" or key.startswith(("fleetlink/", "@")):
             raise RouterConfigError(
                 f"{what}: {key!r} is not a raw ROS topic key (expected e.g. '0/robot1/imu/**')",
-                source=source, name=key,
+                source=source,
+                name=key,
             )
 
 
 def _rule(rule_id: str, flow: str, messages: Sequence[str], keys: Sequence[str]) -> dict[str, Any]:
-    return {"id": rule_id, "permission": "allow", "flows": [flow], "messages": list(messages),
-            "key_exprs": list(keys)}
+    return {
+        "id": rule_id,
+        "permission": "allow",
+        "flows": [flow],
+        "messages": list(messages),
+        "key_exprs": list(keys),
+    }
 
 
 def cloud_site_acl(site: str, *, raw_keys: Sequence[str] = (), source: str = "<cloud>") -> AclBlock:
@@ -242,8 +262,13 @@ def services_raw_acl(
             _rule("services-raw-in", "ingress", ("declare_subscriber",), raw_keys),
             _rule("services-raw-out", "egress", ("put", "delete"), raw_keys),
         ],
-        policies=[{"id": "services-raw", "rules": ["services-raw-in", "services-raw-out"],
-                   "subjects": [services_subject]}],
+        policies=[
+            {
+                "id": "services-raw",
+                "rules": ["services-raw-in", "services-raw-out"],
+                "subjects": [services_subject],
+            }
+        ],
     )
 
 
@@ -257,8 +282,7 @@ def edge_raw_acl(
             _rule("wan-raw-out", "egress", ("put", "delete"), raw_keys),
             _rule("wan-raw-interest", "ingress", ("declare_subscriber",), raw_keys),
         ],
-        policies=[{"id": "wan-raw", "rules": ["wan-raw-out", "wan-raw-interest"],
-                   "subjects": [wan_subject]}],
+        policies=[{"id": "wan-raw", "rules": ["wan-raw-out", "wan-raw-interest"], "subjects": [wan_subject]}],
     )
 
 
@@ -286,16 +310,22 @@ def _get(conf: zenoh.Config, key: str, *, source: str) -> Any:
 def _append_acl(conf: zenoh.Config, block: AclBlock, *, source: str) -> None:
     acl = _get(conf, "access_control", source=source)
     if not acl.get("enabled"):
-        raise RouterConfigError("access_control is not enabled, cannot add rules for sites or raw "
-                                "topics", source=source, name="access_control")
+        raise RouterConfigError(
+            "access_control is not enabled, cannot add rules for sites or raw topics",
+            source=source,
+            name="access_control",
+        )
     merged: dict[str, list[dict[str, Any]]] = {}
     for part in ("rules", "subjects", "policies"):
         merged[part] = [*(acl.get(part) or []), *getattr(block, part)]
         ids = [str(entry["id"]) for entry in merged[part] if entry.get("id") is not None]
         dupes = sorted({i for i in ids if ids.count(i) > 1})
         if dupes:
-            raise RouterConfigError(f"access_control.{part}: duplicate id(s) {dupes}", source=source,
-                                    name=f"access_control/{part}")
+            raise RouterConfigError(
+                f"access_control.{part}: duplicate id(s) {dupes}",
+                source=source,
+                name=f"access_control/{part}",
+            )
     known = {part: {str(entry.get("id")) for entry in merged[part]} for part in ("rules", "subjects")}
     for policy in merged["policies"]:
         for part in ("rules", "subjects"):
@@ -303,14 +333,16 @@ def _append_acl(conf: zenoh.Config, block: AclBlock, *, source: str) -> None:
             if missing:
                 raise RouterConfigError(
                     f"access_control policy {policy.get('id')!r} names unknown {part} {missing}",
-                    source=source, name=missing[0],
+                    source=source,
+                    name=missing[0],
                 )
     for part, entries in merged.items():
         try:
             conf.insert_json5(f"access_control/{part}", json.dumps(entries))
         except zenoh.ZError as exc:
-            raise RouterConfigError(f"access_control.{part}: {exc}", source=source,
-                                    name=f"access_control/{part}") from None
+            raise RouterConfigError(
+                f"access_control.{part}: {exc}", source=source, name=f"access_control/{part}"
+            ) from None
 
 
 def render_router_json5(
@@ -344,8 +376,9 @@ def render_router_json5(
     raw_from = raw_from or {}
     unknown = sorted(set(raw_from) - set(sites))
     if unknown:
-        raise RouterConfigError(f"raw_from names site(s) {unknown} missing from sites", source=source,
-                                name=unknown[0])
+        raise RouterConfigError(
+            f"raw_from names site(s) {unknown} missing from sites", source=source, name=unknown[0]
+        )
     for name in sites:
         block += cloud_site_acl(name, raw_keys=raw_from.get(name, ()), source=source)
     raw_keys = sorted({key for keys in raw_from.values() for key in keys})
@@ -357,7 +390,8 @@ def render_router_json5(
             raise RouterConfigError(
                 f"raw_to_cloud {missing}: raw topics may only cross the WAN downsampled, and no "
                 "egress downsampling rule of this config covers them; add a rule to 'downsampling'",
-                source=source, name=missing[0],
+                source=source,
+                name=missing[0],
             )
         block += edge_raw_acl(raw_to_cloud, source=source)
     if block.rules or block.subjects or block.policies:
@@ -384,6 +418,14 @@ def render_router_config(
     except OSError as exc:
         raise RouterConfigError(f"cannot read router config: {exc.strerror}", source=str(path)) from None
     return render_router_json5(
-        text, source=str(path), site=site, listen=listen, connect=connect, cert_dir=cert_dir,
-        sites=sites, raw_to_cloud=raw_to_cloud, raw_from=raw_from, values=values,
+        text,
+        source=str(path),
+        site=site,
+        listen=listen,
+        connect=connect,
+        cert_dir=cert_dir,
+        sites=sites,
+        raw_to_cloud=raw_to_cloud,
+        raw_from=raw_from,
+        values=values,
     )

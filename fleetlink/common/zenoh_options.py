@@ -82,21 +82,35 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, *, ros: bool = True) ->
     group = parser.add_argument_group("zenoh session")
     group.add_argument("-m", "--mode", choices=["peer", "client", "router"], help="zenoh session mode")
     group.add_argument(
-        "-e", "--connect", action="append", default=[], metavar="ENDPOINT",
+        "-e",
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
         help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
     )
     group.add_argument(
-        "-l", "--listen", action="append", default=[], metavar="ENDPOINT",
+        "-l",
+        "--listen",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
         help="endpoint to listen on, e.g. tcp/127.0.0.1:7448 (repeatable)",
     )
     group.add_argument("--zenoh-config", type=Path, metavar="FILE", help="zenoh JSON5 config file")
     group.add_argument(
-        "--cfg", action="append", default=[], metavar="KEY:JSON5",
+        "--cfg",
+        action="append",
+        default=[],
+        metavar="KEY:JSON5",
         help="zenoh config override, e.g. 'scouting/multicast/enabled:true' (repeatable)",
     )
     if ros:
         group.add_argument(
-            "--domain-id", type=int, default=default_domain_id(), metavar="N",
+            "--domain-id",
+            type=int,
+            default=default_domain_id(),
+            metavar="N",
             help="ROS domain id (default: $ROS_DOMAIN_ID, else 0)",
         )
 

@@ -47,7 +47,7 @@ SiteParam = Annotated[str, Path(pattern=r"^[A-Za-z0-9_.-]+$", max_length=128)]
 NameParam = Annotated[str, Path(pattern=r"^[A-Za-z0-9_.-]+$", max_length=128)]
 _HEADERS = {
     "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; object-src 'none'; "
-                               "base-uri 'none'; form-action 'self'; frame-ancestors 'none'",
+    "base-uri 'none'; form-action 'self'; frame-ancestors 'none'",
     "X-Content-Type-Options": "nosniff",
     "Referrer-Policy": "same-origin",
     "Cache-Control": "no-store",
@@ -64,10 +64,16 @@ def _json(data: Any, status: int = 200) -> JSONResponse:
     return JSONResponse(data, status_code=status, headers=_HEADERS)
 
 
-def _refused(status: int, message: str, fields: dict[str, list[str]] | None = None,
-             problems: list[dict[str, Any]] | None = None) -> JSONResponse:
-    return _json({"ok": False, "status": status, "error": message, "fields": fields or {},
-                  "problems": problems or []}, status)
+def _refused(
+    status: int,
+    message: str,
+    fields: dict[str, list[str]] | None = None,
+    problems: list[dict[str, Any]] | None = None,
+) -> JSONResponse:
+    return _json(
+        {"ok": False, "status": status, "error": message, "fields": fields or {}, "problems": problems or []},
+        status,
+    )
 
 
 def _change(env: Envelope) -> JSONResponse:
@@ -97,20 +103,24 @@ class _Denied(Exception):  # noqa: N818 - an internal signal turned into a 401/4
 class _Console:
     """What the routes share: the source, the token, the templates, the rates, the clock."""
 
-    def __init__(self, sites: Sites, token: SecretStr | None, poll_interval_s: float,
-                 clock: Callable[[], float]) -> None:
+    def __init__(
+        self, sites: Sites, token: SecretStr | None, poll_interval_s: float, clock: Callable[[], float]
+    ) -> None:
         self.sites = sites
         self.token = token
         self.poll_interval_s = poll_interval_s
         self.clock = clock
-        self.templates = Environment(loader=PackageLoader("fleetlink.console", "templates"),
-                                     autoescape=select_autoescape(["html"]))
-        self.board = RateBoard(window_s=max(5.0, 4 * poll_interval_s),
-                               min_span_s=min(0.5, poll_interval_s / 2))
+        self.templates = Environment(
+            loader=PackageLoader("fleetlink.console", "templates"), autoescape=select_autoescape(["html"])
+        )
+        self.board = RateBoard(
+            window_s=max(5.0, 4 * poll_interval_s), min_span_s=min(0.5, poll_interval_s / 2)
+        )
 
     def access(self, request: Request) -> Access:
-        return check(self.token, authorization=request.headers.get("authorization"),
-                     cookie=request.cookies.get(COOKIE))
+        return check(
+            self.token, authorization=request.headers.get("authorization"), cookie=request.cookies.get(COOKIE)
+        )
 
     def reader(self, request: Request) -> None:
         if not self.access(request).allowed:
@@ -125,8 +135,13 @@ class _Console:
 
     def page(self, request: Request, name: str, status: int = 200, **values: Any) -> HTMLResponse:
         html = self.templates.get_template(name).render(
-            base=base_path(request), process=self.sites.process, version=__version__,
-            signed_in=self.token is not None, poll_ms=int(self.poll_interval_s * 1000), **values)
+            base=base_path(request),
+            process=self.sites.process,
+            version=__version__,
+            signed_in=self.token is not None,
+            poll_ms=int(self.poll_interval_s * 1000),
+            **values,
+        )
         return HTMLResponse(html, status_code=status, headers=_HEADERS)
 
     def to_login(self, request: Request) -> RedirectResponse:
@@ -141,8 +156,9 @@ def create_console_app(
     poll_interval_s: float = 1.0,
     clock: Callable[[], float] = time.time,
 ) -> FastAPI:
-    app = FastAPI(title="fleetlink console", version=__version__, docs_url=None, redoc_url=None,
-                  openapi_url=None)
+    app = FastAPI(
+        title="fleetlink console", version=__version__, docs_url=None, redoc_url=None, openapi_url=None
+    )
     app.mount("/static", StaticFiles(packages=[("fleetlink.console", "static")]), name="static")
     console = _Console(sites, token, poll_interval_s, clock)
 
@@ -152,8 +168,10 @@ def create_console_app(
 
     @app.exception_handler(RequestValidationError)
     def on_invalid(_request: Request, exc: RequestValidationError) -> JSONResponse:
-        problems = [{"path": ".".join(str(p) for p in e.get("loc", ())[1:]) or "<root>",
-                     "message": str(e["msg"])} for e in exc.errors()]
+        problems = [
+            {"path": ".".join(str(p) for p in e.get("loc", ())[1:]) or "<root>", "message": str(e["msg"])}
+            for e in exc.errors()
+        ]
         return _refused(422, "invalid request", field_errors(problems), problems)
 
     @app.exception_handler(StarletteHTTPException)
@@ -197,8 +215,14 @@ def _page_routes(app: FastAPI, console: _Console) -> None:
             return console.page(request, "login.html", status=401, next=target, error="wrong token")
         response = RedirectResponse(target, status_code=303, headers=_HEADERS)
         if token is not None:
-            response.set_cookie(COOKIE, cookie_value(token), httponly=True, samesite="strict",
-                                path=base_path(request), secure=request.url.scheme == "https")
+            response.set_cookie(
+                COOKIE,
+                cookie_value(token),
+                httponly=True,
+                samesite="strict",
+                path=base_path(request),
+                secure=request.url.scheme == "https",
+            )
         return response
 
     @app.post("/logout", response_model=None)
@@ -234,8 +258,9 @@ def _api_routes(app: FastAPI, console: _Console) -> None:
 
     @app.put("/api/sites/{site}/mappings/{name}", dependencies=change)
     def change_mapping(site: SiteParam, name: NameParam, form: MappingForm) -> JSONResponse:
-        return _form_change(form, lambda body: sites.ask(site, f"mappings/{name}", op="put", body=body),
-                            with_name=False)
+        return _form_change(
+            form, lambda body: sites.ask(site, f"mappings/{name}", op="put", body=body), with_name=False
+        )
 
     @app.delete("/api/sites/{site}/mappings/{name}", dependencies=change)
     def remove_mapping(site: SiteParam, name: NameParam) -> JSONResponse:

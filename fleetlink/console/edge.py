@@ -69,8 +69,12 @@ class EdgeConsole:
     def mount(self, app: FastAPI) -> None:
         """Serve the console under ``/console/`` of ``app`` (its own routes, not in the admin
         API's OpenAPI document)."""
-        app.mount(PATH, create_console_app(self.site, token=self.token, poll_interval_s=self.poll_interval_s,
-                                           clock=self._clock))
+        app.mount(
+            PATH,
+            create_console_app(
+                self.site, token=self.token, poll_interval_s=self.poll_interval_s, clock=self._clock
+            ),
+        )
 
     # -- the status key --------------------------------------------------------------------------
     def start(self, session: zenoh.Session) -> EdgeConsole:
@@ -106,14 +110,25 @@ class EdgeConsole:
             query.drop()
 
 
-def console_extension(token: SecretStr | None, edge_id: str, *, poll_interval_s: float = 1.0) -> Callable[
+def console_extension(
+    token: SecretStr | None, edge_id: str, *, poll_interval_s: float = 1.0
+) -> Callable[
     [AdminService, Callable[[], EdgeSnapshot], Callable[[], Mapping[str, Any]] | None], EdgeConsole
 ]:
     """The edge's console as an admin extension (``EdgeAdmin(..., extensions=[...])``)."""
 
-    def make(service: AdminService, snapshot: Callable[[], EdgeSnapshot],
-             raw: Callable[[], Mapping[str, Any]] | None) -> EdgeConsole:
-        return EdgeConsole(service, edge_id=edge_id, token=token, snapshot=snapshot, raw_snapshot=raw,
-                           poll_interval_s=poll_interval_s)
+    def make(
+        service: AdminService,
+        snapshot: Callable[[], EdgeSnapshot],
+        raw: Callable[[], Mapping[str, Any]] | None,
+    ) -> EdgeConsole:
+        return EdgeConsole(
+            service,
+            edge_id=edge_id,
+            token=token,
+            snapshot=snapshot,
+            raw_snapshot=raw,
+            poll_interval_s=poll_interval_s,
+        )
 
     return make

@@ -28,15 +28,26 @@ class Envelope:
     def as_dict(self) -> dict[str, Any]:
         if self.ok:
             return {"status": self.status, "site": self.site, "edge_id": self.edge_id, "body": self.body}
-        return {"status": self.status, "site": self.site, "edge_id": self.edge_id, "error": self.error,
-                "problems": list(self.problems)}
+        return {
+            "status": self.status,
+            "site": self.site,
+            "edge_id": self.edge_id,
+            "error": self.error,
+            "problems": list(self.problems),
+        }
 
 
 def from_parts(status: int, part: dict[str, Any], *, site: str, edge_id: str) -> Envelope:
     """``edge.admin.space.execute``'s (status, part) -> an envelope."""
     problems = tuple(p for p in part.get("problems", ()) if isinstance(p, dict))
-    return Envelope(status=status, site=site, edge_id=edge_id, body=part.get("body"),
-                    error=part.get("error"), problems=problems)
+    return Envelope(
+        status=status,
+        site=site,
+        edge_id=edge_id,
+        body=part.get("body"),
+        error=part.get("error"),
+        problems=problems,
+    )
 
 
 def parse(payload: bytes, *, key: str = "") -> Envelope:
@@ -48,8 +59,12 @@ def parse(payload: bytes, *, key: str = "") -> Envelope:
     if not isinstance(data, dict) or not isinstance(data.get("status"), int):
         return Envelope(status=502, error=f"unexpected reply on {key or 'the admin space'}: no status")
     site, edge_id = data.get("site"), data.get("edge_id")
-    return from_parts(int(data["status"]), data, site=site if isinstance(site, str) else "",
-                      edge_id=edge_id if isinstance(edge_id, str) else "")
+    return from_parts(
+        int(data["status"]),
+        data,
+        site=site if isinstance(site, str) else "",
+        edge_id=edge_id if isinstance(edge_id, str) else "",
+    )
 
 
 def failure(status: int, message: str, *, site: str = "") -> Envelope:

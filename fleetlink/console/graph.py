@@ -58,8 +58,15 @@ def build_graph(
     kinds = {str(r["robot"]): str(r.get("robot_type", "")) for r in robots}
     robot_nodes: dict[str, dict[str, Any]] = {}
     for name in sorted(states):
-        _add(robot_nodes, {"id": f"r:{name}", "label": name, "state": states[name],
-                           "detail": f"{kinds[name]} · {states[name]}"})
+        _add(
+            robot_nodes,
+            {
+                "id": f"r:{name}",
+                "label": name,
+                "state": states[name],
+                "detail": f"{kinds[name]} · {states[name]}",
+            },
+        )
     topic_nodes: dict[str, dict[str, Any]] = {}
     edges: list[dict[str, Any]] = []
     targets: dict[str, set[str]] = {str(m["name"]): set() for m in mappings}
@@ -75,8 +82,17 @@ def build_graph(
             _add(robot_nodes, {"id": f"r:{robot}", "label": robot, "state": state, "detail": detail})
         rate = topic_rates.get(name)
         types = ", ".join(str(t) for t in topic.get("types", ()))
-        _add(topic_nodes, {"id": f"t:{name}", "label": name, "detail": types, "rate": rate,
-                           "mapped": bool(matches), "robot": f"r:{robot}"})
+        _add(
+            topic_nodes,
+            {
+                "id": f"t:{name}",
+                "label": name,
+                "detail": types,
+                "rate": rate,
+                "mapped": bool(matches),
+                "robot": f"r:{robot}",
+            },
+        )
         edges.append({"from": f"r:{robot}", "to": f"t:{name}", "rate": rate})
         for match in matches:
             mapping = str(match["mapping"])
@@ -86,8 +102,13 @@ def build_graph(
     mapping_nodes, kafka_nodes = _mapping_columns(mappings, mapping_rates, targets, fed, edges)
     order = {node_id: i for i, node_id in enumerate(robot_nodes)}
     ordered = sorted(topic_nodes.values(), key=lambda n: (order[n["robot"]], n["label"]))
-    return {"robots": list(robot_nodes.values()), "topics": ordered,
-            "mappings": mapping_nodes, "kafka": kafka_nodes, "edges": edges}
+    return {
+        "robots": list(robot_nodes.values()),
+        "topics": ordered,
+        "mappings": mapping_nodes,
+        "kafka": kafka_nodes,
+        "edges": edges,
+    }
 
 
 def _mapping_columns(
@@ -105,12 +126,19 @@ def _mapping_columns(
         name = str(entry["name"])
         rates = mapping_rates.get(name, {})
         owner = entry.get("robot_type")
-        nodes.append({
-            "id": f"m:{name}", "label": name, "detail": f"{owner} template" if owner else "site mapping",
-            "in": rates.get("received"), "out": rates.get("emitted"), "drop": rates.get("dropped"),
-            "dead": rates.get("dead_lettered"), "degraded": bool(entry.get("issues")),
-            "topics": len(fed.get(name, ())),
-        })
+        nodes.append(
+            {
+                "id": f"m:{name}",
+                "label": name,
+                "detail": f"{owner} template" if owner else "site mapping",
+                "in": rates.get("received"),
+                "out": rates.get("emitted"),
+                "drop": rates.get("dropped"),
+                "dead": rates.get("dead_lettered"),
+                "degraded": bool(entry.get("issues")),
+                "topics": len(fed.get(name, ())),
+            }
+        )
         kafka = targets.get(name) or {str(entry.get("to", ""))}
         out = rates.get("emitted")
         for kafka_topic in sorted(kafka):
@@ -119,6 +147,8 @@ def _mapping_columns(
             if len(kafka) > 1:
                 approx.add(kafka_topic)
             edges.append({"from": f"m:{name}", "to": f"k:{kafka_topic}", "rate": share})
-    kafka_nodes = [{"id": f"k:{t}", "label": t, "rate": _sum(v), "approx": t in approx}
-                   for t, v in sorted(shares.items())]
+    kafka_nodes = [
+        {"id": f"k:{t}", "label": t, "rate": _sum(v), "approx": t in approx}
+        for t, v in sorted(shares.items())
+    ]
     return nodes, kafka_nodes

@@ -93,7 +93,7 @@ class ZenohSites:
         out: dict[str, Envelope] = {}
         for key, env in self._replies(admin):
             if key.startswith(prefix):
-                out.setdefault(key[len(prefix):], env)
+                out.setdefault(key[len(prefix) :], env)
         for key, env in self._replies(status):
             if key == status_key(site):
                 out.setdefault("status", env)

@@ -47,17 +47,25 @@ def command_view(router: CommandRouter | None) -> dict[str, Any]:
     stats = router.stats
     with stats.lock:
         counts = {
-            "records": stats.records, "forwards": stats.forwards, "settled": stats.settled,
-            "dead_lettered": stats.dead_lettered, "expired_before_forward": stats.expired_before_forward,
-            "expired_unacknowledged": stats.expired_unacknowledged, "results": dict(stats.results),
+            "records": stats.records,
+            "forwards": stats.forwards,
+            "settled": stats.settled,
+            "dead_lettered": stats.dead_lettered,
+            "expired_before_forward": stats.expired_before_forward,
+            "expired_unacknowledged": stats.expired_unacknowledged,
+            "results": dict(stats.results),
         }
-    mappings = [{"name": m.name, "from": m.from_, "to": m.to}
-                for m in router.config.commands]
+    mappings = [{"name": m.name, "from": m.from_, "to": m.to} for m in router.config.commands]
     return {
-        "available": True, **counts, "in_flight": router.in_flight(),
-        "status_records_written": router.status_writer.written, "status_batches": router.intake.batches,
-        "heartbeats": router.intake.heartbeats, "robots_known": len(router.directory),
-        "sites": router.directory.sites(), "mappings": mappings,
+        "available": True,
+        **counts,
+        "in_flight": router.in_flight(),
+        "status_records_written": router.status_writer.written,
+        "status_batches": router.intake.batches,
+        "heartbeats": router.intake.heartbeats,
+        "robots_known": len(router.directory),
+        "sites": router.directory.sites(),
+        "mappings": mappings,
     }
 
 
@@ -84,10 +92,19 @@ class UplinkConsole:
         s = self.settings
         token = self._token if self._token is not None else load_console_token(s.token_env, s.token_file)
         if token is None:
-            log.warning("the fleet console has no access token (%s is not set): anyone who reaches %s can "
-                        "change mappings; keep it on loopback", s.token_env or "token_env", s.listen)
-        sites = ZenohSites(self.session, token=token, timeout_s=s.query_timeout_s, latency=self.latency,
-                           commands=lambda: command_view(self._router()))
+            log.warning(
+                "the fleet console has no access token (%s is not set): anyone who reaches %s can "
+                "change mappings; keep it on loopback",
+                s.token_env or "token_env",
+                s.listen,
+            )
+        sites = ZenohSites(
+            self.session,
+            token=token,
+            timeout_s=s.query_timeout_s,
+            latency=self.latency,
+            commands=lambda: command_view(self._router()),
+        )
         app = FastAPI(title="fleetlink fleet console", docs_url=None, redoc_url=None, openapi_url=None)
         app.mount("/console", create_console_app(sites, token=token, poll_interval_s=s.poll_interval_s))
 
@@ -125,8 +142,13 @@ def uplink_console(
     """The fleet console as an uplink extension (``Uplink(..., extensions=[...])``)."""
 
     def make(uplink: Uplink) -> UplinkConsole:
-        return UplinkConsole(settings, session=uplink.session, router=lambda: uplink.commands,
-                             latency=uplink.delivery_latency, token=token)
+        return UplinkConsole(
+            settings,
+            session=uplink.session,
+            router=lambda: uplink.commands,
+            latency=uplink.delivery_latency,
+            token=token,
+        )
 
     return make
 

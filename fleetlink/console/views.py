@@ -55,8 +55,11 @@ def topic_rates(board: RateBoard, site: str, status: Any, now: float) -> dict[st
     topics = status.get("topics") if isinstance(status, dict) else None
     if not isinstance(topics, dict):
         return {}
-    return {str(topic): board.rate((site, "topic", str(topic)), float(counts.get("received", 0)), now)
-            for topic, counts in topics.items() if isinstance(counts, dict)}
+    return {
+        str(topic): board.rate((site, "topic", str(topic)), float(counts.get("received", 0)), now)
+        for topic, counts in topics.items()
+        if isinstance(counts, dict)
+    }
 
 
 def site_view(site: str, parts: Mapping[str, Envelope], board: RateBoard, *, now: float) -> dict[str, Any]:
@@ -74,10 +77,15 @@ def site_view(site: str, parts: Mapping[str, Envelope], board: RateBoard, *, now
         mapping["rates"] = rates.get(str(mapping.get("name")), {})
     edge_ids = sorted({e.edge_id for e in parts.values() if e.edge_id})
     return {
-        "site": site, "edge_id": ", ".join(edge_ids), "at": now, "errors": errors,
+        "site": site,
+        "edge_id": ", ".join(edge_ids),
+        "at": now,
+        "errors": errors,
         "health": health if isinstance(health, dict) else None,
         "status": status if isinstance(status, dict) else None,
-        "robots": robots, "robot_types": robot_types, "mappings": mappings,
+        "robots": robots,
+        "robot_types": robot_types,
+        "mappings": mappings,
         "topic_rates": per_topic,
         "graph": build_graph(robots, topics, mappings, topic_rates=per_topic, mapping_rates=rates),
     }
@@ -87,8 +95,12 @@ def site_summary(site: str, health: Envelope) -> dict[str, Any]:
     """One line of the fleet page from a site's health answer."""
     body = health.body if isinstance(health.body, dict) else {}
     return {
-        "site": site, "edge_id": health.edge_id, "status": health.status,
-        "state": body.get("state"), "robots": body.get("robots"), "wan_link_up": body.get("wan_link_up"),
+        "site": site,
+        "edge_id": health.edge_id,
+        "status": health.status,
+        "state": body.get("state"),
+        "robots": body.get("robots"),
+        "wan_link_up": body.get("wan_link_up"),
         "problems": len(body.get("problems", ())) if isinstance(body.get("problems"), list) else None,
         "error": None if health.body is not None else (health.error or f"status {health.status}"),
     }

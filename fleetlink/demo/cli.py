@@ -10,7 +10,8 @@ from typing import Any
 
 def register(sub: Any) -> None:
     parser: argparse.ArgumentParser = sub.add_parser(
-        "demo", help="run the warehouse demo: robots → Kafka → fault detection → light-ring commands",
+        "demo",
+        help="run the warehouse demo: robots → Kafka → fault detection → light-ring commands",
         description="Start Kafka, the registry, Zenoh routers, the uplink, an edge agent, a repeater, "
         "a fault-detection app and simulated TurtleBot 4 robots; pick one robot up and put it down; "
         "show its light ring turn red and green. Ctrl-C stops everything it started.",
@@ -18,12 +19,19 @@ def register(sub: Any) -> None:
     parser.add_argument("--robots", type=int, default=3, help="robots at start (default %(default)s)")
     parser.add_argument("--rate", type=float, default=10.0, help="sensor rate in Hz (default %(default)s)")
     parser.add_argument("--window", default="2s", help="fault-detection window (default %(default)s)")
-    parser.add_argument("--workdir", type=Path, default=Path("var/demo"),
-                        help="logs, configs, spool, summary.json (default %(default)s; wiped at start)")
+    parser.add_argument(
+        "--workdir",
+        type=Path,
+        default=Path("var/demo"),
+        help="logs, configs, spool, summary.json (default %(default)s; wiped at start)",
+    )
     parser.add_argument("--bootstrap", help="use this Kafka instead of starting one (with --registry)")
     parser.add_argument("--registry", help="use this schema registry (Confluent API URL)")
-    parser.add_argument("--keep-running", action="store_true",
-                        help="after the scenario, keep everything running until Ctrl-C (or --duration)")
+    parser.add_argument(
+        "--keep-running",
+        action="store_true",
+        help="after the scenario, keep everything running until Ctrl-C (or --duration)",
+    )
     parser.add_argument("--duration", type=float, help="with --keep-running: stop after this many seconds")
     parser.set_defaults(handler=_run)
 
@@ -39,11 +47,18 @@ def _run(args: argparse.Namespace) -> int:
         return 2
     if args.verbose == 0:
         logging.getLogger().setLevel(logging.WARNING)  # the demo tells its own story
-    demo = Demo(DemoOptions(
-        workdir=args.workdir, robots=args.robots, rate_hz=args.rate, window=args.window,
-        bootstrap=args.bootstrap, registry_url=args.registry, keep_running=args.keep_running,
-        duration_s=args.duration,
-    ))
+    demo = Demo(
+        DemoOptions(
+            workdir=args.workdir,
+            robots=args.robots,
+            rate_hz=args.rate,
+            window=args.window,
+            bootstrap=args.bootstrap,
+            registry_url=args.registry,
+            keep_running=args.keep_running,
+            duration_s=args.duration,
+        )
+    )
     with interrupted_on_sigint(demo):
         summary = demo.run()
     print(f"summary written to {args.workdir / 'summary.json'}")

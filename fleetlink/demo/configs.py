@@ -38,12 +38,24 @@ def edge_config(p: DemoPlaces) -> dict[str, Any]:
             "turtlebot4": {
                 "match": "/tb4_*",
                 "mappings": [
-                    {"name": "ir", "from": "/{robot}/ir_intensity", "to": IR_TOPIC,
-                     "type": "irobot_create_msgs/msg/IrIntensityVector"},
-                    {"name": "hazards", "from": "/{robot}/hazard_detection", "to": HAZARD_TOPIC,
-                     "type": "irobot_create_msgs/msg/HazardDetectionVector"},
-                    {"name": "kidnap", "from": "/{robot}/kidnap_status", "to": KIDNAP_TOPIC,
-                     "type": "irobot_create_msgs/msg/KidnapStatus"},
+                    {
+                        "name": "ir",
+                        "from": "/{robot}/ir_intensity",
+                        "to": IR_TOPIC,
+                        "type": "irobot_create_msgs/msg/IrIntensityVector",
+                    },
+                    {
+                        "name": "hazards",
+                        "from": "/{robot}/hazard_detection",
+                        "to": HAZARD_TOPIC,
+                        "type": "irobot_create_msgs/msg/HazardDetectionVector",
+                    },
+                    {
+                        "name": "kidnap",
+                        "from": "/{robot}/kidnap_status",
+                        "to": KIDNAP_TOPIC,
+                        "type": "irobot_create_msgs/msg/KidnapStatus",
+                    },
                 ],
             }
         },
@@ -59,8 +71,13 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
         "registry": {"url": p.registry_url},
         "zenoh": {"mode": "client", "connect": [p.cloud_router]},
         "commands": [
-            {"name": "lightring", "from": COMMAND_TOPIC, "to": "/{key}/cmd_lightring",
-             "type": "irobot_create_msgs/msg/LightringLeds", "repeat": {"period": "1s", "lease": "15s"}},
+            {
+                "name": "lightring",
+                "from": COMMAND_TOPIC,
+                "to": "/{key}/cmd_lightring",
+                "type": "irobot_create_msgs/msg/LightringLeds",
+                "repeat": {"period": "1s", "lease": "15s"},
+            },
         ],
     }
 

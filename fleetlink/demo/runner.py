@@ -108,20 +108,28 @@ class Demo:
             info = stack.start()
             self._exit.callback(stack.stop)
             bootstrap, registry = info.bootstrap, info.registry_url
-            self.say(f"Kafka up in {info.kafka_seconds:.1f} s at {bootstrap}; "
-                     f"registry up in {info.registry_seconds:.1f} s at {registry}")
+            self.say(
+                f"Kafka up in {info.kafka_seconds:.1f} s at {bootstrap}; "
+                f"registry up in {info.registry_seconds:.1f} s at {registry}"
+            )
         cloud = self._exit.enter_context(ZenohRouter())
         site = self._exit.enter_context(ZenohRouter(connect=(cloud.endpoint,)))
         self.say(f"Zenoh routers: cloud {cloud.endpoint}, site warehouse-a {site.endpoint} (linked)")
         from fleetlink.schemas.bundled import bundled_message_paths
 
-        return DemoPlaces(bootstrap, registry, cloud.endpoint, site.endpoint, work,
-                          tuple(bundled_message_paths()))
+        return DemoPlaces(
+            bootstrap, registry, cloud.endpoint, site.endpoint, work, tuple(bundled_message_paths())
+        )
 
     def _process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
         log = self.o.workdir / "logs" / f"{name}.log"
-        proc = ServerProcess(name=name, argv=[sys.executable, "-m", "fleetlink", *argv], log_path=log,
-                             pid_path=self.o.workdir / f"{name}.pid", ready=ready)
+        proc = ServerProcess(
+            name=name,
+            argv=[sys.executable, "-m", "fleetlink", *argv],
+            log_path=log,
+            pid_path=self.o.workdir / f"{name}.pid",
+            ready=ready,
+        )
         took = proc.start(timeout=self.o.step_timeout_s)
         self._exit.callback(proc.stop)
         self.say(f"{name} running ({took:.1f} s; log: {log})")
@@ -129,18 +137,28 @@ class Demo:
     def _start_services(self, places: DemoPlaces) -> None:
         work = self.o.workdir
         files = {}
-        for name, config in (("uplink", uplink_config(places)), ("edge", edge_config(places)),
-                             ("repeater", repeater_config(places))):
+        for name, config in (
+            ("uplink", uplink_config(places)),
+            ("edge", edge_config(places)),
+            ("repeater", repeater_config(places)),
+        ):
             files[name] = work / f"{name}.yaml"
             files[name].write_text(yaml.safe_dump(config, sort_keys=False))
         logs = work / "logs"
-        self._process("uplink", ["uplink", "run", "-c", str(files["uplink"])],
-                      lambda: "uplink running" in _read(logs / "uplink.log"))
+        self._process(
+            "uplink",
+            ["uplink", "run", "-c", str(files["uplink"])],
+            lambda: "uplink running" in _read(logs / "uplink.log"),
+        )
         stats = work / "edge-stats.json"
-        self._process("edge", ["edge", "run", "-c", str(files["edge"]), "--stats-file", str(stats)],
-                      stats.exists)
-        self._process("repeater", ["repeater", "run", "-c", str(files["repeater"])],
-                      lambda: "running for site" in _read(logs / "repeater.log"))
+        self._process(
+            "edge", ["edge", "run", "-c", str(files["edge"]), "--stats-file", str(stats)], stats.exists
+        )
+        self._process(
+            "repeater",
+            ["repeater", "run", "-c", str(files["repeater"])],
+            lambda: "running for site" in _read(logs / "repeater.log"),
+        )
 
     def _start_watchers(self, places: DemoPlaces) -> None:
         def on_registration(_topic: str, key: bytes | None, value: dict[str, Any] | None, _m: Any) -> None:
@@ -148,8 +166,10 @@ class Demo:
             event = (value or {}).get("event", "?")
             if event == "registered" and robot not in self.story.registered:
                 self.story.registered[robot] = time.monotonic()
-                self.say(f"robot {robot} registered ({(value or {}).get('robot_type', '?')}): "
-                         "its mappings are live")
+                self.say(
+                    f"robot {robot} registered ({(value or {}).get('robot_type', '?')}): "
+                    "its mappings are live"
+                )
             elif event == "deregistered":
                 self.say(f"robot {robot} deregistered ({(value or {}).get('reason', '')})")
 
@@ -163,11 +183,23 @@ class Demo:
             ([REGISTRATIONS_TOPIC], True, on_registration),
             ([COMMAND_TOPIC], True, on_command),
         ):
-            watcher = TopicWatcher(places.bootstrap, places.registry_url, topics, decode=decode,
-                                   on_record=handler, since_ms=self._since_ms).start()
+            watcher = TopicWatcher(
+                places.bootstrap,
+                places.registry_url,
+                topics,
+                decode=decode,
+                on_record=handler,
+                since_ms=self._since_ms,
+            ).start()
             self._exit.callback(watcher.stop)
-        self._flow = TopicWatcher(places.bootstrap, places.registry_url, SENSOR_TOPICS, decode=False,
-                                  on_record=lambda *_: None, since_ms=self._since_ms).start()
+        self._flow = TopicWatcher(
+            places.bootstrap,
+            places.registry_url,
+            SENSOR_TOPICS,
+            decode=False,
+            on_record=lambda *_: None,
+            since_ms=self._since_ms,
+        ).start()
         self._exit.callback(self._flow.stop)
         ticker = threading.Thread(target=self._tell_rates, name="demo-rates", daemon=True)
         ticker.start()
@@ -188,10 +220,13 @@ class Demo:
         from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, parse_duration_ms
 
         settings = FaultDetectionSettings(
-            bootstrap=places.bootstrap, registry_url=places.registry_url,
-            window_ms=parse_duration_ms(self.o.window), state_dir=places.workdir / "app-state",
+            bootstrap=places.bootstrap,
+            registry_url=places.registry_url,
+            window_ms=parse_duration_ms(self.o.window),
+            state_dir=places.workdir / "app-state",
             # a fresh consumer group per run: on a shared Kafka, earlier runs' records are not replayed
-            group=self._app_group, offset_reset="latest",
+            group=self._app_group,
+            offset_reset="latest",
             msg_paths=places.msg_paths,
         )
         stop = threading.Event()
@@ -200,8 +235,9 @@ class Demo:
             state = getattr(command.state, "value", command.state)
             self.say(f"fault detection: {command.robot} is now {state} (every event in its window agreed)")
 
-        thread = threading.Thread(target=run_app, args=(settings, stop, decided), name="fault-app",
-                                  daemon=True)
+        thread = threading.Thread(
+            target=run_app, args=(settings, stop, decided), name="fault-app", daemon=True
+        )
         thread.start()
 
         def stop_app() -> None:
@@ -228,17 +264,24 @@ class Demo:
 
         config = ros_session_config(ZenohOptions(mode="client", connect=(places.site_router,)))
         fleet = self._exit.enter_context(
-            Fleet(config, ts, robots=self.o.robots, rate=self.o.rate_hz, on_led=on_led))
+            Fleet(config, ts, robots=self.o.robots, rate=self.o.rate_hz, on_led=on_led)
+        )
         names = fleet.names()
-        self.say(f"simulated TurtleBot 4 fleet up: {', '.join(names)} (IR, hazards, kidnap, odom, imu, "
-                 f"battery at {self.o.rate_hz:g} Hz; each listens on cmd_lightring)")
+        self.say(
+            f"simulated TurtleBot 4 fleet up: {', '.join(names)} (IR, hazards, kidnap, odom, imu, "
+            f"battery at {self.o.rate_hz:g} Hz; each listens on cmd_lightring)"
+        )
         self._until(lambda: set(names) <= set(self.story.registered), "every robot registered")
-        self._until(lambda: all(self._flow.counts.get(t, 0) > 0 for t in SENSOR_TOPICS),
-                    "records flowing into every sensor topic")
+        self._until(
+            lambda: all(self._flow.counts.get(t, 0) > 0 for t in SENSOR_TOPICS),
+            "records flowing into every sensor topic",
+        )
         self.say("sensor data is flowing: " + ", ".join(SENSOR_TOPICS))
         # judge a fault only once the app has whole windows of healthy events behind it
-        self._until(lambda: app_has_committed(places.bootstrap, self._app_group, SENSOR_TOPICS),
-                    "the fault-detection app consuming every sensor topic")
+        self._until(
+            lambda: app_has_committed(places.bootstrap, self._app_group, SENSOR_TOPICS),
+            "the fault-detection app consuming every sensor topic",
+        )
         self._wait(parse_duration_ms(self.o.window) / 1000 + 1.0)
 
         healthy, faulted = names[0], names[1 % len(names)]

@@ -83,8 +83,7 @@ def app_has_committed(bootstrap: str, group: str, topics: Sequence[str]) -> bool
     """Whether consumer ``group`` has committed an offset on every partition of ``topics``."""
     admin = AdminClient({"bootstrap.servers": bootstrap, "log_level": 3})  # no info lines on close
     try:
-        futures = admin.list_consumer_group_offsets([ConsumerGroupTopicPartitions(group)],
-                                                    request_timeout=5)
+        futures = admin.list_consumer_group_offsets([ConsumerGroupTopicPartitions(group)], request_timeout=5)
         partitions = futures[group].result(timeout=10).topic_partitions or []
     except KafkaException:
         return False

@@ -64,11 +64,10 @@ def _mvn() -> str:
 
 def _run_mvn(args: list[str], cwd: Path, what: str) -> None:
     log.info("fetching %s from Maven Central (first run only)", what)
-    print(f"fleetlink stack: fetching {what} from Maven Central (first run only; cached in {cwd})",
-          flush=True)
-    proc = subprocess.run(
-        [_mvn(), "-B", "-q", *args], cwd=cwd, capture_output=True, text=True, check=False
+    print(
+        f"fleetlink stack: fetching {what} from Maven Central (first run only; cached in {cwd})", flush=True
     )
+    proc = subprocess.run([_mvn(), "-B", "-q", *args], cwd=cwd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         tail = "\n".join((proc.stdout + proc.stderr).splitlines()[-20:])
         raise StackError(f"could not fetch {what} with Maven (exit {proc.returncode}):\n{tail}")

@@ -83,8 +83,15 @@ class KafkaBroker:
         self._log4j = data / "log4j2.properties"
         self.process = ServerProcess(
             name=f"Kafka broker on {settings.host}:{settings.port}",
-            argv=[java, *JVM_OPTS, f"-Dlog4j2.configurationFile={self._log4j}", "-cp", classpath,
-                  "kafka.Kafka", str(self._props)],
+            argv=[
+                java,
+                *JVM_OPTS,
+                f"-Dlog4j2.configurationFile={self._log4j}",
+                "-cp",
+                classpath,
+                "kafka.Kafka",
+                str(self._props),
+            ],
             log_path=data / "kafka.log",
             pid_path=data / "kafka.pid",
             ready=self._ready,
@@ -116,11 +123,22 @@ class KafkaBroker:
             return
         cluster_id = base64.urlsafe_b64encode(uuid.uuid4().bytes).rstrip(b"=").decode()
         proc = subprocess.run(
-            [self._java, f"-Dlog4j2.configurationFile={self._log4j}", "-cp", self._classpath,
-             # "=": a generated id may start with "-", which would read as an option
-             "kafka.tools.StorageTool", "format", "--standalone", f"--cluster-id={cluster_id}",
-             "-c", str(self._props)],
-            capture_output=True, text=True, check=False,
+            [
+                self._java,
+                f"-Dlog4j2.configurationFile={self._log4j}",
+                "-cp",
+                self._classpath,
+                # "=": a generated id may start with "-", which would read as an option
+                "kafka.tools.StorageTool",
+                "format",
+                "--standalone",
+                f"--cluster-id={cluster_id}",
+                "-c",
+                str(self._props),
+            ],
+            capture_output=True,
+            text=True,
+            check=False,
         )
         if proc.returncode != 0:
             raise StackError(f"formatting Kafka storage in {data} failed:\n{proc.stdout}{proc.stderr}")

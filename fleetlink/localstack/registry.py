@@ -32,7 +32,9 @@ class SchemaRegistry:
         self.process = ServerProcess(
             name=f"Apicurio Registry on {settings.host}:{settings.port}",
             argv=[
-                java, "-Xms128m", "-Xmx768m",
+                java,
+                "-Xms128m",
+                "-Xmx768m",
                 f"-Dquarkus.http.host={settings.host}",
                 f"-Dquarkus.http.port={settings.port}",
                 # Quarkus' management interface (health, metrics) would take 0.0.0.0:9000
@@ -41,9 +43,10 @@ class SchemaRegistry:
                 "-Dapicurio.storage.kind=sql",
                 "-Dapicurio.storage.sql.kind=h2",
                 "-Dquarkus.log.level=WARN",
-                "-Dquarkus.log.category.\"io.quarkus\".level=INFO",
+                '-Dquarkus.log.category."io.quarkus".level=INFO',
                 "-Dquarkus.http.limits.max-body-size=16M",
-                "-jar", str(jar),
+                "-jar",
+                str(jar),
             ],
             log_path=data / "registry.log",
             pid_path=data / "registry.pid",

@@ -70,8 +70,9 @@ class LocalStack:
         except StackError:
             # no Java 21 here: the 3.0 line of the same registry runs on Java 17
             registry_java, registry_version = kafka_java, APICURIO_JAVA17_VERSION
-            log.info("no Java %d+; using Apicurio Registry %s on Java 17", REGISTRY_MIN_JAVA,
-                     registry_version)
+            log.info(
+                "no Java %d+; using Apicurio Registry %s on Java 17", REGISTRY_MIN_JAVA, registry_version
+            )
         artifacts = fetch_all(apicurio_version=registry_version)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.kafka = KafkaBroker(

@@ -57,9 +57,15 @@ class Ack:
 
 
 def encode_ack(ack: Ack) -> bytes:
-    parts = [ACK_MAGIC, bytes([VERSION]), str16(ack.edge_id), str16(ack.stream),
-             _ACK_RANGE.pack(ack.first_seq, ack.last_seq, _STATUS_CODES[ack.status]),
-             str16(ack.detail), U32.pack(len(ack.failures))]
+    parts = [
+        ACK_MAGIC,
+        bytes([VERSION]),
+        str16(ack.edge_id),
+        str16(ack.stream),
+        _ACK_RANGE.pack(ack.first_seq, ack.last_seq, _STATUS_CODES[ack.status]),
+        str16(ack.detail),
+        U32.pack(len(ack.failures)),
+    ]
     for failure in ack.failures:
         parts += (_FAILURE_HEAD.pack(failure.seq, int(failure.dead_lettered)), str16(failure.reason))
     if ack.status == "need_schemas":
@@ -92,6 +98,13 @@ def decode_ack(data: bytes) -> Ack:
         (n_missing,) = r.unpack(U16, "missing schema count")
         missing = tuple(r.take(8, "missing schema fingerprint") for _ in range(n_missing))
     r.done("the ack")
-    return Ack(edge_id=edge_id, stream=stream, first_seq=first_seq, last_seq=last_seq,
-               status=name, failures=tuple(failures), detail=detail, missing_schemas=missing)
-
+    return Ack(
+        edge_id=edge_id,
+        stream=stream,
+        first_seq=first_seq,
+        last_seq=last_seq,
+        status=name,
+        failures=tuple(failures),
+        detail=detail,
+        missing_schemas=missing,
+    )

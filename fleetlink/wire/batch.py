@@ -96,8 +96,13 @@ def encode_batch_payloads(
         raise WireError(f"unknown codec {codec!r}")
     if len(schemas) + len(elided) > 0xFFFF:
         raise WireError(f"{len(schemas) + len(elided)} schemas do not fit a 16-bit count")
-    parts = [str16(site), str16(edge_id), str16(stream), U64.pack(items[0][0]),
-             U16.pack(len(schemas) + len(elided))]
+    parts = [
+        str16(site),
+        str16(edge_id),
+        str16(stream),
+        U64.pack(items[0][0]),
+        U16.pack(len(schemas) + len(elided)),
+    ]
     for fingerprint in elided:
         if len(fingerprint) != 8:
             raise WireError(f"a schema fingerprint has 8 bytes, got {len(fingerprint)}")
@@ -127,9 +132,14 @@ def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = Non
     if batch.records and batch.records[0].seq != batch.first_seq:
         raise WireError(f"first_seq {batch.first_seq} is not the first record's seq {batch.records[0].seq}")
     return encode_batch_payloads(
-        site=batch.site, edge_id=batch.edge_id, stream=batch.stream,
-        items=[(r.seq, encode_payload(r)) for r in batch.records], schemas=batch.schemas,
-        elided=batch.elided, codec=codec, level=level,
+        site=batch.site,
+        edge_id=batch.edge_id,
+        stream=batch.stream,
+        items=[(r.seq, encode_payload(r)) for r in batch.records],
+        schemas=batch.schemas,
+        elided=batch.elided,
+        codec=codec,
+        level=level,
     )
 
 
@@ -212,6 +222,12 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     r.done("the batch")
     if records[0].seq != first_seq:
         raise WireError(f"first_seq {first_seq} is not the first record's seq {records[0].seq}")
-    return Batch(site=site, edge_id=edge_id, stream=stream, first_seq=first_seq,
-                 records=tuple(records), schemas=schemas, elided=elided)
-
+    return Batch(
+        site=site,
+        edge_id=edge_id,
+        stream=stream,
+        first_seq=first_seq,
+        records=tuple(records),
+        schemas=schemas,
+        elided=elided,
+    )

@@ -85,8 +85,20 @@ class CommandEnvelope:
 
 def _replace_schema(env: CommandEnvelope, schema: str | None) -> CommandEnvelope:
     return CommandEnvelope(
-        env.command_id, env.robot, env.ros_topic, env.ros_type, env.mapping, env.issued_at_ms,
-        env.lease_until_ms, env.period_ms, env.schema_fp, env.body, schema, env.qos, env.order, env.source,
+        env.command_id,
+        env.robot,
+        env.ros_topic,
+        env.ros_type,
+        env.mapping,
+        env.issued_at_ms,
+        env.lease_until_ms,
+        env.period_ms,
+        env.schema_fp,
+        env.body,
+        schema,
+        env.qos,
+        env.order,
+        env.source,
     )
 
 
@@ -130,9 +142,15 @@ class StatusAck:
 def encode_envelope(env: CommandEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
     check_envelope(env)
     header: dict[str, Any] = {
-        "id": env.command_id, "robot": env.robot, "topic": env.ros_topic, "type": env.ros_type,
-        "mapping": env.mapping, "issued": env.issued_at_ms, "until": env.lease_until_ms,
-        "period": env.period_ms, "order": env.order,
+        "id": env.command_id,
+        "robot": env.robot,
+        "topic": env.ros_topic,
+        "type": env.ros_type,
+        "mapping": env.mapping,
+        "issued": env.issued_at_ms,
+        "until": env.lease_until_ms,
+        "period": env.period_ms,
+        "order": env.order,
     }
     if env.source != env.command_id:
         header["source"] = env.source
@@ -166,7 +184,7 @@ def decode_envelope(data: bytes) -> CommandEnvelope:
     end = _HEADER_LEN.size + size
     if end > len(rest):
         raise EnvelopeError("command envelope", f"header of {size} bytes runs past the end", data)
-    header = _json_object(rest[_HEADER_LEN.size:end], "command envelope header", data)
+    header = _json_object(rest[_HEADER_LEN.size : end], "command envelope header", data)
     try:
         fp, view = split_single_object(bytes(rest[end:]))
         body = bytes(view)
@@ -174,10 +192,19 @@ def decode_envelope(data: bytes) -> CommandEnvelope:
         raise EnvelopeError("command envelope", f"value: {exc}", data) from None
     get = _Fields(header, "command envelope", data)
     env = CommandEnvelope(
-        command_id=get.text("id"), robot=get.text("robot"), ros_topic=get.text("topic"),
-        ros_type=get.text("type"), mapping=get.text("mapping"), issued_at_ms=get.integer("issued"),
-        lease_until_ms=get.integer("until"), period_ms=get.integer("period"), schema_fp=fp, body=body,
-        schema=get.optional_text("schema"), qos=get.optional_text("qos"), order=get.integer("order"),
+        command_id=get.text("id"),
+        robot=get.text("robot"),
+        ros_topic=get.text("topic"),
+        ros_type=get.text("type"),
+        mapping=get.text("mapping"),
+        issued_at_ms=get.integer("issued"),
+        lease_until_ms=get.integer("until"),
+        period_ms=get.integer("period"),
+        schema_fp=fp,
+        body=body,
+        schema=get.optional_text("schema"),
+        qos=get.optional_text("qos"),
+        order=get.integer("order"),
         source=get.text("source", allow_empty=True) if "source" in header else get.text("id"),
     )
     try:
@@ -223,8 +250,14 @@ def check_envelope(env: CommandEnvelope) -> None:
 def encode_reply(reply: CommandReply) -> bytes:
     if reply.result not in RESULTS:
         raise EnvelopeError("command reply", f"result {reply.result!r} is not one of {sorted(RESULTS)}")
-    obj = {"id": reply.command_id, "robot": reply.robot, "result": reply.result, "detail": reply.detail,
-           "site": reply.site, "repeater": reply.repeater}
+    obj = {
+        "id": reply.command_id,
+        "robot": reply.robot,
+        "result": reply.result,
+        "detail": reply.detail,
+        "site": reply.site,
+        "repeater": reply.repeater,
+    }
     return json.dumps({k: v for k, v in obj.items() if v}, separators=(",", ":")).encode()
 
 
@@ -233,9 +266,14 @@ def decode_reply(data: bytes) -> CommandReply:
     result = get.text("result")
     if result not in RESULTS:
         raise EnvelopeError("command reply", f"result {result!r} is not one of {sorted(RESULTS)}", data)
-    return CommandReply(get.text("id"), get.text("robot"), result,  # type: ignore[arg-type]
-                        get.text("detail", allow_empty=True), get.text("site", allow_empty=True),
-                        get.text("repeater", allow_empty=True))
+    return CommandReply(
+        get.text("id"),
+        get.text("robot"),
+        result,  # type: ignore[arg-type]
+        get.text("detail", allow_empty=True),
+        get.text("site", allow_empty=True),
+        get.text("repeater", allow_empty=True),
+    )
 
 
 # -- status ---------------------------------------------------------------------------------
@@ -246,10 +284,15 @@ def encode_status_batch(batch: StatusBatch, *, compress_above: int = COMPRESS_AB
     for event in batch.events:
         if event.status not in STATUSES:
             raise EnvelopeError("status batch", f"status {event.status!r} is not one of {sorted(STATUSES)}")
-    text = json.dumps({
-        "repeater": batch.repeater, "site": batch.site,
-        "events": [status_to_json(e) for e in batch.events],
-    }, separators=(",", ":"), ensure_ascii=False).encode()
+    text = json.dumps(
+        {
+            "repeater": batch.repeater,
+            "site": batch.site,
+            "events": [status_to_json(e) for e in batch.events],
+        },
+        separators=(",", ":"),
+        ensure_ascii=False,
+    ).encode()
     if len(text) > compress_above:
         packed = zlib.compress(text, 6)
         if len(packed) < len(text):
@@ -258,8 +301,15 @@ def encode_status_batch(batch: StatusBatch, *, compress_above: int = COMPRESS_AB
 
 
 def status_to_json(event: StatusEvent) -> dict[str, Any]:
-    return {"id": event.command_id, "robot": event.robot, "topic": event.ros_topic,
-            "status": event.status, "at": event.at_ms, "site": event.site, "detail": event.detail}
+    return {
+        "id": event.command_id,
+        "robot": event.robot,
+        "topic": event.ros_topic,
+        "status": event.status,
+        "at": event.at_ms,
+        "site": event.site,
+        "detail": event.detail,
+    }
 
 
 def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
@@ -269,9 +319,15 @@ def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
     status = get.text("status")
     if status not in STATUSES:
         raise EnvelopeError("status event", f"status {status!r} is not one of {sorted(STATUSES)}", data)
-    return StatusEvent(get.text("id"), get.text("robot"), get.text("topic"), status,  # type: ignore[arg-type]
-                       get.integer("at"), get.text("site", allow_empty=True),
-                       get.text("detail", allow_empty=True))
+    return StatusEvent(
+        get.text("id"),
+        get.text("robot"),
+        get.text("topic"),
+        status,  # type: ignore[arg-type]
+        get.integer("at"),
+        get.text("site", allow_empty=True),
+        get.text("detail", allow_empty=True),
+    )
 
 
 def decode_status_batch(data: bytes) -> StatusBatch:
@@ -283,8 +339,9 @@ def decode_status_batch(data: bytes) -> StatusBatch:
     events = obj.get("events")
     if not isinstance(events, list):
         raise EnvelopeError("status batch", "field 'events' must be a list", data)
-    return StatusBatch(get.text("repeater"), get.text("site"),
-                       tuple(status_from_json(e, data) for e in events))
+    return StatusBatch(
+        get.text("repeater"), get.text("site"), tuple(status_from_json(e, data) for e in events)
+    )
 
 
 def encode_status_ack(ack: StatusAck) -> bytes:

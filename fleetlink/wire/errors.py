@@ -14,7 +14,6 @@ class WireError(FleetlinkError):
         self.offset = offset
 
 
-
 class EnvelopeError(FleetlinkError):
     """Bytes that are not a valid command envelope, reply or status batch.
 

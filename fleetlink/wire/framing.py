@@ -59,4 +59,3 @@ class Reader:
     def done(self, what: str) -> None:
         if self.pos != self.end:
             raise WireError(f"{self.end - self.pos} unexpected trailing bytes after {what}", offset=self.pos)
-

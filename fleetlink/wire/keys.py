@@ -14,8 +14,10 @@ def check_key_name(name: str, what: str = "name") -> str:
     """A site, edge id or robot as key-expression chunks: letters, digits, '_', '.', '-'
     (robots may span several '/'-separated chunks). No wildcards, no empty chunks."""
     if _KEY_CHUNK.fullmatch(name) is None:
-        raise WireError(f"{what} {name!r} cannot be used in a key expression: use letters, digits, "
-                        "'_', '.', '-' (no wildcards, no empty chunks)")
+        raise WireError(
+            f"{what} {name!r} cannot be used in a key expression: use letters, digits, "
+            "'_', '.', '-' (no wildcards, no empty chunks)"
+        )
     return name
 
 
@@ -56,4 +58,3 @@ def events_key(site: str) -> str:
 def admin_key(site: str) -> str:
     """Everything administrative of a site: ``fleetlink/<site>/admin/**``."""
     return f"{site_prefix(site)}/admin/**"
-

@@ -82,8 +82,11 @@ def _tail(kafka_topic: str, key: bytes | None, headers: Sequence[tuple[str, byte
 def encode_payload(record: Record) -> bytes:
     """A record's spool payload (everything but its seq); readable by batch versions 1 and 2."""
     flags = (FLAG_RAW_VALUE if record.raw_value else 0) | (FLAG_NULL_KEY if record.key is None else 0)
-    return (_PAYLOAD_HEAD.pack(flags, record.timestamp_ms, len(record.value)) + record.value
-            + _tail(record.kafka_topic, record.key, record.headers))
+    return (
+        _PAYLOAD_HEAD.pack(flags, record.timestamp_ms, len(record.value))
+        + record.value
+        + _tail(record.kafka_topic, record.key, record.headers)
+    )
 
 
 class PayloadTemplate:
@@ -106,8 +109,12 @@ class PayloadTemplate:
             return _PAYLOAD_HEAD.pack(self._flags, timestamp_ms, len(value)) + value + self._tail
         if not 0 <= source_seq < 1 << 64:
             raise WireError(f"source seq {source_seq} does not fit a u64")
-        return (_PAYLOAD_HEAD.pack(self._flags | FLAG_SOURCE_SEQ, timestamp_ms, len(value)) + value
-                + U64.pack(source_seq) + self._tail)
+        return (
+            _PAYLOAD_HEAD.pack(self._flags | FLAG_SOURCE_SEQ, timestamp_ms, len(value))
+            + value
+            + U64.pack(source_seq)
+            + self._tail
+        )
 
 
 def payload_fingerprint(payload: bytes) -> bytes | None:
@@ -123,8 +130,11 @@ def payload_fingerprint(payload: bytes) -> bytes | None:
 def payload_fingerprints(payloads: Iterable[bytes]) -> set[bytes]:
     """``{payload_fingerprint(p)}`` of many payloads without ``None`` (one pass, no call each)."""
     head, start, end = VALUE_OFFSET, VALUE_OFFSET + 2, VALUE_OFFSET + 10
-    return {p[start:end] for p in payloads
-            if len(p) >= end and not p[0] & FLAG_RAW_VALUE and p[head:start] == SINGLE_OBJECT_MAGIC}
+    return {
+        p[start:end]
+        for p in payloads
+        if len(p) >= end and not p[0] & FLAG_RAW_VALUE and p[head:start] == SINGLE_OBJECT_MAGIC
+    }
 
 
 def decode_payload(payload: bytes | memoryview, seq: int = 0) -> Record:
@@ -168,8 +178,15 @@ def decode_record(data: bytes, pos: int, end: int, seq: int, *, tails: Tails, al
         raise WireError("record flagged with a null key carries key bytes", offset=tail_at)
     if source_seq >= 0:
         headers = (*headers, (SOURCE_SEQ_HEADER, str(source_seq).encode()))
-    return Record(topic, None if flags & FLAG_NULL_KEY else key, value, headers, timestamp_ms, seq,
-                  bool(flags & FLAG_RAW_VALUE))
+    return Record(
+        topic,
+        None if flags & FLAG_NULL_KEY else key,
+        value,
+        headers,
+        timestamp_ms,
+        seq,
+        bool(flags & FLAG_RAW_VALUE),
+    )
 
 
 def _parse_tail(data: bytes, pos: int, end: int) -> tuple[str, bytes, Headers]:

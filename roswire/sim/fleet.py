@@ -156,10 +156,17 @@ class Fleet:
         return name
 
     def _make_robot(self, name: str) -> SimRobot:
-        node = RosNode("create3", f"/{name}", domain_id=self.domain_id, config=self.config,
-                       typestore=self.typestore, distro=self.distro)
-        return SimRobot(name, RobotModel(name, time.time(), self.seed), node,
-                        MessageFactory(self.typestore, name))
+        node = RosNode(
+            "create3",
+            f"/{name}",
+            domain_id=self.domain_id,
+            config=self.config,
+            typestore=self.typestore,
+            distro=self.distro,
+        )
+        return SimRobot(
+            name, RobotModel(name, time.time(), self.seed), node, MessageFactory(self.typestore, name)
+        )
 
     def _start_robot(self, robot: SimRobot) -> None:
         # under the robot's lock: the fleet's ticker must not see a started node without publishers
@@ -167,8 +174,9 @@ class Fleet:
             robot.node.start()
             for topic, (typename, qos) in TOPICS.items():
                 robot.publishers[topic] = robot.node.create_publisher(topic, typename, qos)
-        robot.node.create_subscriber("cmd_lightring", LIGHTRING, lambda s: self._on_lightring(robot, s),
-                                     decode=True)
+        robot.node.create_subscriber(
+            "cmd_lightring", LIGHTRING, lambda s: self._on_lightring(robot, s), decode=True
+        )
 
     def remove_robot(self, name: str) -> None:
         with self._lock:

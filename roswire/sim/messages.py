@@ -34,7 +34,8 @@ class MessageFactory:
         sec = math.floor(stamp)
         nanosec = min(round((stamp - sec) * 1e9), 999_999_999)
         return self.t["std_msgs/msg/Header"](
-            stamp=self.t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame)
+            stamp=self.t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame
+        )
 
     def ir_intensity(self, r: Readings) -> Any:
         readings = [
@@ -46,7 +47,8 @@ class MessageFactory:
     def hazard_detection(self, r: Readings) -> Any:
         detections = [
             self.t["irobot_create_msgs/msg/HazardDetection"](
-                header=self.header(r.stamp, _HAZARD_FRAMES.get(h, "base_link")), type=h)
+                header=self.header(r.stamp, _HAZARD_FRAMES.get(h, "base_link")), type=h
+            )
             for h in r.hazards
         ]
         return self.t[HAZARDS](header=self.header(r.stamp, "base_link"), detections=detections)
@@ -63,12 +65,15 @@ class MessageFactory:
     def odom(self, r: Readings) -> Any:
         t = self.t
         pose = t["geometry_msgs/msg/Pose"](
-            position=t["geometry_msgs/msg/Point"](x=r.x, y=r.y, z=0.0), orientation=self._quat(r.yaw))
+            position=t["geometry_msgs/msg/Point"](x=r.x, y=r.y, z=0.0), orientation=self._quat(r.yaw)
+        )
         twist = t["geometry_msgs/msg/Twist"](
-            linear=self._vec(r.linear_velocity, 0.0, 0.0), angular=self._vec(0.0, 0.0, r.angular_velocity))
+            linear=self._vec(r.linear_velocity, 0.0, 0.0), angular=self._vec(0.0, 0.0, r.angular_velocity)
+        )
         cov = np.zeros(36, dtype=np.float64)
         return t[ODOMETRY](
-            header=self.header(r.stamp, "odom"), child_frame_id="base_link",
+            header=self.header(r.stamp, "odom"),
+            child_frame_id="base_link",
             pose=t["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
             twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=cov.copy()),
         )
@@ -76,30 +81,42 @@ class MessageFactory:
     def imu(self, r: Readings) -> Any:
         cov = np.zeros(9, dtype=np.float64)
         return self.t[IMU](
-            header=self.header(r.stamp, "imu_link"), orientation=self._quat(r.yaw),
-            orientation_covariance=cov, angular_velocity=self._vec(0.0, 0.0, r.angular_velocity),
-            angular_velocity_covariance=cov.copy(), linear_acceleration=self._vec(*r.linear_acceleration),
+            header=self.header(r.stamp, "imu_link"),
+            orientation=self._quat(r.yaw),
+            orientation_covariance=cov,
+            angular_velocity=self._vec(0.0, 0.0, r.angular_velocity),
+            angular_velocity_covariance=cov.copy(),
+            linear_acceleration=self._vec(*r.linear_acceleration),
             linear_acceleration_covariance=cov.copy(),
         )
 
     def battery_state(self, r: Readings) -> Any:
         cls: Any = self.t[BATTERY]
         return cls(
-            header=self.header(r.stamp, "base_link"), voltage=r.battery_voltage, temperature=25.0,
-            current=-0.5, charge=2.1 * r.battery_percentage, capacity=2.1, design_capacity=2.1,
+            header=self.header(r.stamp, "base_link"),
+            voltage=r.battery_voltage,
+            temperature=25.0,
+            current=-0.5,
+            charge=2.1 * r.battery_percentage,
+            capacity=2.1,
+            design_capacity=2.1,
             percentage=r.battery_percentage,
             power_supply_status=cls.POWER_SUPPLY_STATUS_DISCHARGING,
             power_supply_health=cls.POWER_SUPPLY_HEALTH_GOOD,
-            power_supply_technology=cls.POWER_SUPPLY_TECHNOLOGY_LION, present=True,
-            cell_voltage=np.zeros(0, dtype=np.float32), cell_temperature=np.zeros(0, dtype=np.float32),
-            location="slot0", serial_number=f"{self.robot}-battery",
+            power_supply_technology=cls.POWER_SUPPLY_TECHNOLOGY_LION,
+            present=True,
+            cell_voltage=np.zeros(0, dtype=np.float32),
+            cell_temperature=np.zeros(0, dtype=np.float32),
+            location="slot0",
+            serial_number=f"{self.robot}-battery",
         )
 
     def lightring(self, colours: tuple[RGB, ...], override_system: bool, stamp: float) -> Any:
         """A ``cmd_lightring`` command (what a fleet operator would send)."""
         leds = [self.t["irobot_create_msgs/msg/LedColor"](red=r, green=g, blue=b) for r, g, b in colours]
-        return self.t[LIGHTRING](header=self.header(stamp, "base_link"), leds=leds,
-                                 override_system=override_system)
+        return self.t[LIGHTRING](
+            header=self.header(stamp, "base_link"), leds=leds, override_system=override_system
+        )
 
 
 def lightring_colours(msg: Any) -> tuple[RGB, ...]:

@@ -115,8 +115,9 @@ class RobotModel:
 
     def set_lightring(self, colours: tuple[RGB, ...], override_system: bool, now: float) -> LedState:
         """Apply a ``cmd_lightring`` command: overriding colours show, otherwise the system's."""
-        self.led = LedState(colours, True, now) if override_system else LedState(
-            SYSTEM_LEDS.colours, False, now)
+        self.led = (
+            LedState(colours, True, now) if override_system else LedState(SYSTEM_LEDS.colours, False, now)
+        )
         return self.led
 
     def step(self, now: float) -> Readings:
@@ -137,7 +138,16 @@ class RobotModel:
             hazards = ()
             accel = (rng.gauss(0, 0.02), v * w + rng.gauss(0, 0.02), GRAVITY + rng.gauss(0, 0.02))
         return Readings(
-            stamp=now, ir=ir, hazards=hazards, kidnapped=self.picked_up, x=self.x, y=self.y,
-            yaw=self.yaw, linear_velocity=v, angular_velocity=w, linear_acceleration=accel,
-            battery_percentage=self.battery, battery_voltage=14.0 + 2.8 * self.battery,
+            stamp=now,
+            ir=ir,
+            hazards=hazards,
+            kidnapped=self.picked_up,
+            x=self.x,
+            y=self.y,
+            yaw=self.yaw,
+            linear_velocity=v,
+            angular_velocity=w,
+            linear_acceleration=accel,
+            battery_percentage=self.battery,
+            battery_voltage=14.0 + 2.8 * self.battery,
         )

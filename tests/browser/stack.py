@@ -107,8 +107,12 @@ def console_stack(
             robot_types={"tb4": {"match": "/tb4_*", "mappings": [IR_MAPPING]}},
         )
         sim = stack.enter_context(fleet(site_router.endpoint, domain, robots=robots, rate=rate))
-        admin = EdgeAdmin(edge, token=SecretStr(token), listen="127.0.0.1:0",
-                          extensions=[console_extension(SecretStr(token), edge.edge_id)])
+        admin = EdgeAdmin(
+            edge,
+            token=SecretStr(token),
+            listen="127.0.0.1:0",
+            extensions=[console_extension(SecretStr(token), edge.edge_id)],
+        )
         agent = stack.enter_context(EdgeAgent(admin.load(), stop_timeout_s=0.5))
         admin.attach(agent)
         stack.callback(admin.stop)

@@ -17,9 +17,11 @@ from fleetlink.localstack.process import free_port
 def own_kafka(tmp_path: Path) -> Iterator[KafkaBroker]:
     """A broker of this test's own, to kill: same data directory across restarts."""
     artifacts = fetch_all()
-    broker = KafkaBroker(KafkaSettings(port=free_port(), controller_port=free_port(),
-                                       data_dir=tmp_path / "kafka"),
-                         artifacts.kafka_classpath, find_java(KAFKA_MIN_JAVA, "Apache Kafka 4"))
+    broker = KafkaBroker(
+        KafkaSettings(port=free_port(), controller_port=free_port(), data_dir=tmp_path / "kafka"),
+        artifacts.kafka_classpath,
+        find_java(KAFKA_MIN_JAVA, "Apache Kafka 4"),
+    )
     broker.start(90)
     try:
         yield broker

@@ -58,8 +58,13 @@ class Process:
 
     def start(self) -> Process:
         with self.log.open("ab") as out:
-            self.proc = subprocess.Popen([sys.executable, "-m", "fleetlink", "-v", *self.argv], cwd=ROOT,
-                                         stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "fleetlink", "-v", *self.argv],
+                cwd=ROOT,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+            )
         return self
 
     def kill(self) -> None:
@@ -135,16 +140,30 @@ class Bed:
 
     def start_edge(self) -> Process:
         n = sum(p.name == "edge" for p in self.processes)
-        self.edge = Process("edge", ["edge", "run", "-c", str(self.edge_yaml), "--stats-file",
-                                     str(self.stats_file), "--stats-interval", "0.2", "--stop-timeout", "5"],
-                            self.tmp / f"edge-{n}.log").start()
+        self.edge = Process(
+            "edge",
+            [
+                "edge",
+                "run",
+                "-c",
+                str(self.edge_yaml),
+                "--stats-file",
+                str(self.stats_file),
+                "--stats-interval",
+                "0.2",
+                "--stop-timeout",
+                "5",
+            ],
+            self.tmp / f"edge-{n}.log",
+        ).start()
         self.processes.append(self.edge)
         return self.edge
 
     def start_uplink(self) -> Process:
         n = sum(p.name == "uplink" for p in self.processes)
-        self.uplink = Process("uplink", ["uplink", "run", "-c", str(self.uplink_yaml)],
-                              self.tmp / f"uplink-{n}.log").start()
+        self.uplink = Process(
+            "uplink", ["uplink", "run", "-c", str(self.uplink_yaml)], self.tmp / f"uplink-{n}.log"
+        ).start()
         self.processes.append(self.uplink)
         return self.uplink
 
@@ -161,11 +180,16 @@ class Bed:
 
     def wait_drained(self, records: int, timeout: float) -> None:
         """Every one of ``records`` samples spooled, and the spool empty (all acknowledged)."""
+
         def drained() -> bool:
             stats = self.stats()
             buffer = self.durable().get("buffer", {})
-            return bool(stats.get("processor", {}).get("samples", 0) >= records and buffer.get("depth") == 0
-                        and stats.get("running"))
+            return bool(
+                stats.get("processor", {}).get("samples", 0) >= records
+                and buffer.get("depth") == 0
+                and stats.get("running")
+            )
+
         self.wait(drained, timeout, f"{records} records spooled and acknowledged")
 
     def wait(self, condition: Any, timeout: float, what: str) -> None:
@@ -187,8 +211,9 @@ def _write_yaml(path: Path, data: dict[str, Any]) -> Path:
 
 
 @contextmanager
-def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s",
-        registry_relay: bool = False) -> Iterator[Bed]:
+def bed(
+    tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s", registry_relay: bool = False
+) -> Iterator[Bed]:
     """Routers and the relay in this process; config files for the edge and uplink processes.
     ``registry_relay``: the uplink reaches the registry through a relay too (``Bed.registry_relay``)."""
     run = uuid.uuid4().hex[:8]
@@ -204,26 +229,63 @@ def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s
         relay = stack.enter_context(TcpRelay(cloud.port))
         site = stack.enter_context(ZenohRouter(connect=(relay.endpoint,)))
         site_name, topic, dead_letter = f"fault-{run}", f"fault.chat.{run}", f"fault.dead-letter.{run}"
-        edge_yaml = _write_yaml(tmp / "edge.yaml", {
-            "site": site_name, "edge_id": "edge-1",
-            "zenoh": {"mode": "client", "connect": [site.endpoint]},
-            "robot_types": {"tb4": {"match": "/tb4_*", "mappings": [
-                {"name": "chat", "from": "/{robot}/chatter", "to": topic, "type": STRING}]}},
-            "spool": {"dir": str(tmp / "spool"), "segment_bytes": "1MiB", "max_bytes": "64MiB",
-                      "fsync": "interval", "fsync_interval": "50ms"},
-            "registration": {"grace_period": "30s"},
-            "wan": {"batch_max_records": BATCH, "linger": "10ms", "ack_timeout": ack_timeout,
-                    "max_in_flight": 1, "retry_backoff_min": "100ms", "retry_backoff_max": "1s"},
-            "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
-        })
-        uplink_yaml = _write_yaml(tmp / "uplink.yaml", {
-            "kafka": {"bootstrap_servers": bootstrap},
-            "registry": {"url": uplink_registry},
-            "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
-            "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
-        })
-        test_bed = Bed(tmp, bootstrap, registry_url, cloud, relay, site, site_name, topic, dead_letter,
-                       edge_yaml, uplink_yaml, tmp / "edge-stats.json", to_registry)
+        edge_yaml = _write_yaml(
+            tmp / "edge.yaml",
+            {
+                "site": site_name,
+                "edge_id": "edge-1",
+                "zenoh": {"mode": "client", "connect": [site.endpoint]},
+                "robot_types": {
+                    "tb4": {
+                        "match": "/tb4_*",
+                        "mappings": [
+                            {"name": "chat", "from": "/{robot}/chatter", "to": topic, "type": STRING}
+                        ],
+                    }
+                },
+                "spool": {
+                    "dir": str(tmp / "spool"),
+                    "segment_bytes": "1MiB",
+                    "max_bytes": "64MiB",
+                    "fsync": "interval",
+                    "fsync_interval": "50ms",
+                },
+                "registration": {"grace_period": "30s"},
+                "wan": {
+                    "batch_max_records": BATCH,
+                    "linger": "10ms",
+                    "ack_timeout": ack_timeout,
+                    "max_in_flight": 1,
+                    "retry_backoff_min": "100ms",
+                    "retry_backoff_max": "1s",
+                },
+                "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
+            },
+        )
+        uplink_yaml = _write_yaml(
+            tmp / "uplink.yaml",
+            {
+                "kafka": {"bootstrap_servers": bootstrap},
+                "registry": {"url": uplink_registry},
+                "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
+                "topics": {"dead_letter": dead_letter, "registrations": f"fault.robots.{run}"},
+            },
+        )
+        test_bed = Bed(
+            tmp,
+            bootstrap,
+            registry_url,
+            cloud,
+            relay,
+            site,
+            site_name,
+            topic,
+            dead_letter,
+            edge_yaml,
+            uplink_yaml,
+            tmp / "edge-stats.json",
+            to_registry,
+        )
         try:
             yield test_bed
         finally:
@@ -231,8 +293,9 @@ def bed(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s
 
 
 @contextmanager
-def streaming(tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s",
-              rate: float = 400.0) -> Iterator[tuple[Bed, Generator]]:
+def streaming(
+    tmp: Path, bootstrap: str, registry_url: str, *, ack_timeout: str = "10s", rate: float = 400.0
+) -> Iterator[tuple[Bed, Generator]]:
     """A bed with the uplink and the edge started and the generator publishing."""
     with bed(tmp, bootstrap, registry_url, ack_timeout=ack_timeout) as b:
         b.start_uplink()
@@ -264,10 +327,12 @@ class Generator:
 
     def __init__(self, router: str, rate: float = 400.0) -> None:
         self.rate = rate
-        self.node = RosNode("gen", "/tb4_01", config=zenoh_peer_config(router),
-                            typestore=load_typestore("jazzy")).start()
-        self.publisher: RosPublisher = self.node.create_publisher("/tb4_01/chatter", STRING,
-                                                                  congestion="block")
+        self.node = RosNode(
+            "gen", "/tb4_01", config=zenoh_peer_config(router), typestore=load_typestore("jazzy")
+        ).start()
+        self.publisher: RosPublisher = self.node.create_publisher(
+            "/tb4_01/chatter", STRING, congestion="block"
+        )
         self.sent = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -315,8 +380,10 @@ class Count:
 
     def __str__(self) -> str:
         head = self.lost[:10]
-        return (f"lost {len(self.lost)} {head}, duplicated {self.duplicated}, unexpected {self.unexpected}, "
-                f"out of order {self.out_of_order}")
+        return (
+            f"lost {len(self.lost)} {head}, duplicated {self.duplicated}, unexpected {self.unexpected}, "
+            f"out of order {self.out_of_order}"
+        )
 
 
 def count(reader: TopicReader, msgs: list[Message], sent: int) -> Count:
@@ -335,14 +402,20 @@ def count(reader: TopicReader, msgs: list[Message], sent: int) -> Count:
             firsts.append(v)
     out_of_order = sum(1 for a, b in itertools.pairwise(firsts) if b < a)
     unexpected += sum(1 for v in seen if not 0 <= v < sent)
-    return Count(lost=sorted(set(range(sent)) - seen), duplicated=len(values) - len(seen),
-                 unexpected=unexpected, out_of_order=out_of_order)
+    return Count(
+        lost=sorted(set(range(sent)) - seen),
+        duplicated=len(values) - len(seen),
+        unexpected=unexpected,
+        out_of_order=out_of_order,
+    )
 
 
 def read_all(reader: TopicReader, topic: str, sent: int, timeout: float = 30.0) -> list[Message]:
     """Everything on the topic once at least ``sent`` distinct values arrived (or the deadline)."""
+
     def complete(msgs: list[Message]) -> bool:
         return len({m.value() for m in msgs}) >= sent
+
     try:
         return reader.read_until(topic, complete, timeout, what=f"{sent} distinct records on {topic}")
     except AssertionError:

@@ -102,25 +102,37 @@ def test_row23_malformed_commands_are_dead_lettered_and_nothing_is_sent(
     leds = LedLog()
     with Wan() as wan:
         site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic)], suffix=run)
+        config = uplink_config(
+            kafka_bootstrap, schema_registry_url, wan.cloud.endpoint, [lightring_mapping(topic)], suffix=run
+        )
         create_topics(kafka_bootstrap, topic)
         for raw in bad.values():
             producer.send(topic, "tb4_01", raw_value=raw)
         producer.send(topic, "tb4_01", raw_value=b"")  # empty value
         producer.send(topic, "tb4_02", GREEN, command_id=f"good-{run}")
-        with Repeater(repeater_config(site, tmp_path / "state")) as rep, fleet(site, ts, leds) as robots, \
-                TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_dead_letter,
-                         avro=False) as dlq, running_uplink(config) as uplink:
+        with (
+            Repeater(repeater_config(site, tmp_path / "state")) as rep,
+            fleet(site, ts, leds) as robots,
+            TopicLog(
+                kafka_bootstrap, schema_registry_url, config.topics.command_dead_letter, avro=False
+            ) as dlq,
+            running_uplink(config) as uplink,
+        ):
             robots.add_robot("tb4_01")
             robots.add_robot("tb4_02")
             router = uplink.commands
             assert router is not None
-            wait_until(lambda: leds.first("tb4_02", "green") is not None, timeout=15,
-                       message="the good command after the bad ones is delivered")
+            wait_until(
+                lambda: leds.first("tb4_02", "green") is not None,
+                timeout=15,
+                message="the good command after the bad ones is delivered",
+            )
             wait_until(lambda: len(dlq.records) == len(bad) + 1, timeout=10, message="dead letters")
-            wait_until(lambda: committed(kafka_bootstrap, router.group_id, topic) == len(bad) + 2,
-                       timeout=10, message="every offset committed")
+            wait_until(
+                lambda: committed(kafka_bootstrap, router.group_id, topic) == len(bad) + 2,
+                timeout=10,
+                message="every offset committed",
+            )
             by_value = {r["value"] or b"": r for r in dlq.records}
             for what, raw in bad.items():
                 record = by_value[raw]  # the raw bytes, unchanged
@@ -150,15 +162,24 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
     leds = LedLog()
     with Wan() as wan:
         site = wan.add_site("site-a")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic, period="1s", lease="25s")], suffix=run)
+        config = uplink_config(
+            kafka_bootstrap,
+            schema_registry_url,
+            wan.cloud.endpoint,
+            [lightring_mapping(topic, period="1s", lease="25s")],
+            suffix=run,
+        )
         # the killed uplink's group membership must time out before the second one gets the partition
-        kafka = config.kafka.model_copy(update={"consumer_overrides": {"session.timeout.ms": 6000,
-                                                                       "heartbeat.interval.ms": 1000}})
+        kafka = config.kafka.model_copy(
+            update={"consumer_overrides": {"session.timeout.ms": 6000, "heartbeat.interval.ms": 1000}}
+        )
         config = config.model_copy(update={"kafka": kafka})
         create_topics(kafka_bootstrap, topic)
-        with Repeater(repeater_config(site, tmp_path / "state")) as rep, fleet(site, ts, leds) as robots, \
-                TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status:
+        with (
+            Repeater(repeater_config(site, tmp_path / "state")) as rep,
+            fleet(site, ts, leds) as robots,
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+        ):
             robots.add_robot("tb4_01")
             wait_repeater_sees(rep, "/tb4_01/cmd_lightring")
             producer.send(topic, "tb4_01", RED, command_id=f"once-{run}")
@@ -171,12 +192,21 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
             site.relay.set_mode("pass")
             wait_until(lambda: leds.count("tb4_01", "red") >= 2, timeout=10, message="repeating locally")
             with uplink_process(config, tmp_path / "uplink2.yaml"):
-                wait_until(lambda: rep.stats.duplicates >= 1, timeout=30,
-                           message="the second uplink re-delivered the command")
-                wait_until(lambda: committed(kafka_bootstrap, f"uplink-{run}.commands", topic) == 1,
-                           timeout=15, message="offset committed after the duplicate reply")
-                wait_until(lambda: "delivered" in status.statuses(f"once-{run}"), timeout=15,
-                           message="delivered status")
+                wait_until(
+                    lambda: rep.stats.duplicates >= 1,
+                    timeout=30,
+                    message="the second uplink re-delivered the command",
+                )
+                wait_until(
+                    lambda: committed(kafka_bootstrap, f"uplink-{run}.commands", topic) == 1,
+                    timeout=15,
+                    message="offset committed after the duplicate reply",
+                )
+                wait_until(
+                    lambda: "delivered" in status.statuses(f"once-{run}"),
+                    timeout=15,
+                    message="delivered status",
+                )
                 marker = leds.count("tb4_01")
                 wait_until(lambda: leds.count("tb4_01") >= marker + 2, timeout=10, message="more repeats")
             assert rep.stats.applied == 1
@@ -194,22 +224,38 @@ def test_row25_repeater_restarted_after_the_lease_does_not_replay(
     lease = 3.0
     state = tmp_path / "state"
     with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease=f"{lease}s") as bed:
-        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
-                                                        bed.site, bed.config)
-        with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
-                running_uplink(config), fleet(site, ts, leds) as robots:
+        ts, run, topic, producer, leds, site, config = (
+            bed.ts,
+            bed.run,
+            bed.topic,
+            bed.producer,
+            bed.leds,
+            bed.site,
+            bed.config,
+        )
+        with (
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+            running_uplink(config),
+            fleet(site, ts, leds) as robots,
+        ):
             with Repeater(repeater_config(site, state)) as rep:
                 sent = producer.send(topic, "tb4_01", RED, command_id=f"stale-{run}")
                 wait_until(lambda: rep.stats.applied == 1, timeout=10, message="applied, robot offline")
             assert leds.count("tb4_01") == 0
-            wait_until(lambda: time.time() > sent + lease + 0.5, timeout=lease + 5,
-                       message="the lease ended while the repeater was down")
+            wait_until(
+                lambda: time.time() > sent + lease + 0.5,
+                timeout=lease + 5,
+                message="the lease ended while the repeater was down",
+            )
             robots.add_robot("tb4_01")  # the robot is back
             robots.add_robot("tb4_02")
             with Repeater(repeater_config(site, state)) as rep:
                 wait_repeater_sees(rep, "/tb4_01/cmd_lightring")
-                wait_until(lambda: "expired" in status.statuses(f"stale-{run}"), timeout=10,
-                           message="recorded as expired")
+                wait_until(
+                    lambda: "expired" in status.statuses(f"stale-{run}"),
+                    timeout=10,
+                    message="recorded as expired",
+                )
                 expired = next(v for v in status.values() if v["command_id"] == f"stale-{run}")
                 assert expired["detail"] == "lease ended while the repeater was down"
                 # positive control: a fresh command flows through the same repeater meanwhile
@@ -226,21 +272,35 @@ def test_repeater_restarted_within_the_lease_resumes_without_reapplying(
 ) -> None:
     state = tmp_path / "state"
     with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease="20s") as bed:
-        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
-                                                        bed.site, bed.config)
-        with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
-                fleet(site, ts, leds) as robots, running_uplink(config):
+        ts, run, topic, producer, leds, site, config = (
+            bed.ts,
+            bed.run,
+            bed.topic,
+            bed.producer,
+            bed.leds,
+            bed.site,
+            bed.config,
+        )
+        with (
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+            fleet(site, ts, leds) as robots,
+            running_uplink(config),
+        ):
             robots.add_robot("tb4_01")
             with Repeater(repeater_config(site, state)) as rep:
                 wait_repeater_sees(rep, "/tb4_01/cmd_lightring")
                 producer.send(topic, "tb4_01", RED, command_id=f"keep-{run}")
                 wait_until(lambda: leds.count("tb4_01", "red") >= 2, timeout=10, message="repeating")
-                wait_until(lambda: status.statuses(f"keep-{run}") == ["delivered"], timeout=10,
-                           message="delivered")
+                wait_until(
+                    lambda: status.statuses(f"keep-{run}") == ["delivered"], timeout=10, message="delivered"
+                )
             stopped_at = leds.count("tb4_01")
             with Repeater(repeater_config(site, state)) as rep:
-                wait_until(lambda: leds.count("tb4_01") >= stopped_at + 3, timeout=10,
-                           message="repeats resumed from the journal")
+                wait_until(
+                    lambda: leds.count("tb4_01") >= stopped_at + 3,
+                    timeout=10,
+                    message="repeats resumed from the journal",
+                )
                 assert rep.stats.applied == 0  # resumed, not re-applied
                 assert [c.command_id for c in rep.schedule.active()] == [f"keep-{run}"]
             assert status.statuses(f"keep-{run}") == ["delivered"]  # not twice
@@ -251,11 +311,21 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
 ) -> None:
     lease = 5.0
     with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease=f"{lease}s") as bed:
-        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
-                                                        bed.site, bed.config)
-        with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
-                fleet(site, ts, leds) as robots, running_uplink(config), \
-                Repeater(repeater_config(site, tmp_path / "state")) as rep:
+        ts, run, topic, producer, leds, site, config = (
+            bed.ts,
+            bed.run,
+            bed.topic,
+            bed.producer,
+            bed.leds,
+            bed.site,
+            bed.config,
+        )
+        with (
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+            fleet(site, ts, leds) as robots,
+            running_uplink(config),
+            Repeater(repeater_config(site, tmp_path / "state")) as rep,
+        ):
             robots.add_robot("tb4_01")
             wait_repeater_sees(rep, "/tb4_01/cmd_lightring")
             sent = producer.send(topic, "tb4_01", RED, command_id=f"cut-{run}")
@@ -274,11 +344,16 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
             # relay swallowed broke the Zenoh stream of the WAN link, which may have to time out
             # and reconnect first.
             try:
-                wait_until(lambda: distinct(status.statuses(f"cut-{run}")) == ["delivered", "expired"],
-                           timeout=60, message="statuses reach Kafka after the heal")
+                wait_until(
+                    lambda: distinct(status.statuses(f"cut-{run}")) == ["delivered", "expired"],
+                    timeout=60,
+                    message="statuses reach Kafka after the heal",
+                )
             except AssertionError as exc:
-                raise AssertionError(f"{exc}; in Kafka: {status.statuses(f'cut-{run}')}, still pending at "
-                                     f"the repeater: {rep.pending_statuses()}") from None
+                raise AssertionError(
+                    f"{exc}; in Kafka: {status.statuses(f'cut-{run}')}, still pending at "
+                    f"the repeater: {rep.pending_statuses()}"
+                ) from None
             assert leds.last("tb4_01") == last
 
 
@@ -286,11 +361,21 @@ def test_wan_cut_dead_man_stops_a_long_lease_early(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
     with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease="60s") as bed:
-        ts, run, topic, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
-                                                        bed.site, bed.config)
-        with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
-                fleet(site, ts, leds) as robots, running_uplink(config), \
-                Repeater(repeater_config(site, tmp_path / "state", dead_man="2s")) as rep:
+        ts, run, topic, producer, leds, site, config = (
+            bed.ts,
+            bed.run,
+            bed.topic,
+            bed.producer,
+            bed.leds,
+            bed.site,
+            bed.config,
+        )
+        with (
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+            fleet(site, ts, leds) as robots,
+            running_uplink(config),
+            Repeater(repeater_config(site, tmp_path / "state", dead_man="2s")) as rep,
+        ):
             robots.add_robot("tb4_01")
             wait_repeater_sees(rep, "/tb4_01/cmd_lightring")
             producer.send(topic, "tb4_01", RED, command_id=f"dm-{run}")
@@ -303,8 +388,11 @@ def test_wan_cut_dead_man_stops_a_long_lease_early(
             last = leds.last("tb4_01")
             assert last is not None
             site.relay.set_mode("pass")
-            wait_until(lambda: distinct(status.statuses(f"dm-{run}")) == ["delivered", "expired"],
-                       timeout=30, message="statuses reach Kafka after the heal")
+            wait_until(
+                lambda: distinct(status.statuses(f"dm-{run}")) == ["delivered", "expired"],
+                timeout=30,
+                message="statuses reach Kafka after the heal",
+            )
             expired = next(v for v in status.values() if v["status"] == "expired")
             assert expired["detail"].startswith("dead-man: no contact with the uplink")
             assert leds.last("tb4_01") == last  # stopped for good, though the lease had 50 s left

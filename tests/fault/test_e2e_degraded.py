@@ -41,8 +41,9 @@ def check(result: Count, retried: int) -> None:
     assert result.duplicated <= BATCH * retried, f"{result}; {retried} batch(es) retried"
 
 
-def test_kafka_frozen_longer_than_the_ack_timeout(own_kafka: KafkaBroker, schema_registry_url: str,
-                                                  tmp_path: Path) -> None:
+def test_kafka_frozen_longer_than_the_ack_timeout(
+    own_kafka: KafkaBroker, schema_registry_url: str, tmp_path: Path
+) -> None:
     reader = TopicReader(own_kafka.bootstrap, schema_registry_url)
     with streaming(tmp_path, own_kafka.bootstrap, schema_registry_url, ack_timeout="2s") as (b, gen):
         generate(b, gen, 600)
@@ -51,8 +52,11 @@ def test_kafka_frozen_longer_than_the_ack_timeout(own_kafka: KafkaBroker, schema
         own_kafka.process.signal(signal.SIGSTOP)
         frozen_at = time.monotonic()
         try:
-            b.wait(lambda: sender(b).get("batches_retried", 0) > before, 15,
-                   "the edge times out on the frozen broker and re-sends")
+            b.wait(
+                lambda: sender(b).get("batches_retried", 0) > before,
+                15,
+                "the edge times out on the frozen broker and re-sends",
+            )
             generate(b, gen, 800)
             assert b.durable()["buffer"]["depth"] >= 400  # the edge keeps spooling
         finally:
@@ -107,15 +111,18 @@ def test_slow_wan_backlog_grows_in_the_spool_not_in_front_of_zenoh(
         sent = gen.pause()
         b.wait_drained(sent, 60)
         stats = b.stats()
-    check(tally(reader, b, sent, f", {backlog} in the spool at the slowest"),
-          stats["streams"]["durable"]["sender"]["batches_retried"])
+    check(
+        tally(reader, b, sent, f", {backlog} in the spool at the slowest"),
+        stats["streams"]["durable"]["sender"]["batches_retried"],
+    )
     assert stats["intake"]["dropped"] == 0
     chatter = stats["subscriptions"]["/tb4_01/chatter"]
     assert (chatter["missing"], chatter["received"]) == (0, sent)
 
 
-def test_registry_down_when_a_new_topic_needs_its_schema(kafka_bootstrap: str, schema_registry_url: str,
-                                                         tmp_path: Path) -> None:
+def test_registry_down_when_a_new_topic_needs_its_schema(
+    kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
+) -> None:
     reader = TopicReader(kafka_bootstrap, schema_registry_url)
     with bed(tmp_path, kafka_bootstrap, schema_registry_url, registry_relay=True) as b:
         registry = b.registry_relay
@@ -124,13 +131,19 @@ def test_registry_down_when_a_new_topic_needs_its_schema(kafka_bootstrap: str, s
         b.start_edge()
         gen = Generator(b.site.endpoint)  # the robot joins: its registration event is the first record
         try:
-            b.wait(lambda: b.durable().get("buffer", {}).get("acked", 0) >= 1, 30,
-                   "the registration event in Kafka (the registry is reachable)")
+            b.wait(
+                lambda: b.durable().get("buffer", {}).get("acked", 0) >= 1,
+                30,
+                "the registration event in Kafka (the registry is reachable)",
+            )
             registry.set_mode("refuse")
             gen.wait_subscribed()
             gen.start()
-            b.wait(lambda: sender(b).get("batches_retried", 0) >= 2, 15,
-                   "batches answered 'error' while the registry is down, and sent again")
+            b.wait(
+                lambda: sender(b).get("batches_retried", 0) >= 2,
+                15,
+                "batches answered 'error' while the registry is down, and sent again",
+            )
             generate(b, gen, 400)
             assert b.durable()["buffer"]["depth"] >= 300  # waiting in the spool
             assert reader.consume(b.topic, 0, lambda ms: False, 0.5) == []  # nothing half-produced
@@ -147,8 +160,9 @@ def test_registry_down_when_a_new_topic_needs_its_schema(kafka_bootstrap: str, s
     assert errors >= 1  # the uplink said why
 
 
-def test_a_stalled_edge_loses_nothing_silently(kafka_bootstrap: str, schema_registry_url: str,
-                                               tmp_path: Path) -> None:
+def test_a_stalled_edge_loses_nothing_silently(
+    kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
+) -> None:
     reader = TopicReader(kafka_bootstrap, schema_registry_url)
     with streaming(tmp_path, kafka_bootstrap, schema_registry_url) as (b, gen):
         generate(b, gen, 400)
@@ -167,8 +181,14 @@ def test_a_stalled_edge_loses_nothing_silently(kafka_bootstrap: str, schema_regi
             chatter = stats.get("subscriptions", {}).get("/tb4_01/chatter", {})
             return int(stats.get("intake", {}).get("dropped", 0)) + int(chatter.get("missing", 0))
 
-        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) + counted() >= sent
-               and b.durable().get("buffer", {}).get("depth") == 0, 40, "everything processed or counted")
+        b.wait(
+            lambda: (
+                b.stats().get("processor", {}).get("samples", 0) + counted() >= sent
+                and b.durable().get("buffer", {}).get("depth") == 0
+            ),
+            40,
+            "everything processed or counted",
+        )
         accounted = counted()
     result = tally(reader, b, sent, f" with the edge stopped 2 s; {accounted} counted as lost by the edge")
     assert len(result.lost) == accounted, str(result)

@@ -30,8 +30,9 @@ def reader(kafka_bootstrap: str, schema_registry_url: str) -> TopicReader:
     return TopicReader(kafka_bootstrap, schema_registry_url)
 
 
-def test_baseline_then_graceful_stop_and_restart(kafka_bootstrap: str, schema_registry_url: str,
-                                                 reader: TopicReader, tmp_path: Path) -> None:
+def test_baseline_then_graceful_stop_and_restart(
+    kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
+) -> None:
     with streaming(tmp_path, kafka_bootstrap, schema_registry_url) as (b, gen):
         generate(b, gen, 1500)
         first = gen.pause()
@@ -53,8 +54,14 @@ def test_baseline_then_graceful_stop_and_restart(kafka_bootstrap: str, schema_re
         gen.start()
         generate(b, gen, 1000)
         sent = gen.pause()
-        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= sent - first
-               and b.durable().get("buffer", {}).get("depth") == 0, 30, "second run drained")
+        b.wait(
+            lambda: (
+                b.stats().get("processor", {}).get("samples", 0) >= sent - first
+                and b.durable().get("buffer", {}).get("depth") == 0
+            ),
+            30,
+            "second run drained",
+        )
         resent = b.durable()["sender"]["records_sent"]
         assert resent == sent - first + 1  # the new records and this run's registration event only
     result = tally(reader, b, sent)
@@ -62,14 +69,18 @@ def test_baseline_then_graceful_stop_and_restart(kafka_bootstrap: str, schema_re
     assert summary == ([], 0, 0, 0), str(result)
 
 
-def test_wan_cut_hang_style(kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader,
-                            tmp_path: Path) -> None:
+def test_wan_cut_hang_style(
+    kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
+) -> None:
     with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as (b, gen):
         generate(b, gen, 400)
         b.relay.set_mode("blackhole")
         generate(b, gen, 800)
-        b.wait(lambda: b.durable().get("buffer", {}).get("depth", 0) >= 600, 10,
-               "the spool grows while the WAN is cut")
+        b.wait(
+            lambda: b.durable().get("buffer", {}).get("depth", 0) >= 600,
+            10,
+            "the spool grows while the WAN is cut",
+        )
         generate(b, gen, 1200)  # about 5 s of cut in all
         depth = b.durable()["buffer"]["depth"]
         assert depth >= 1500
@@ -94,15 +105,19 @@ def within_window(result: Count) -> None:
     assert result.duplicated <= BATCH, str(result)
 
 
-def test_uplink_killed_mid_stream(kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader,
-                                  tmp_path: Path) -> None:
+def test_uplink_killed_mid_stream(
+    kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
+) -> None:
     with streaming(tmp_path, kafka_bootstrap, schema_registry_url) as (b, gen):
         generate(b, gen, 600)
         assert b.uplink is not None
         b.uplink.kill()
         generate(b, gen, 600)
-        b.wait(lambda: b.durable().get("sender", {}).get("batches_retried", 0) > 0, 10,
-               "the edge noticed the uplink is gone")
+        b.wait(
+            lambda: b.durable().get("sender", {}).get("batches_retried", 0) > 0,
+            10,
+            "the edge noticed the uplink is gone",
+        )
         b.start_uplink()
         generate(b, gen, 400)
         sent = gen.pause()
@@ -110,8 +125,9 @@ def test_uplink_killed_mid_stream(kafka_bootstrap: str, schema_registry_url: str
     within_window(tally(reader, b, sent))
 
 
-def test_edge_killed_with_unacknowledged_records(kafka_bootstrap: str, schema_registry_url: str,
-                                                 reader: TopicReader, tmp_path: Path) -> None:
+def test_edge_killed_with_unacknowledged_records(
+    kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
+) -> None:
     with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as (b, gen):
         generate(b, gen, 500)
         b.relay.set_mode("blackhole")  # nothing is acknowledged from here on
@@ -124,14 +140,23 @@ def test_edge_killed_with_unacknowledged_records(kafka_bootstrap: str, schema_re
         b.edge.kill()
         b.relay.set_mode("pass")
         b.start_edge()
-        b.wait(lambda: b.stats().get("running") and b.durable().get("buffer", {}).get("depth") == 0, 40,
-               "the restarted edge sent what the crashed one left in the spool")
+        b.wait(
+            lambda: b.stats().get("running") and b.durable().get("buffer", {}).get("depth") == 0,
+            40,
+            "the restarted edge sent what the crashed one left in the spool",
+        )
         gen.wait_subscribed()
         gen.start()
         generate(b, gen, 300)
         sent = gen.pause()
-        b.wait(lambda: b.stats().get("processor", {}).get("samples", 0) >= sent - spooled
-               and b.durable().get("buffer", {}).get("depth") == 0, 30, "the new records drained")
+        b.wait(
+            lambda: (
+                b.stats().get("processor", {}).get("samples", 0) >= sent - spooled
+                and b.durable().get("buffer", {}).get("depth") == 0
+            ),
+            30,
+            "the new records drained",
+        )
     within_window(tally(reader, b, sent))
 
 

@@ -125,7 +125,11 @@ class Child:
     def __init__(self, spec: dict[str, Any]) -> None:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "tests.fault.test_spool_faults", json.dumps(spec)],
-            cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            cwd=ROOT,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         self.lines: list[dict[str, Any]] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -179,15 +183,21 @@ def drain(directory: Path, options: SpoolOptions) -> tuple[dict[int, bytes], dic
 def segments_are_clean(directory: Path) -> bool:
     for path in directory.glob("*.seg"):
         data = path.read_bytes()
-        if any(isinstance(e, Damage) for e in scan(data, SEGMENT_HEADER_SIZE, len(data), max_len=1 << 24,
-                                                    final=True, copy=False)):
+        if any(
+            isinstance(e, Damage)
+            for e in scan(data, SEGMENT_HEADER_SIZE, len(data), max_len=1 << 24, final=True, copy=False)
+        ):
             return False
     return True
 
 
 # --- row 8 --------------------------------------------------------------------------------------
-CRASH_OPTIONS: dict[str, Any] = {"segment_bytes": 65536, "max_bytes": 64 << 20, "fsync": "interval",
-                                 "fsync_interval_ms": 50}
+CRASH_OPTIONS: dict[str, Any] = {
+    "segment_bytes": 65536,
+    "max_bytes": 64 << 20,
+    "fsync": "interval",
+    "fsync_interval_ms": 50,
+}
 
 
 def test_row8_kill9_while_appending_and_acking_loses_nothing_taken(
@@ -229,8 +239,11 @@ FILL_OPTIONS: dict[str, Any] = {"segment_bytes": 8192, "max_bytes": 64 << 20}
 def frames_of(path: Path) -> list[tuple[int, int, int]]:
     """``(offset, end, seq)`` of every frame in a segment file."""
     data = path.read_bytes()
-    return [(f.offset, f.end, f.seq) for f in scan(data, SEGMENT_HEADER_SIZE, len(data), max_len=1 << 24,
-                                                   final=True, copy=False) if not isinstance(f, Damage)]
+    return [
+        (f.offset, f.end, f.seq)
+        for f in scan(data, SEGMENT_HEADER_SIZE, len(data), max_len=1 << 24, final=True, copy=False)
+        if not isinstance(f, Damage)
+    ]
 
 
 def test_row10_torn_tail_and_flipped_bit_are_counted_skipped_and_named(
@@ -268,8 +281,17 @@ def test_row11_file_size_limit_rotates_segments_and_never_half_writes(
 ) -> None:
     limit = 20_000
     options: dict[str, Any] = {"segment_bytes": 1 << 20, "max_bytes": 64 << 20}
-    child = Child({"dir": str(tmp_path), "options": options, "mode": "fill", "count": 3000, "batch": 50,
-                   "fsize": limit, "close": True})
+    child = Child(
+        {
+            "dir": str(tmp_path),
+            "options": options,
+            "mode": "fill",
+            "count": 3000,
+            "batch": 50,
+            "fsize": limit,
+            "close": True,
+        }
+    )
     children.append(child)
     child.wait_for("closed")
     taken = [seq for results in child.of("results") for seq in results]
@@ -287,8 +309,12 @@ def test_row11_file_size_limit_rotates_segments_and_never_half_writes(
 def test_row11_disk_full_follows_the_policy_and_keeps_the_ledger_whole(
     tmp_path: Path, children: list[Child], policy: str
 ) -> None:
-    options: dict[str, Any] = {"segment_bytes": 8192, "max_bytes": 64 << 20, "policy": policy,
-                               "block_timeout_s": 0.2}
+    options: dict[str, Any] = {
+        "segment_bytes": 8192,
+        "max_bytes": 64 << 20,
+        "policy": policy,
+        "block_timeout_s": 0.2,
+    }
     child = Child({"dir": str(tmp_path), "options": options, "mode": "disk_full", "close": True})
     children.append(child)
     child.wait_for("closed")
@@ -310,18 +336,20 @@ def test_row11_disk_full_follows_the_policy_and_keeps_the_ledger_whole(
     records, _ = drain(tmp_path, SpoolOptions(**options))
     done = {s for first, last in acked for s in range(first, last + 1)}
     unacked = [s for s in taken if s not in done]
-    assert sorted(records) == unacked[stats["dropped_oldest"]:]  # the drop counter is the lost count
+    assert sorted(records) == unacked[stats["dropped_oldest"] :]  # the drop counter is the lost count
     if policy != "drop_oldest":
         assert stats["dropped_oldest"] == 0
 
 
 # --- row 12 -------------------------------------------------------------------------------------
 @pytest.mark.parametrize("policy", ["block", "drop_oldest", "drop_newest"])
-def test_row12_capacity_policies_survive_a_kill(
-    tmp_path: Path, children: list[Child], policy: str
-) -> None:
-    options: dict[str, Any] = {"segment_bytes": 4096, "max_bytes": 16384, "policy": policy,
-                               "block_timeout_s": 0.2}
+def test_row12_capacity_policies_survive_a_kill(tmp_path: Path, children: list[Child], policy: str) -> None:
+    options: dict[str, Any] = {
+        "segment_bytes": 4096,
+        "max_bytes": 16384,
+        "policy": policy,
+        "block_timeout_s": 0.2,
+    }
     child = Child({"dir": str(tmp_path), "options": options, "mode": "fill", "count": 1000, "batch": 50})
     children.append(child)
     child.wait_for("stats")
@@ -334,7 +362,7 @@ def test_row12_capacity_policies_survive_a_kill(
     if policy == "drop_oldest":
         assert taken == list(range(1, 1001))
         assert stats["dropped_oldest"] > 0
-        assert sorted(records) == taken[stats["dropped_oldest"]:]
+        assert sorted(records) == taken[stats["dropped_oldest"] :]
     elif policy == "drop_newest":
         assert results.count(None) == stats["dropped_newest"] > 0
         assert sorted(records) == taken

@@ -47,40 +47,63 @@ class Cloud:
     dead_letter: str
 
 
-def uplink_config(cloud_router: str, bootstrap: str, registry_url: str, *, suffix: str,
-                  message_max_bytes: int = 1_000_000) -> UplinkConfig:
-    return UplinkConfig.model_validate({
-        "kafka": {"bootstrap_servers": bootstrap, "message_max_bytes": message_max_bytes},
-        "registry": {"url": registry_url},
-        "zenoh": {"mode": "client", "connect": [cloud_router]},
-        "topics": {"dead_letter": f"e2e.dead-letter.{suffix}", "registrations": f"e2e.robots.{suffix}"},
-    })
+def uplink_config(
+    cloud_router: str, bootstrap: str, registry_url: str, *, suffix: str, message_max_bytes: int = 1_000_000
+) -> UplinkConfig:
+    return UplinkConfig.model_validate(
+        {
+            "kafka": {"bootstrap_servers": bootstrap, "message_max_bytes": message_max_bytes},
+            "registry": {"url": registry_url},
+            "zenoh": {"mode": "client", "connect": [cloud_router]},
+            "topics": {"dead_letter": f"e2e.dead-letter.{suffix}", "registrations": f"e2e.robots.{suffix}"},
+        }
+    )
 
 
 @contextmanager
 def cloud(bootstrap: str, registry_url: str, *, message_max_bytes: int = 1_000_000) -> Iterator[Cloud]:
     suffix = uuid.uuid4().hex[:8]
     with ZenohRouter() as router:
-        config = uplink_config(router.endpoint, bootstrap, registry_url, suffix=suffix,
-                               message_max_bytes=message_max_bytes)
+        config = uplink_config(
+            router.endpoint, bootstrap, registry_url, suffix=suffix, message_max_bytes=message_max_bytes
+        )
         with Uplink(config):
-            yield Cloud(router.endpoint, bootstrap, registry_url, config.topics.registrations,
-                        config.topics.dead_letter)
+            yield Cloud(
+                router.endpoint,
+                bootstrap,
+                registry_url,
+                config.topics.registrations,
+                config.topics.dead_letter,
+            )
 
 
-def edge_config(spool: Path, site_router: str, cloud_: Cloud, *, site: str,
-                robot_types: Mapping[str, Any] | None = None, mappings: Sequence[Mapping[str, Any]] = (),
-                **extra: Any) -> EdgeConfig:
+def edge_config(
+    spool: Path,
+    site_router: str,
+    cloud_: Cloud,
+    *,
+    site: str,
+    robot_types: Mapping[str, Any] | None = None,
+    mappings: Sequence[Mapping[str, Any]] = (),
+    **extra: Any,
+) -> EdgeConfig:
     data: dict[str, Any] = {
-        "site": site, "edge_id": "edge-1",
+        "site": site,
+        "edge_id": "edge-1",
         "zenoh": {"mode": "client", "connect": [site_router]},
-        "robot_types": dict(robot_types or {}), "mappings": list(mappings),
+        "robot_types": dict(robot_types or {}),
+        "mappings": list(mappings),
         "spool": {"dir": str(spool), "segment_bytes": "4MiB", "max_bytes": "64MiB"},
         "registration": {"grace_period": "1s"},
         # one batch in flight per stream: the uplink runs batches on a worker pool, so two batches
         # of a stream in flight at once may reach Kafka in either order (see docs/edge.md)
-        "wan": {"linger": "5ms", "ack_timeout": "20s", "retry_backoff_min": "50ms", "retry_backoff_max": "1s",
-                "max_in_flight": 1},
+        "wan": {
+            "linger": "5ms",
+            "ack_timeout": "20s",
+            "retry_backoff_min": "50ms",
+            "retry_backoff_max": "1s",
+            "max_in_flight": 1,
+        },
         "topics": {"dead_letter": cloud_.dead_letter, "registrations": cloud_.registrations},
     }
     data.update(extra)
@@ -105,8 +128,14 @@ def bag_messages(bag: Path, topic: str) -> list[bytes]:
         return [bytes(raw) for _, _, raw in reader.messages(connections=conns)]
 
 
-def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float, *,
-                           uplink_dead_letters: int = 0, stream_name: str = "durable") -> None:
+def wait_spooled_and_acked(
+    agent: EdgeAgent,
+    records: int,
+    timeout: float,
+    *,
+    uplink_dead_letters: int = 0,
+    stream_name: str = "durable",
+) -> None:
     """Wait until the stream (``durable``: the spool, ``memory``: best effort) took at least
     ``records`` and the uplink acked them all; then check that the uplink dead-lettered exactly
     ``uplink_dead_letters`` of them."""
@@ -129,6 +158,7 @@ def wait_spooled_and_acked(agent: EdgeAgent, records: int, timeout: float, *,
 def wait_received(agent: EdgeAgent, samples: int, timeout: float) -> None:
     """Wait until the edge's processor has taken ``samples`` samples (with the subscriptions'
     counters in the failure message)."""
+
     def done() -> bool:
         return bool(agent.snapshot()["processor"]["samples"] >= samples)
 
@@ -136,8 +166,10 @@ def wait_received(agent: EdgeAgent, samples: int, timeout: float) -> None:
         wait_until(done, timeout, interval=0.05, message=f"{samples} samples received")
     except AssertionError as exc:
         snap = agent.snapshot()
-        raise AssertionError(f"{exc}; processor {snap['processor']}, intake {snap['intake']}, "
-                             f"subscriptions {json.dumps(snap['subscriptions'])}") from None
+        raise AssertionError(
+            f"{exc}; processor {snap['processor']}, intake {snap['intake']}, "
+            f"subscriptions {json.dumps(snap['subscriptions'])}"
+        ) from None
 
 
 def counter(agent: EdgeAgent, mapping: str, name: str) -> int:
@@ -158,24 +190,33 @@ class TopicReader:
         out = self.read_until(topic, lambda ms: len(ms) >= count, timeout, what=f"{count} records on {topic}")
         return out + self.consume(topic, len(out), lambda ms: False, 1.0)
 
-    def read_until(self, topic: str, done: Callable[[list[Message]], bool], timeout: float = 30.0,
-                   what: str = "") -> list[Message]:
+    def read_until(
+        self, topic: str, done: Callable[[list[Message]], bool], timeout: float = 30.0, what: str = ""
+    ) -> list[Message]:
         """Records of a one-partition topic from the beginning until ``done(records)`` holds."""
         out = self.consume(topic, 0, done, timeout)
         if not done(out):
-            raise AssertionError(f"timed out after {timeout:.0f}s waiting for {what or topic} "
-                                 f"(got {len(out)} records)")
+            raise AssertionError(
+                f"timed out after {timeout:.0f}s waiting for {what or topic} (got {len(out)} records)"
+            )
         return out
 
-    def consume(self, topic: str, offset: int, done: Callable[[list[Message]], bool],
-                 timeout: float) -> list[Message]:
+    def consume(
+        self, topic: str, offset: int, done: Callable[[list[Message]], bool], timeout: float
+    ) -> list[Message]:
         """Consume from ``offset`` until ``done`` or the deadline; a consumer that makes no
         progress for a while (stale metadata of a topic created moments ago) is replaced."""
         out: list[Message] = []
         deadline = time.monotonic() + timeout
         while not done(out) and time.monotonic() < deadline:
-            consumer = Consumer({"bootstrap.servers": self.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}",
-                                 "enable.auto.commit": False, "topic.metadata.refresh.interval.ms": 500})
+            consumer = Consumer(
+                {
+                    "bootstrap.servers": self.bootstrap,
+                    "group.id": f"e2e-{uuid.uuid4().hex}",
+                    "enable.auto.commit": False,
+                    "topic.metadata.refresh.interval.ms": 500,
+                }
+            )
             try:
                 consumer.assign([TopicPartition(topic, 0, offset + len(out))])
                 progress = time.monotonic()

@@ -99,8 +99,9 @@ class Edge:
 def running_edge(config: EdgeConfig, *, token: str | None = TOKEN) -> Iterator[Edge]:
     """The agent with its admin API (config file + saved admin changes), stopped at the end."""
     secret = SecretStr(token) if token else None
-    admin = EdgeAdmin(config, token=secret, listen="127.0.0.1:0",
-                      extensions=[console_extension(secret, config.edge_id)])
+    admin = EdgeAdmin(
+        config, token=secret, listen="127.0.0.1:0", extensions=[console_extension(secret, config.edge_id)]
+    )
     agent = EdgeAgent(admin.load(), stop_timeout_s=0.5)
     with agent:
         admin.attach(agent)

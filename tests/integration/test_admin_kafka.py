@@ -50,8 +50,12 @@ def test_runtime_mapping_reaches_kafka_and_stops(
             robot_types={"tb4": {"match": "/tb4_*", "mappings": []}},
             ros={"domain_id": domain, "message_paths": [str(p) for p in bundled_message_paths()]},
         )
-        admin = EdgeAdmin(config, token=SecretStr(TOKEN), listen="127.0.0.1:0",
-                          extensions=[console_extension(SecretStr(TOKEN), config.edge_id)])
+        admin = EdgeAdmin(
+            config,
+            token=SecretStr(TOKEN),
+            listen="127.0.0.1:0",
+            extensions=[console_extension(SecretStr(TOKEN), config.edge_id)],
+        )
         with fleet(router.endpoint, domain, rate=10) as sim, EdgeAgent(admin.load()) as agent:
             admin.attach(agent)
             http = httpx.Client(base_url=admin.url, headers=AUTH, timeout=10)

@@ -57,13 +57,24 @@ def reference(stamps: np.ndarray, columns: dict[str, np.ndarray]) -> list[dict[s
         inside = index == k
         newest = stamps[inside].max()
         last = int(np.flatnonzero(inside & (stamps == newest))[-1])  # ties: the later message
-        record: dict[str, Any] = {"robot": "husky_1", "window_start_ns": int(k) * S,
-                                  "window_end_ns": (int(k) + 1) * S, "count": int(inside.sum())}
+        record: dict[str, Any] = {
+            "robot": "husky_1",
+            "window_start_ns": int(k) * S,
+            "window_end_ns": (int(k) + 1) * S,
+            "count": int(inside.sum()),
+        }
         for name, column in columns.items():
             values = column[inside]
-            record.update({f"{name}_count": len(values), f"{name}_mean": float(values.mean()),
-                           f"{name}_min": float(values.min()), f"{name}_max": float(values.max()),
-                           f"{name}_last": float(column[last]), f"{name}_stddev": float(values.std())})
+            record.update(
+                {
+                    f"{name}_count": len(values),
+                    f"{name}_mean": float(values.mean()),
+                    f"{name}_min": float(values.min()),
+                    f"{name}_max": float(values.max()),
+                    f"{name}_last": float(column[last]),
+                    f"{name}_stddev": float(values.std()),
+                }
+            )
         out.append(record)
     return out
 
@@ -88,13 +99,30 @@ def test_imu_aggregates_in_kafka_equal_numpy_over_the_bag(
     want = reference(np.array([m[0] for m in messages], dtype=np.int64), columns)
     assert len(messages) == 11_865  # the whole bag, ~395 s
     assert len(want) > 390
-    mapping = {"name": "imu_1s", "from": "/{robot}/imu/data", "to": topic, "type": IMU, "stages": [
-        {"type": "aggregate", "window": "1s", "fields": FIELDS, "ops": OPS, "idle_timeout": "3s"}]}
+    mapping = {
+        "name": "imu_1s",
+        "from": "/{robot}/imu/data",
+        "to": topic,
+        "type": IMU,
+        "stages": [{"type": "aggregate", "window": "1s", "fields": FIELDS, "ops": OPS, "idle_timeout": "3s"}],
+    }
     with cloud(kafka_bootstrap, schema_registry_url) as cloud_, site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=unique_site(),
-                             robot_types={"husky": {"match": "/husky_*", "mappings": [mapping]}})
-        with EdgeAgent(config) as agent, RosNode("imu", "/husky_1", config=zenoh_peer_config(router.endpoint),
-                                                 typestore=load_typestore("jazzy")) as node:
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=unique_site(),
+            robot_types={"husky": {"match": "/husky_*", "mappings": [mapping]}},
+        )
+        with (
+            EdgeAgent(config) as agent,
+            RosNode(
+                "imu",
+                "/husky_1",
+                config=zenoh_peer_config(router.endpoint),
+                typestore=load_typestore("jazzy"),
+            ) as node,
+        ):
             publisher = node.create_publisher("/husky_1/imu/data", IMU, congestion="block")
             wait_until(publisher.has_subscribers, 15, message="edge subscribed to /husky_1/imu/data")
             for stamp, raw in messages:

@@ -48,11 +48,16 @@ DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
 LIGHTRING = "irobot_create_msgs/msg/LightringLeds"
 RED, GREEN, BLUE, YELLOW = (255, 0, 0), (0, 255, 0), (0, 0, 255), (255, 255, 0)
 REGISTRATION_SCHEMA = {
-    "type": "record", "name": "RobotRegistration", "namespace": "fleetlink",
+    "type": "record",
+    "name": "RobotRegistration",
+    "namespace": "fleetlink",
     "fields": [
-        {"name": "robot", "type": "string"}, {"name": "robot_type", "type": "string"},
-        {"name": "site", "type": "string"}, {"name": "edge_id", "type": "string"},
-        {"name": "event", "type": "string"}, {"name": "timestamp", "type": "long"},
+        {"name": "robot", "type": "string"},
+        {"name": "robot_type", "type": "string"},
+        {"name": "site", "type": "string"},
+        {"name": "edge_id", "type": "string"},
+        {"name": "event", "type": "string"},
+        {"name": "timestamp", "type": "long"},
     ],
 }
 
@@ -95,8 +100,9 @@ class Router:
 
     def __init__(self, template: str, *, site: str | None = None, connect: tuple[str, ...] = ()) -> None:
         self.port = free_port()
-        self._config = render_router_config(DEPLOY / template, site=site, listen=[self.endpoint],
-                                            connect=list(connect))
+        self._config = render_router_config(
+            DEPLOY / template, site=site, listen=[self.endpoint], connect=list(connect)
+        )
         self.session: zenoh.Session | None = None
 
     @property
@@ -131,7 +137,8 @@ class Wan:
     def add_site(self, name: str) -> Site:
         relay = self._stack.enter_context(TcpRelay(self.cloud.port))
         router = self._stack.enter_context(
-            Router("edge-router-dev.json5", site=name, connect=(relay.endpoint,)))
+            Router("edge-router-dev.json5", site=name, connect=(relay.endpoint,))
+        )
         site = Site(name, router, relay)
         self.sites[name] = site
         _wait_linked(self.cloud.endpoint, router.endpoint)
@@ -141,11 +148,16 @@ class Wan:
 def _wait_linked(cloud: str, site: str) -> None:
     """Wait until a token declared at the site is seen from the cloud (the WAN link is up)."""
     key = f"fleetlink/probe/{uid()}"
-    with zenoh.open(zenoh_peer_config(site, "client")) as at_site, \
-            zenoh.open(zenoh_peer_config(cloud, "client")) as at_cloud:
+    with (
+        zenoh.open(zenoh_peer_config(site, "client")) as at_site,
+        zenoh.open(zenoh_peer_config(cloud, "client")) as at_cloud,
+    ):
         token = at_site.liveliness().declare_token(key)
-        wait_until(lambda: any(r.ok is not None for r in at_cloud.liveliness().get(key, timeout=0.5)),
-                   timeout=15, message="site router linked to the cloud router")
+        wait_until(
+            lambda: any(r.ok is not None for r in at_cloud.liveliness().get(key, timeout=0.5)),
+            timeout=15,
+            message="site router linked to the cloud router",
+        )
         token.undeclare()
 
 
@@ -167,36 +179,56 @@ class CommandProducer:
     def __init__(self, bootstrap: str, registry_url: str, typestore: Typestore) -> None:
         self.client = SchemaRegistryClient({"url": registry_url})
         self.schema = avro_schema(typestore, LIGHTRING, "jazzy")
-        self._serializer = AvroSerializer(self.client, json.dumps(self.schema),
-                                          to_dict=lambda obj, _ctx: obj)
+        self._serializer = AvroSerializer(self.client, json.dumps(self.schema), to_dict=lambda obj, _ctx: obj)
         self._producer = Producer({"bootstrap.servers": bootstrap, "linger.ms": 0})
 
     def value(self, topic: str, colour: tuple[int, int, int]) -> bytes:
-        datum = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
-                 "leds": [{"red": colour[0], "green": colour[1], "blue": colour[2]}] * 6,
-                 "override_system": True}
+        datum = {
+            "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
+            "leds": [{"red": colour[0], "green": colour[1], "blue": colour[2]}] * 6,
+            "override_system": True,
+        }
         out = self._serializer(datum, SerializationContext(topic, MessageField.VALUE))
         assert isinstance(out, bytes)
         return out
 
-    def send(self, topic: str, robot: str | None, colour: tuple[int, int, int] = RED, *,
-             command_id: str | None = None, timestamp_ms: int | None = None,
-             raw_value: bytes | None = None) -> float:
+    def send(
+        self,
+        topic: str,
+        robot: str | None,
+        colour: tuple[int, int, int] = RED,
+        *,
+        command_id: str | None = None,
+        timestamp_ms: int | None = None,
+        raw_value: bytes | None = None,
+    ) -> float:
         """Produce one command and wait for Kafka's ack; returns the wall time it was produced."""
         value = raw_value if raw_value is not None else self.value(topic, colour)
         headers = [("fleetlink-command-id", command_id.encode())] if command_id else []
         errors: list[Any] = []
         sent = time.time()
-        self._producer.produce(topic, key=robot.encode() if robot else None, value=value, headers=headers,
-                               timestamp=timestamp_ms or 0, on_delivery=lambda err, _m: errors.append(err))
+        self._producer.produce(
+            topic,
+            key=robot.encode() if robot else None,
+            value=value,
+            headers=headers,
+            timestamp=timestamp_ms or 0,
+            on_delivery=lambda err, _m: errors.append(err),
+        )
         self._producer.flush(10)
         assert errors == [None], errors
         return sent
 
     def register(self, topic: str, robot: str, site: str, event: str = "registered") -> None:
         serializer = AvroSerializer(self.client, json.dumps(REGISTRATION_SCHEMA), to_dict=lambda o, _c: o)
-        datum = {"robot": robot, "robot_type": "turtlebot4", "site": site, "edge_id": f"edge-{site}",
-                 "event": event, "timestamp": int(time.time() * 1000)}
+        datum = {
+            "robot": robot,
+            "robot_type": "turtlebot4",
+            "site": site,
+            "edge_id": f"edge-{site}",
+            "event": event,
+            "timestamp": int(time.time() * 1000),
+        }
         value = serializer(datum, SerializationContext(topic, MessageField.VALUE))
         self._producer.produce(topic, key=robot.encode(), value=value)
         self._producer.flush(10)
@@ -208,8 +240,14 @@ class TopicLog:
 
     def __init__(self, bootstrap: str, registry_url: str, topic: str, *, avro: bool = True) -> None:
         self.topic = topic
-        self._consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"log-{uid()}",
-                                   "auto.offset.reset": "earliest", "enable.auto.commit": False})
+        self._consumer = Consumer(
+            {
+                "bootstrap.servers": bootstrap,
+                "group.id": f"log-{uid()}",
+                "auto.offset.reset": "earliest",
+                "enable.auto.commit": False,
+            }
+        )
         self._deserializer = AvroDeserializer(SchemaRegistryClient({"url": registry_url})) if avro else None
         self.records: list[dict[str, Any]] = []
         self._lock = threading.Lock()
@@ -232,10 +270,17 @@ class TopicLog:
             if msg is None or msg.error():
                 continue
             raw = msg.value()
-            value = raw if self._deserializer is None else self._deserializer(
-                raw, SerializationContext(self.topic, MessageField.VALUE))
-            entry = {"key": msg.key(), "value": value, "headers": dict(msg.headers() or []),
-                     "timestamp": msg.timestamp()[1]}
+            value = (
+                raw
+                if self._deserializer is None
+                else self._deserializer(raw, SerializationContext(self.topic, MessageField.VALUE))
+            )
+            entry = {
+                "key": msg.key(),
+                "value": value,
+                "headers": dict(msg.headers() or []),
+                "timestamp": msg.timestamp()[1],
+            }
             with self._lock:
                 self.records.append(entry)
 
@@ -244,28 +289,43 @@ class TopicLog:
             return [r["value"] for r in self.records]
 
     def statuses(self, command_id: str | None = None, robot: str | None = None) -> list[str]:
-        return [v["status"] for v in self.values()
-                if command_id in (None, v["command_id"]) and robot in (None, v["robot"])]
+        return [
+            v["status"]
+            for v in self.values()
+            if command_id in (None, v["command_id"]) and robot in (None, v["robot"])
+        ]
 
 
 # -- fleetlink processes ---------------------------------------------------------------------
 
 
-def uplink_config(bootstrap: str, registry_url: str, cloud: str, commands: list[dict[str, Any]],
-                  *, suffix: str) -> UplinkConfig:
-    return UplinkConfig.model_validate({
-        "kafka": {"bootstrap_servers": bootstrap, "client_id": f"uplink-{suffix}", "linger_ms": 0},
-        "registry": {"url": registry_url},
-        "zenoh": {"mode": "client", "connect": [cloud]},
-        "topics": {"dead_letter": f"dlq.{suffix}", "registrations": f"robots.{suffix}",
-                   "command_dead_letter": f"cmd-dlq.{suffix}", "command_status": f"cmd-status.{suffix}"},
-        "commands": commands,
-    })
+def uplink_config(
+    bootstrap: str, registry_url: str, cloud: str, commands: list[dict[str, Any]], *, suffix: str
+) -> UplinkConfig:
+    return UplinkConfig.model_validate(
+        {
+            "kafka": {"bootstrap_servers": bootstrap, "client_id": f"uplink-{suffix}", "linger_ms": 0},
+            "registry": {"url": registry_url},
+            "zenoh": {"mode": "client", "connect": [cloud]},
+            "topics": {
+                "dead_letter": f"dlq.{suffix}",
+                "registrations": f"robots.{suffix}",
+                "command_dead_letter": f"cmd-dlq.{suffix}",
+                "command_status": f"cmd-status.{suffix}",
+            },
+            "commands": commands,
+        }
+    )
 
 
 def lightring_mapping(topic: str, *, period: str = "1s", lease: str = "10s", **extra: Any) -> dict[str, Any]:
-    return {"name": "lightring", "from": topic, "to": "/{key}/cmd_lightring", "type": LIGHTRING,
-            "repeat": {"period": period, "lease": lease}} | extra
+    return {
+        "name": "lightring",
+        "from": topic,
+        "to": "/{key}/cmd_lightring",
+        "type": LIGHTRING,
+        "repeat": {"period": period, "lease": lease},
+    } | extra
 
 
 @dataclass
@@ -282,26 +342,40 @@ class LightringBed:
 
 
 @contextmanager
-def lightring_bed(bootstrap: str, registry_url: str, *, period: str = "1s",
-                  lease: str = "10s") -> Iterator[LightringBed]:
+def lightring_bed(
+    bootstrap: str, registry_url: str, *, period: str = "1s", lease: str = "10s"
+) -> Iterator[LightringBed]:
     ts, run = irobot_store(), uid()
     topic = f"cmd.lightring.{run}"
     producer = CommandProducer(bootstrap, registry_url, ts)
     with Wan() as wan:
         site = wan.add_site("site-a")
-        config = uplink_config(bootstrap, registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(topic, period=period, lease=lease)], suffix=run)
+        config = uplink_config(
+            bootstrap,
+            registry_url,
+            wan.cloud.endpoint,
+            [lightring_mapping(topic, period=period, lease=lease)],
+            suffix=run,
+        )
         create_topics(bootstrap, topic)
         yield LightringBed(ts, run, topic, producer, LedLog(), site, config)
 
 
 def repeater_config(site: Site, state_dir: Path, **repeater: Any) -> RepeaterConfig:
-    return RepeaterConfig.model_validate({
-        "repeater": {"site": site.name, "state_dir": str(state_dir), "id": f"rep-{site.name}",
-                     "heartbeat": "300ms", "status_timeout": "1s", **repeater},
-        "ros": {"distro": "jazzy", "message_paths": [str(IROBOT)]},
-        "zenoh": {"mode": "client", "connect": [site.endpoint]},
-    })
+    return RepeaterConfig.model_validate(
+        {
+            "repeater": {
+                "site": site.name,
+                "state_dir": str(state_dir),
+                "id": f"rep-{site.name}",
+                "heartbeat": "300ms",
+                "status_timeout": "1s",
+                **repeater,
+            },
+            "ros": {"distro": "jazzy", "message_paths": [str(IROBOT)]},
+            "zenoh": {"mode": "client", "connect": [site.endpoint]},
+        }
+    )
 
 
 @contextmanager

@@ -27,11 +27,21 @@ def test_late_joiner_lease_end_and_supersede_with_statuses(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
     with lightring_bed(kafka_bootstrap, schema_registry_url, period="1s", lease=f"{LEASE_S}s") as bed:
-        ts, run, commands, producer, leds, site, config = (bed.ts, bed.run, bed.topic, bed.producer, bed.leds,
-                                                           bed.site, bed.config)
-        with Repeater(repeater_config(site, tmp_path / "state")) as rep, fleet(site, ts, leds) as robots, \
-                TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status, \
-                running_uplink(config) as uplink:
+        ts, run, commands, producer, leds, site, config = (
+            bed.ts,
+            bed.run,
+            bed.topic,
+            bed.producer,
+            bed.leds,
+            bed.site,
+            bed.config,
+        )
+        with (
+            Repeater(repeater_config(site, tmp_path / "state")) as rep,
+            fleet(site, ts, leds) as robots,
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+            running_uplink(config) as uplink,
+        ):
             router = uplink.commands
             assert router is not None
             robots.add_robot("tb4_01")
@@ -48,12 +58,16 @@ def test_late_joiner_lease_end_and_supersede_with_statuses(
             assert switched is not None
 
             # tb4_05 subscribes after A went out five times unheard
-            wait_until(lambda: rep.stats.by_topic["/tb4_05/cmd_lightring"] >= 1 + 5, timeout=10,
-                       message="A published, then repeated 5 times")
+            wait_until(
+                lambda: rep.stats.by_topic["/tb4_05/cmd_lightring"] >= 1 + 5,
+                timeout=10,
+                message="A published, then repeated 5 times",
+            )
             joined = robots.add_robot("tb4_05")
             assert joined == "tb4_05"
-            wait_until(lambda: leds.first("tb4_05", "red") is not None, timeout=3,
-                       message="late joiner got A")
+            wait_until(
+                lambda: leds.first("tb4_05", "red") is not None, timeout=3, message="late joiner got A"
+            )
             got_a = leds.first("tb4_05", "red")
             assert got_a is not None
             assert got_a - sent_a >= 4.0  # it really joined late
@@ -61,10 +75,16 @@ def test_late_joiner_lease_end_and_supersede_with_statuses(
             assert rep.stats.late_joiner_publishes >= 1
 
             # the leases end: status records for every case
-            want = {f"A-{run}": ["delivered", "expired"], f"B1-{run}": ["delivered", "superseded"],
-                    f"B2-{run}": ["delivered", "expired"]}
-            wait_until(lambda: all(distinct(status.statuses(cid)) == states for cid, states in want.items()),
-                       timeout=LEASE_S + 10, message=f"statuses {want}")
+            want = {
+                f"A-{run}": ["delivered", "expired"],
+                f"B1-{run}": ["delivered", "superseded"],
+                f"B2-{run}": ["delivered", "expired"],
+            }
+            wait_until(
+                lambda: all(distinct(status.statuses(cid)) == states for cid, states in want.items()),
+                timeout=LEASE_S + 10,
+                message=f"statuses {want}",
+            )
             records = {(v["command_id"], v["status"]): v for v in status.values()}
             assert records[(f"B1-{run}", "superseded")]["detail"] == f"superseded by B2-{run}"
             assert records[(f"A-{run}", "delivered")]["robot"] == "tb4_05"
@@ -73,8 +93,11 @@ def test_late_joiner_lease_end_and_supersede_with_statuses(
             # nothing published after a lease ended, and B1 never again after B2 took over
             before = rep.stats.publishes
             beats = router.intake.heartbeats
-            wait_until(lambda: router.intake.heartbeats >= beats + 5, timeout=10,
-                       message="the repeater kept talking to the uplink for a while")
+            wait_until(
+                lambda: router.intake.heartbeats >= beats + 5,
+                timeout=10,
+                message="the repeater kept talking to the uplink for a while",
+            )
             assert rep.stats.publishes == before
             assert all(t <= sent_a + LEASE_S + TOLERANCE_S for t, _ in leds.of("tb4_05"))
             assert all(t <= sent_b2 + LEASE_S + TOLERANCE_S for t, _ in leds.of("tb4_01"))

@@ -41,15 +41,23 @@ def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every
     leds = LedLog()
     with Wan() as wan:
         a, b = wan.add_site("site-a"), wan.add_site("site-b")
-        config = uplink_config(kafka_bootstrap, schema_registry_url, wan.cloud.endpoint,
-                               [lightring_mapping(commands)], suffix=run)
+        config = uplink_config(
+            kafka_bootstrap,
+            schema_registry_url,
+            wan.cloud.endpoint,
+            [lightring_mapping(commands)],
+            suffix=run,
+        )
         create_topics(kafka_bootstrap, commands, config.topics.registrations)
         for robot, site in (("tb4_01", "site-a"), ("tb4_02", "site-a"), ("tb4_03", "site-b")):
             producer.register(config.topics.registrations, robot, site)
-        with Repeater(repeater_config(a, tmp_path / "a")) as rep_a, \
-                Repeater(repeater_config(b, tmp_path / "b")) as rep_b, \
-                fleet(a, ts, leds) as robots_a, fleet(b, ts, leds) as robots_b, \
-                TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status:
+        with (
+            Repeater(repeater_config(a, tmp_path / "a")) as rep_a,
+            Repeater(repeater_config(b, tmp_path / "b")) as rep_b,
+            fleet(a, ts, leds) as robots_a,
+            fleet(b, ts, leds) as robots_b,
+            TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
+        ):
             robots_a.add_robot("tb4_01")
             robots_a.add_robot("tb4_02")
             robots_b.add_robot("tb4_03")
@@ -58,12 +66,16 @@ def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every
             with running_uplink(config) as uplink:
                 router = uplink.commands
                 assert router is not None
-                wait_until(lambda: router.directory.site_of("tb4_03") == "site-b", timeout=10,
-                           message="registrations read")
+                wait_until(
+                    lambda: router.directory.site_of("tb4_03") == "site-b",
+                    timeout=10,
+                    message="registrations read",
+                )
 
                 sent = producer.send(commands, "tb4_02", RED, command_id=f"red-{run}")
-                wait_until(lambda: leds.first("tb4_02", "red") is not None, timeout=5,
-                           message="tb4_02 shows red")
+                wait_until(
+                    lambda: leds.first("tb4_02", "red") is not None, timeout=5, message="tb4_02 shows red"
+                )
                 first = leds.first("tb4_02", "red")
                 assert first is not None
                 assert first - sent < 5.0
@@ -72,24 +84,40 @@ def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every
                 assert leds.count("tb4_01") == 0
                 assert leds.count("tb4_03") == 0
                 assert (rep_a.stats.applied, rep_b.stats.applied) == (1, 0)
-                wait_until(lambda: "delivered" in status.statuses(f"red-{run}", "tb4_02"), timeout=10,
-                           message="delivered status")
+                wait_until(
+                    lambda: "delivered" in status.statuses(f"red-{run}", "tb4_02"),
+                    timeout=10,
+                    message="delivered status",
+                )
                 delivered = next(v for v in status.values() if v["command_id"] == f"red-{run}")
                 assert (delivered["site"], delivered["ros_topic"]) == ("site-a", "/tb4_02/cmd_lightring")
 
                 # a robot nobody registered: every site's repeater takes the command
                 producer.send(commands, "tb4_09", GREEN, command_id=f"green-{run}")
-                wait_until(lambda: rep_a.stats.applied == 2 and rep_b.stats.applied == 1, timeout=10,
-                           message="both sites applied the command for the unknown robot")
+                wait_until(
+                    lambda: rep_a.stats.applied == 2 and rep_b.stats.applied == 1,
+                    timeout=10,
+                    message="both sites applied the command for the unknown robot",
+                )
                 robots_b.add_robot("tb4_09")  # it turns up at site-b: late joiner, still leased
-                wait_until(lambda: leds.first("tb4_09", "green") is not None, timeout=5,
-                           message="tb4_09 shows green")
-                wait_until(lambda: any(v["command_id"] == f"green-{run}" and v["status"] == "delivered"
-                                       and v["site"] == "site-b" for v in status.values()),
-                           timeout=10, message="delivered at site-b")
+                wait_until(
+                    lambda: leds.first("tb4_09", "green") is not None, timeout=5, message="tb4_09 shows green"
+                )
+                wait_until(
+                    lambda: any(
+                        v["command_id"] == f"green-{run}"
+                        and v["status"] == "delivered"
+                        and v["site"] == "site-b"
+                        for v in status.values()
+                    ),
+                    timeout=10,
+                    message="delivered at site-b",
+                )
                 assert leds.count("tb4_01") == 0
-                assert not any(v["command_id"] == f"green-{run}" and v["status"] == "delivered"
-                               and v["site"] == "site-a" for v in status.values())
+                assert not any(
+                    v["command_id"] == f"green-{run}" and v["status"] == "delivered" and v["site"] == "site-a"
+                    for v in status.values()
+                )
                 assert router.stats.dead_lettered == 0
 
                 # mappings change at runtime: a second Kafka topic, routed without a restart
@@ -98,5 +126,8 @@ def test_command_reaches_only_the_addressed_robot_and_unknown_robots_reach_every
                 extra = CommandMapping.model_validate(lightring_mapping(second, name="lightring2"))
                 router.set_mappings([*config.commands, extra])
                 producer.send(second, "tb4_01", BLUE, command_id=f"blue-{run}")
-                wait_until(lambda: leds.first("tb4_01", "blue") is not None, timeout=20,
-                           message="a command from the new mapping")
+                wait_until(
+                    lambda: leds.first("tb4_01", "blue") is not None,
+                    timeout=20,
+                    message="a command from the new mapping",
+                )

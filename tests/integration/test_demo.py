@@ -10,8 +10,16 @@ from fleetlink.demo.runner import Demo, DemoOptions
 
 def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
     out = io.StringIO()
-    demo = Demo(DemoOptions(workdir=tmp_path / "demo", robots=3, bootstrap=kafka_bootstrap,
-                            registry_url=schema_registry_url, out=out, step_timeout_s=60))
+    demo = Demo(
+        DemoOptions(
+            workdir=tmp_path / "demo",
+            robots=3,
+            bootstrap=kafka_bootstrap,
+            registry_url=schema_registry_url,
+            out=out,
+            step_timeout_s=60,
+        )
+    )
     summary = demo.run()
     told = out.getvalue()
 

@@ -40,6 +40,7 @@ def test_the_docs_have_runnable_commands() -> None:
 @pytest.mark.parametrize(("doc", "command"), COMMANDS, ids=[f"{d}: {c}" for d, c in COMMANDS])
 def test_runnable_command(doc: str, command: str) -> None:
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    result = subprocess.run(shlex.split(command), cwd=ROOT, env=env, capture_output=True, text=True,
-                            timeout=120, check=False)
+    result = subprocess.run(
+        shlex.split(command), cwd=ROOT, env=env, capture_output=True, text=True, timeout=120, check=False
+    )
     assert result.returncode == 0, f"{doc}: `{command}` exited {result.returncode}:\n{result.stderr[-2000:]}"

@@ -65,11 +65,18 @@ def test_garbage_on_a_data_key_is_dead_lettered_and_the_next_record_flows(
     no_attachment = os.urandom(64)
     not_cdr = b"\x00\x01\x00\x00" + b"\xff" * 3  # a CDR header, then a string length past the end
     with site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=site_name, robot_types={
-            "tb4": {"match": "/tb4_*", "mappings": [CHAT | {"to": topic}]},
-        })
-        talker = RosNode("talker", "/tb4_01", config=zenoh_peer_config(router.endpoint),
-                         typestore=load_typestore("jazzy"))
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=site_name,
+            robot_types={
+                "tb4": {"match": "/tb4_*", "mappings": [CHAT | {"to": topic}]},
+            },
+        )
+        talker = RosNode(
+            "talker", "/tb4_01", config=zenoh_peer_config(router.endpoint), typestore=load_typestore("jazzy")
+        )
         with EdgeAgent(config) as agent, talker as robot:
             publisher = robot.create_publisher("/tb4_01/chatter", STRING, congestion="block")
             wait_until(publisher.has_subscribers, 10, message="edge subscribed")
@@ -77,8 +84,11 @@ def test_garbage_on_a_data_key_is_dead_lettered_and_the_next_record_flows(
             with zenoh.open(zenoh_peer_config(router.endpoint)) as vandal:
                 vandal.put(key, no_attachment)
                 vandal.put(key, not_cdr, attachment=attachment.encode(1, time.time_ns(), b"\x07" * 16))
-                wait_until(lambda: agent.snapshot()["processor"]["records"] >= 4, 10,
-                           message="both bad samples reached the processor")
+                wait_until(
+                    lambda: agent.snapshot()["processor"]["records"] >= 4,
+                    10,
+                    message="both bad samples reached the processor",
+                )
             publisher.publish_cdr(cdr.encode_string("after"))
             wait_until(lambda: counter(agent, "chat", "emitted") == 2, 10)
             wait_until(lambda: agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0, 20)
@@ -88,8 +98,9 @@ def test_garbage_on_a_data_key_is_dead_lettered_and_the_next_record_flows(
 
     chat = reader.read(topic, 2)
     assert [reader.value(m)["data"] for m in chat] == ["before", "after"]
-    dead = reader.read_until(cloud_.dead_letter,
-                             lambda ms: sum(headers(m).get("fleetlink.site") == site_name for m in ms) >= 2)
+    dead = reader.read_until(
+        cloud_.dead_letter, lambda ms: sum(headers(m).get("fleetlink.site") == site_name for m in ms) >= 2
+    )
     mine = [m for m in dead if headers(m).get("fleetlink.site") == site_name]
     assert len(mine) == 2
     first, second = headers(mine[0]), headers(mine[1])
@@ -111,11 +122,18 @@ def test_oversized_record_is_dead_lettered_with_a_reference_and_the_spool_advanc
     site_name = unique_site()
     huge = "x" * (MAX_MESSAGE + 100_000)
     with site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=site_name, robot_types={
-            "tb4": {"match": "/tb4_*", "mappings": [CHAT | {"to": topic}]},
-        })
-        talker = RosNode("talker", "/tb4_01", config=zenoh_peer_config(router.endpoint),
-                         typestore=load_typestore("jazzy"))
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=site_name,
+            robot_types={
+                "tb4": {"match": "/tb4_*", "mappings": [CHAT | {"to": topic}]},
+            },
+        )
+        talker = RosNode(
+            "talker", "/tb4_01", config=zenoh_peer_config(router.endpoint), typestore=load_typestore("jazzy")
+        )
         with EdgeAgent(config) as agent, talker as robot:
             publisher = robot.create_publisher("/tb4_01/chatter", STRING, congestion="block")
             wait_until(publisher.has_subscribers, 10, message="edge subscribed")
@@ -123,16 +141,20 @@ def test_oversized_record_is_dead_lettered_with_a_reference_and_the_spool_advanc
             publisher.publish_cdr(cdr.encode_string(huge))
             publisher.publish_cdr(cdr.encode_string("small 2"))
             wait_until(lambda: counter(agent, "chat", "emitted") == 3, 10)
-            wait_until(lambda: agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0, 20,
-                       message="the spool advanced past the oversized record")
+            wait_until(
+                lambda: agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0,
+                20,
+                message="the spool advanced past the oversized record",
+            )
             sender = agent.snapshot()["streams"]["durable"]["sender"]
             assert sender["records_dead_lettered"] == 1
             assert sender["batches_retried"] == 0  # no endless retry
 
     chat = reader.read(topic, 2)
     assert [reader.value(m)["data"] for m in chat] == ["small 1", "small 2"]
-    dead = reader.read_until(cloud_.dead_letter,
-                             lambda ms: any(headers(m).get("fleetlink.site") == site_name for m in ms))
+    dead = reader.read_until(
+        cloud_.dead_letter, lambda ms: any(headers(m).get("fleetlink.site") == site_name for m in ms)
+    )
     mine = [m for m in dead if headers(m).get("fleetlink.site") == site_name]
     assert len(mine) == 1
     h = headers(mine[0])

@@ -40,19 +40,33 @@ IMU = "sensor_msgs/msg/Imu"
 def test_three_robots_many_to_one(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
     topic = f"fleet.imu.{uuid.uuid4().hex[:8]}"
     site_name = unique_site()
-    expected = {"r1": bag_messages(HUSKY, "/imu/data"), "r2": bag_messages(HUSKY, "/imu/data"),
-                "r3": bag_messages(TB3, "/imu")}
+    expected = {
+        "r1": bag_messages(HUSKY, "/imu/data"),
+        "r2": bag_messages(HUSKY, "/imu/data"),
+        "r3": bag_messages(TB3, "/imu"),
+    }
     total = sum(len(v) for v in expected.values())
     with cloud(kafka_bootstrap, schema_registry_url) as cloud_, site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=site_name, robot_types={
-            "rover": {"match": "/r*", "mappings": [
-                {"name": "imu_data", "from": "/{robot}/imu/data", "to": topic},
-                {"name": "imu", "from": "/{robot}/imu", "to": topic},
-            ]},
-        })
-        robots = [replayer(HUSKY, "r1", router.endpoint, ["/imu/data"]),
-                  replayer(HUSKY, "r2", router.endpoint, ["/imu/data"]),
-                  replayer(TB3, "r3", router.endpoint, ["/imu"])]
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=site_name,
+            robot_types={
+                "rover": {
+                    "match": "/r*",
+                    "mappings": [
+                        {"name": "imu_data", "from": "/{robot}/imu/data", "to": topic},
+                        {"name": "imu", "from": "/{robot}/imu", "to": topic},
+                    ],
+                },
+            },
+        )
+        robots = [
+            replayer(HUSKY, "r1", router.endpoint, ["/imu/data"]),
+            replayer(HUSKY, "r2", router.endpoint, ["/imu/data"]),
+            replayer(TB3, "r3", router.endpoint, ["/imu"]),
+        ]
         with EdgeAgent(config) as agent:
             for rep in robots:
                 rep.start()

@@ -58,13 +58,28 @@ def test_one_to_one(cloud_: Cloud, reader: TopicReader, tmp_path: Path, delivery
     topic = f"fleet.gps.{uuid.uuid4().hex[:8]}"
     expected = bag_messages(HUSKY, "/fix")
     with site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=unique_site(), mappings=[
-            {"name": "gps", "from": "/husky_7/fix", "to": topic, "key": "husky_7",
-             "type": "sensor_msgs/msg/NavSatFix", "delivery": delivery},
-        ])
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=unique_site(),
+            mappings=[
+                {
+                    "name": "gps",
+                    "from": "/husky_7/fix",
+                    "to": topic,
+                    "key": "husky_7",
+                    "type": "sensor_msgs/msg/NavSatFix",
+                    "delivery": delivery,
+                },
+            ],
+        )
         with EdgeAgent(config) as agent:
-            wait_until(lambda: "/husky_7/fix" in agent.subscribed_topics(), 10,
-                       message="eager subscription of a mapping with a declared type")
+            wait_until(
+                lambda: "/husky_7/fix" in agent.subscribed_topics(),
+                10,
+                message="eager subscription of a mapping with a declared type",
+            )
             with replayer(HUSKY, "husky_7", router.endpoint, ["/fix"]) as robot:
                 assert robot.wait_for_subscribers(10)
                 assert robot.run().total == len(expected)
@@ -93,11 +108,18 @@ def test_one_to_many_by_message_field(cloud_: Cloud, reader: TopicReader, tmp_pa
     texts[150] = "no such/zone"
     site_name = unique_site()
     with site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=site_name, mappings=[
-            {"name": "tasks", "from": "/{robot}/task_status", "to": f"fleet.tasks.{run}.{{msg.data}}"},
-        ])
-        robot = RosNode("tasks", "/tb4_01", config=zenoh_peer_config(router.endpoint),
-                        typestore=load_typestore("jazzy"))
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=site_name,
+            mappings=[
+                {"name": "tasks", "from": "/{robot}/task_status", "to": f"fleet.tasks.{run}.{{msg.data}}"},
+            ],
+        )
+        robot = RosNode(
+            "tasks", "/tb4_01", config=zenoh_peer_config(router.endpoint), typestore=load_typestore("jazzy")
+        )
         with EdgeAgent(config) as agent, robot as node:
             publisher = node.create_publisher("/tb4_01/task_status", STRING, congestion="block")
             wait_until(publisher.has_subscribers, 10, message="edge subscribed to /tb4_01/task_status")
@@ -105,7 +127,12 @@ def test_one_to_many_by_message_field(cloud_: Cloud, reader: TopicReader, tmp_pa
                 publisher.publish_cdr(cdr.encode_string(text))
             wait_spooled_and_acked(agent, len(texts), timeout=30)
             assert agent.snapshot()["mappings"]["tasks"] == {
-                "received": 300, "emitted": 299, "dropped": 0, "dead_lettered": 1, "type_mismatch": 0}
+                "received": 300,
+                "emitted": 299,
+                "dropped": 0,
+                "dead_lettered": 1,
+                "type_mismatch": 0,
+            }
     for zone in zones:
         positions = [i + 1 for i, t in enumerate(texts) if t == zone]
         msgs = reader.read(f"fleet.tasks.{run}.{zone}", len(positions))
@@ -113,8 +140,9 @@ def test_one_to_many_by_message_field(cloud_: Cloud, reader: TopicReader, tmp_pa
         assert [reader.value(m) for m in msgs] == [{"data": zone}] * len(msgs)
         assert seqs(msgs) == positions  # each zone's records in publishing order
         assert {m.key() for m in msgs} == {b"tb4_01"}
-    dead = reader.read_until(cloud_.dead_letter, lambda ms: any(headers(m).get("fleetlink.site") == site_name
-                                                                for m in ms))
+    dead = reader.read_until(
+        cloud_.dead_letter, lambda ms: any(headers(m).get("fleetlink.site") == site_name for m in ms)
+    )
     mine = [m for m in dead if headers(m).get("fleetlink.site") == site_name]
     assert len(mine) == 1
     h = headers(mine[0])
@@ -127,16 +155,29 @@ def test_one_to_many_by_message_field(cloud_: Cloud, reader: TopicReader, tmp_pa
 def test_many_to_many(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> None:
     """``/{robot}/{sensor}`` -> ``fleet.<run>.{sensor}``: two robots, three sensors, three topics."""
     run = uuid.uuid4().hex[:8]
-    sensors = {"imu": "sensor_msgs/msg/Imu", "odom": "nav_msgs/msg/Odometry",
-               "scan": "sensor_msgs/msg/LaserScan"}
+    sensors = {
+        "imu": "sensor_msgs/msg/Imu",
+        "odom": "nav_msgs/msg/Odometry",
+        "scan": "sensor_msgs/msg/LaserScan",
+    }
     expected = {s: bag_messages(TB3, f"/{s}") for s in sensors}
     robots = ("tb3_1", "tb3_2")
     total = len(robots) * sum(len(v) for v in expected.values())
     with site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=unique_site(), robot_types={
-            "tb3": {"match": "/tb3_*", "mappings": [
-                {"name": "sensors", "from": "/{robot}/{sensor}", "to": f"fleet.{run}.{{sensor}}"}]},
-        })
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=unique_site(),
+            robot_types={
+                "tb3": {
+                    "match": "/tb3_*",
+                    "mappings": [
+                        {"name": "sensors", "from": "/{robot}/{sensor}", "to": f"fleet.{run}.{{sensor}}"}
+                    ],
+                },
+            },
+        )
         with EdgeAgent(config) as agent:
             replays = [replayer(TB3, r, router.endpoint, [f"/{s}" for s in sensors]).start() for r in robots]
             try:

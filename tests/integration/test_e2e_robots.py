@@ -52,10 +52,12 @@ class Robot:
 
     def __init__(self, router: str, name: str) -> None:
         self.name = name
-        self.node = RosNode("talker", f"/{name}", config=zenoh_peer_config(router),
-                            typestore=load_typestore("jazzy")).start()
-        self.publisher: RosPublisher = self.node.create_publisher(f"/{name}/chatter", STRING,
-                                                                  congestion="block")
+        self.node = RosNode(
+            "talker", f"/{name}", config=zenoh_peer_config(router), typestore=load_typestore("jazzy")
+        ).start()
+        self.publisher: RosPublisher = self.node.create_publisher(
+            f"/{name}/chatter", STRING, congestion="block"
+        )
 
     def say(self, count: int) -> None:
         wait_until(self.publisher.has_subscribers, 10, message=f"edge subscribed to /{self.name}/chatter")
@@ -76,8 +78,9 @@ def events_of(msgs: list[Message], reader: TopicReader, site_name: str) -> list[
     return out
 
 
-def test_robots_join_register_and_leave(cloud_: Cloud, kafka_bootstrap: str, schema_registry_url: str,
-                                        tmp_path: Path) -> None:
+def test_robots_join_register_and_leave(
+    cloud_: Cloud, kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
+) -> None:
     run = uuid.uuid4().hex[:8]
     topic = f"fleet.chat.{run}"
     site_name = unique_site()
@@ -90,14 +93,23 @@ def test_robots_join_register_and_leave(cloud_: Cloud, kafka_bootstrap: str, sch
             ros_events.append(json.loads(cdr.decode_string(sample.payload)))
 
     with site(cloud_) as router:
-        config = edge_config(tmp_path / "spool", router.endpoint, cloud_, site=site_name, robot_types={
-            "tb4": {"match": "/tb4_*", "mappings": [
-                {"name": "chat", "from": "/{robot}/chatter", "to": topic, "type": STRING}]},
-        })
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=site_name,
+            robot_types={
+                "tb4": {
+                    "match": "/tb4_*",
+                    "mappings": [{"name": "chat", "from": "/{robot}/chatter", "to": topic, "type": STRING}],
+                },
+            },
+        )
         observer = RosNode("watcher", config=zenoh_peer_config(router.endpoint))
         with EdgeAgent(config) as agent, observer as watcher:
-            watcher.create_subscriber("/fleetlink/robots", STRING, on_event,
-                                      QoS(durability=Durability.TRANSIENT_LOCAL, depth=100))
+            watcher.create_subscriber(
+                "/fleetlink/robots", STRING, on_event, QoS(durability=Durability.TRANSIENT_LOCAL, depth=100)
+            )
             first = Robot(router.endpoint, "tb4_01")
             first.say(50)
             wait_until(lambda: agent.robots() == {"tb4_01": "tb4"}, 10)
@@ -107,13 +119,17 @@ def test_robots_join_register_and_leave(cloud_: Cloud, kafka_bootstrap: str, sch
             joining.say(30)
             first.say(50)
 
-            explicit = RosNode("register", config=zenoh_peer_config(router.endpoint),
-                               typestore=load_typestore("jazzy")).start()
+            explicit = RosNode(
+                "register", config=zenoh_peer_config(router.endpoint), typestore=load_typestore("jazzy")
+            ).start()
             register = explicit.create_publisher("/fleetlink/register", STRING)
             wait_until(register.has_subscribers, 10)
             register.publish_cdr(cdr.encode_string("tb4/tb4_09"))
-            wait_until(lambda: "/tb4_09/chatter" in agent.subscribed_topics(), 10,
-                       message="the explicitly registered robot's declared-type topic is subscribed at once")
+            wait_until(
+                lambda: "/tb4_09/chatter" in agent.subscribed_topics(),
+                10,
+                message="the explicitly registered robot's declared-type topic is subscribed at once",
+            )
             register.publish_cdr(cdr.encode_string("no_such_type/tb4_10"))
             wait_until(lambda: agent.snapshot()["registration"]["bad_registrations"] == 1, 10)
 
@@ -125,11 +141,20 @@ def test_robots_join_register_and_leave(cloud_: Cloud, kafka_bootstrap: str, sch
             wait_until(lambda: len(ros_events) == 4, 10, message="4 events on /fleetlink/robots")
             first.leave()
             explicit.stop()
-            wait_until(lambda: agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0
-                       and agent.snapshot()["streams"]["durable"]["buffer"]["appended"] >= 134, 20)
+            wait_until(
+                lambda: (
+                    agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0
+                    and agent.snapshot()["streams"]["durable"]["buffer"]["appended"] >= 134
+                ),
+                20,
+            )
 
-    want = [("tb4_01", "registered", "discovered"), ("tb4_02", "registered", "discovered"),
-            ("tb4_09", "registered", "explicit"), ("tb4_02", "deregistered", "liveliness_lost")]
+    want = [
+        ("tb4_01", "registered", "discovered"),
+        ("tb4_02", "registered", "discovered"),
+        ("tb4_09", "registered", "explicit"),
+        ("tb4_02", "deregistered", "liveliness_lost"),
+    ]
     msgs = reader.read_until(cloud_.registrations, lambda ms: len(events_of(ms, reader, site_name)) >= 4)
     assert events_of(msgs, reader, site_name) == want
     mine = [m for m in msgs if headers(m).get("fleetlink.site") == site_name]

@@ -369,8 +369,9 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
     assert [(c.key, colours(c), c.timestamp) for c in new_commands] == [("tb4_04", {RED}, joined_red_at)]
 
     # every record counted: none skipped as late, undecodable or malformed
-    skipped = [r.getMessage() for r in caplog.records
-               if r.name.startswith("fleetlink.examples.fault_detection")]
+    skipped = [
+        r.getMessage() for r in caplog.records if r.name.startswith("fleetlink.examples.fault_detection")
+    ]
     assert skipped == []
 
     # a stop request ends the app promptly (finish the record in hand, commit, close)

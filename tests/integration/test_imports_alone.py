@@ -54,8 +54,15 @@ CHILD = textwrap.dedent(
 
 def test_every_module_imports_alone_in_a_fresh_interpreter() -> None:
     names = sorted(name for name in modules() if not name.endswith("__main__"))
-    done = subprocess.run([sys.executable, "-c", CHILD], input=json.dumps(names), capture_output=True,
-                          text=True, cwd=ROOT / "tests", timeout=600, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", CHILD],
+        input=json.dumps(names),
+        capture_output=True,
+        text=True,
+        cwd=ROOT / "tests",
+        timeout=600,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     failures: dict[str, str] = json.loads(done.stdout.strip().splitlines()[-1])
     assert failures == {}, "\n\n".join(f"{name}:\n{trace}" for name, trace in failures.items())

@@ -37,9 +37,24 @@ def domain() -> int:
 @pytest.fixture
 def sim(zenoh_router: str, domain: int) -> Iterator[subprocess.Popen[str]]:
     proc = subprocess.Popen(
-        fleetlink("sim", "--robots", "2", "--rate", "10", "--msg-path", CREATE3, "--duration", "60",
-                  "-e", zenoh_router, "--domain-id", str(domain)),
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        fleetlink(
+            "sim",
+            "--robots",
+            "2",
+            "--rate",
+            "10",
+            "--msg-path",
+            CREATE3,
+            "--duration",
+            "60",
+            "-e",
+            zenoh_router,
+            "--domain-id",
+            str(domain),
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
     yield proc
@@ -62,21 +77,38 @@ def test_ros_graph_json_reports_simulated_fleet_with_rates(
         lines.append(line)
     assert lines[-1].startswith("simulating tb4_01, tb4_02 at 10 Hz"), lines
     result = subprocess.run(
-        fleetlink("ros", "graph", "--json", "--duration", "2", "--robot-type", "turtlebot4=/tb4_*",
-                  "-e", zenoh_router, "--domain-id", str(domain)),
-        capture_output=True, text=True, timeout=30, check=False,
+        fleetlink(
+            "ros",
+            "graph",
+            "--json",
+            "--duration",
+            "2",
+            "--robot-type",
+            "turtlebot4=/tb4_*",
+            "-e",
+            zenoh_router,
+            "--domain-id",
+            str(domain),
+        ),
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
     )
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
-    assert [(r["name"], r["type"]) for r in report["robots"]] == [("tb4_01", "turtlebot4"),
-                                                                  ("tb4_02", "turtlebot4")]
+    assert [(r["name"], r["type"]) for r in report["robots"]] == [
+        ("tb4_01", "turtlebot4"),
+        ("tb4_02", "turtlebot4"),
+    ]
     assert {n["fqn"] for n in report["nodes"]} == {"/tb4_01/create3", "/tb4_02/create3"}
     topics = {t["name"]: t for t in report["topics"]}
     imu = topics["/tb4_01/imu"]
     assert imu["types"] == ["sensor_msgs/msg/Imu"]
     assert imu["publishers"][0]["qos"] == "2::,5:,:,:,,"
     assert imu["publishers"][0]["type_hash"] == (
-        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b")
+        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
+    )
     assert 7.0 <= imu["rate_hz"] <= 12.0
     assert 0.3 <= topics["/tb4_02/battery_state"]["rate_hz"] <= 2.0
     assert topics["/tb4_01/cmd_lightring"]["subscribers"][0]["type"] == "irobot_create_msgs/msg/LightringLeds"
@@ -87,9 +119,16 @@ def test_killed_robot_process_is_deregistered_within_a_second(
     zenoh_router: str, domain: int, sim: subprocess.Popen[str]
 ) -> None:
     events: list[tuple[RobotEvent, float]] = []
-    with RosNode("fleetlink", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as node, \
-         RobotWatcher(node, [RobotType("turtlebot4", "/tb4_*")], grace_s=0.1, tick_s=0.05,
-                      listeners=(lambda e: events.append((e, time.monotonic())),)):
+    with (
+        RosNode("fleetlink", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as node,
+        RobotWatcher(
+            node,
+            [RobotType("turtlebot4", "/tb4_*")],
+            grace_s=0.1,
+            tick_s=0.05,
+            listeners=(lambda e: events.append((e, time.monotonic())),),
+        ),
+    ):
         wait_until(lambda: len(events) == 2, timeout=15, message="both simulated robots registered")
         killed = time.monotonic()
         os.kill(sim.pid, signal.SIGKILL)
@@ -103,13 +142,29 @@ def test_killed_robot_process_is_deregistered_within_a_second(
 def test_replay_command_publishes_a_bag_topic(zenoh_router: str, domain: int) -> None:
     received: list[RosSample] = []
     with RosNode("listener", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as node:
-        sub = node.create_subscriber("/husky_01/fix", "sensor_msgs/msg/NavSatFix", received.append,
-                                     type_hash=None, declare_token=False)
+        sub = node.create_subscriber(
+            "/husky_01/fix", "sensor_msgs/msg/NavSatFix", received.append, type_hash=None, declare_token=False
+        )
         result = subprocess.run(
-            fleetlink("replay", str(BAGS / "robot_localization_husky"), "--robot", "husky_01", "--fast",
-                      "--topic", "/fix", "--wait-subscribers", "10", "-e", zenoh_router,
-                      "--domain-id", str(domain)),
-            capture_output=True, text=True, timeout=60, check=False,
+            fleetlink(
+                "replay",
+                str(BAGS / "robot_localization_husky"),
+                "--robot",
+                "husky_01",
+                "--fast",
+                "--topic",
+                "/fix",
+                "--wait-subscribers",
+                "10",
+                "-e",
+                zenoh_router,
+                "--domain-id",
+                str(domain),
+            ),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
         )
         assert result.returncode == 0, result.stderr
         assert "published 989 messages on 1 topics" in result.stdout
@@ -119,32 +174,61 @@ def test_replay_command_publishes_a_bag_topic(zenoh_router: str, domain: int) ->
 
 
 def test_replay_command_reports_a_missing_bag(tmp_path: Path) -> None:
-    result = subprocess.run(fleetlink("replay", str(tmp_path / "nope"), "--robot", "r", "--fast",
-                                      "-e", "tcp/127.0.0.1:1"),
-                            capture_output=True, text=True, timeout=60, check=False)
+    result = subprocess.run(
+        fleetlink("replay", str(tmp_path / "nope"), "--robot", "r", "--fast", "-e", "tcp/127.0.0.1:1"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert result.returncode == 1
     assert "bag not found" in result.stderr
 
 
 def test_sim_stdin_commands(zenoh_router: str, domain: int) -> None:
     result = subprocess.run(
-        fleetlink("sim", "--robots", "1", "--msg-path", CREATE3, "--stdin", "-e", zenoh_router,
-                  "--domain-id", str(domain)),
+        fleetlink(
+            "sim",
+            "--robots",
+            "1",
+            "--msg-path",
+            CREATE3,
+            "--stdin",
+            "-e",
+            zenoh_router,
+            "--domain-id",
+            str(domain),
+        ),
         input="list\nfault tb4_01\nadd\nled tb4_02\nremove tb4_01\nheal tb4_09\njump\nlist\nquit\n",
-        capture_output=True, text=True, timeout=60, check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines()[1:] == [
-        "tb4_01", "tb4_01 picked up", "tb4_02 added", "tb4_02 light ring: green", "tb4_01 removed",
+        "tb4_01",
+        "tb4_01 picked up",
+        "tb4_02 added",
+        "tb4_02 light ring: green",
+        "tb4_01 removed",
         "error: no robot named tb4_09",
-        "unknown command 'jump' (fault R, heal R, add [R], remove R, led R, list, quit)", "tb4_02",
+        "unknown command 'jump' (fault R, heal R, add [R], remove R, led R, list, quit)",
+        "tb4_02",
     ]
 
 
 def test_sim_with_a_bad_msg_path_names_it() -> None:
     env = {k: v for k, v in os.environ.items() if k != "FLEETLINK_MSG_PATH"}
-    result = subprocess.run(fleetlink("sim", "--robots", "1", "--msg-path", "/nonexistent/pkg",
-                                      "-m", "client", "-e", "tcp/127.0.0.1:1"),
-                            capture_output=True, text=True, timeout=60, check=False, env=env)
+    result = subprocess.run(
+        fleetlink(
+            "sim", "--robots", "1", "--msg-path", "/nonexistent/pkg", "-m", "client", "-e", "tcp/127.0.0.1:1"
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env=env,
+    )
     assert result.returncode == 1
     assert "--msg-path /nonexistent/pkg: not a directory" in result.stderr

@@ -56,8 +56,9 @@ def test_robots_joining_and_leaving_are_seen_within_a_second(
     zenoh_router: str, domain: int, observer: RosNode
 ) -> None:
     events: list[tuple[RobotEvent, float]] = []
-    with RobotWatcher(observer, TB4, grace_s=0.2, tick_s=0.05,
-                      listeners=(lambda e: events.append((e, time.monotonic())),)):
+    with RobotWatcher(
+        observer, TB4, grace_s=0.2, tick_s=0.05, listeners=(lambda e: events.append((e, time.monotonic())),)
+    ):
         first = robot(zenoh_router, domain, "tb4_01")
         first_up = time.monotonic()  # its tokens are declared: from here discovery must take < 1 s
         second = robot(zenoh_router, domain, "tb4_02")
@@ -72,7 +73,10 @@ def test_robots_joining_and_leaving_are_seen_within_a_second(
         wait_until(lambda: len(events) == 3, timeout=5, message="tb4_01 deregistered")
         event, at = events[2]
         assert (event.robot, event.kind, event.reason) == (
-            "tb4_01", RobotEventKind.DEREGISTERED, Reason.LIVELINESS_LOST)
+            "tb4_01",
+            RobotEventKind.DEREGISTERED,
+            Reason.LIVELINESS_LOST,
+        )
         assert at - left < 1.0
         second.stop()
         wait_until(lambda: len(events) == 4, timeout=5, message="tb4_02 deregistered")
@@ -84,8 +88,11 @@ def test_robot_running_before_discovery_starts_is_found(
     early = robot(zenoh_router, domain, "tb4_07")
     try:
         with RobotWatcher(observer, TB4, grace_s=0.2) as watcher:
-            wait_until(lambda: [r.name for r in watcher.robots()] == ["tb4_07"], timeout=5,
-                       message="pre-existing robot tb4_07 found")
+            wait_until(
+                lambda: [r.name for r in watcher.robots()] == ["tb4_07"],
+                timeout=5,
+                message="pre-existing robot tb4_07 found",
+            )
             (found,) = watcher.robots()
             assert found.robot_type == "turtlebot4"
             assert len(found.entities) == 2  # the node token and the publisher token
@@ -98,10 +105,12 @@ def test_graph_shows_nodes_topics_types_and_qos(zenoh_router: str, domain: int, 
     with GraphWatcher(observer.session, domain, listeners=(events.append,)) as watcher:
         node = RosNode("tf_pub", "/tb4_03", domain_id=domain, config=zenoh_peer_config(zenoh_router)).start()
         try:
-            node.create_publisher("/tf_static", "tf2_msgs/msg/TFMessage", TRANSIENT_LOCAL,
-                                  type_hash="TypeHashNotSupported")
-            node.create_subscriber("cmd_vel", "geometry_msgs/msg/Twist", lambda s: None,
-                                   type_hash="TypeHashNotSupported")
+            node.create_publisher(
+                "/tf_static", "tf2_msgs/msg/TFMessage", TRANSIENT_LOCAL, type_hash="TypeHashNotSupported"
+            )
+            node.create_subscriber(
+                "cmd_vel", "geometry_msgs/msg/Twist", lambda s: None, type_hash="TypeHashNotSupported"
+            )
             wait_until(lambda: len(watcher.topics()) == 2, timeout=5, message="two topics")
             topics = watcher.topics()
             tf = topics["/tf_static"]
@@ -126,25 +135,34 @@ def test_malformed_tokens_are_counted_and_never_stop_discovery(
     zenoh_router: str, domain: int, observer: RosNode
 ) -> None:
     bad_keys = [
-        f"@ros2_lv/{domain}/zz/0/0/NN/%/%/x",                        # zid not hex
-        f"@ros2_lv/{domain}/ab/0/0/NN/%/%",                          # too few chunks
+        f"@ros2_lv/{domain}/zz/0/0/NN/%/%/x",  # zid not hex
+        f"@ros2_lv/{domain}/ab/0/0/NN/%/%",  # too few chunks
         f"@ros2_lv/{domain}/ab/0/1/MP/%/%/n/%t/not_a_type/TypeHashNotSupported/::,10:,:,:,,",
         f"@ros2_lv/{domain}/ab/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::String_/TypeHashNotSupported/garbage",
-        f"@ros2_lv/{domain}/ab/0/0/QQ/%/%/n",                         # unknown kind
+        f"@ros2_lv/{domain}/ab/0/0/QQ/%/%/n",  # unknown kind
     ]
     with zenoh.open(zenoh_peer_config(zenoh_router)) as vandal:
         tokens = [vandal.liveliness().declare_token(k) for k in bad_keys]
         with GraphWatcher(observer.session, domain) as watcher:
-            wait_until(lambda: watcher.stats.malformed == len(bad_keys), timeout=5,
-                       message="every malformed token counted")
+            wait_until(
+                lambda: watcher.stats.malformed == len(bad_keys),
+                timeout=5,
+                message="every malformed token counted",
+            )
             good = robot(zenoh_router, domain, "tb4_05")
             try:
-                wait_until(lambda: "/tb4_05/imu" in watcher.topics(), timeout=5,
-                           message="discovery continues after malformed tokens")
+                wait_until(
+                    lambda: "/tb4_05/imu" in watcher.topics(),
+                    timeout=5,
+                    message="discovery continues after malformed tokens",
+                )
                 for token in tokens:
                     token.undeclare()
-                wait_until(lambda: watcher.stats.deletes >= len(bad_keys), timeout=5,
-                           message="deletes of malformed tokens seen")
+                wait_until(
+                    lambda: watcher.stats.deletes >= len(bad_keys),
+                    timeout=5,
+                    message="deletes of malformed tokens seen",
+                )
                 assert [n.fqn for n in watcher.nodes()] == ["/tb4_05/sim"]
                 assert watcher.stats.malformed == len(bad_keys)
             finally:
@@ -156,17 +174,25 @@ def test_explicit_registration_topic_and_robot_events_topic(
 ) -> None:
     published: list[dict[str, str]] = []
     with RosNode("ops", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as ops:
-        ops.create_subscriber(EVENTS_TOPIC, STRING, lambda s: published.append(
-            json.loads(cdr.decode_string(s.payload))), type_hash=STRING_HASH)
+        ops.create_subscriber(
+            EVENTS_TOPIC,
+            STRING,
+            lambda s: published.append(json.loads(cdr.decode_string(s.payload))),
+            type_hash=STRING_HASH,
+        )
         register = ops.create_publisher(REGISTER_TOPIC, STRING, type_hash=STRING_HASH)
-        with RobotWatcher(observer, TB4, grace_s=0.2, tick_s=0.05, registrations=True,
-                          events_topic=EVENTS_TOPIC) as watcher:
+        with RobotWatcher(
+            observer, TB4, grace_s=0.2, tick_s=0.05, registrations=True, events_topic=EVENTS_TOPIC
+        ) as watcher:
             wait_until(lambda: register.matching, timeout=5, message="watcher listens on /fleetlink/register")
-            register.publish_cdr(cdr.encode_string("turtlebot4/tb4_42"))     # not running yet
-            register.publish_cdr(cdr.encode_string("forklift/fl_1"))         # unknown type: ignored
-            register.publish_cdr(b"\x00\x01\x00\x00garbage")                  # not a String: ignored
-            wait_until(lambda: [r.name for r in watcher.robots()] == ["tb4_42"], timeout=5,
-                       message="explicitly registered robot")
+            register.publish_cdr(cdr.encode_string("turtlebot4/tb4_42"))  # not running yet
+            register.publish_cdr(cdr.encode_string("forklift/fl_1"))  # unknown type: ignored
+            register.publish_cdr(b"\x00\x01\x00\x00garbage")  # not a String: ignored
+            wait_until(
+                lambda: [r.name for r in watcher.robots()] == ["tb4_42"],
+                timeout=5,
+                message="explicitly registered robot",
+            )
             assert watcher.robots()[0].explicit
             wait_until(lambda: watcher.bad_registrations == 2, timeout=5, message="bad registrations counted")
             late = robot(zenoh_router, domain, "tb4_42")
@@ -188,10 +214,14 @@ def test_router_restart_discovery_and_subscription_come_back(domain: int) -> Non
     events: list[RobotEvent] = []
     samples: list[RosSample] = []
     try:
-        with RosNode("fleetlink", domain_id=domain,
-                     config=zenoh_peer_config(router.endpoint, "client")) as obs, \
-             RosNode("sim", "/tb4_09", domain_id=domain,
-                     config=zenoh_peer_config(router.endpoint, "client")) as bot:
+        with (
+            RosNode(
+                "fleetlink", domain_id=domain, config=zenoh_peer_config(router.endpoint, "client")
+            ) as obs,
+            RosNode(
+                "sim", "/tb4_09", domain_id=domain, config=zenoh_peer_config(router.endpoint, "client")
+            ) as bot,
+        ):
             obs.create_subscriber("/tb4_09/imu", IMU, samples.append, type_hash=IMU_HASH)
             pub = bot.create_publisher("imu", IMU, SENSOR_DATA, type_hash=IMU_HASH)
             with RobotWatcher(obs, TB4, grace_s=10.0, listeners=(events.append,)) as watcher:

@@ -46,8 +46,9 @@ def raw(zenoh_router: str) -> Iterator[zenoh.Session]:
 
 @pytest.fixture
 def node(zenoh_router: str, domain: int, typestore: Typestore) -> Iterator[RosNode]:
-    with RosNode("talker", "/tb4_01", domain_id=domain, config=zenoh_peer_config(zenoh_router),
-                 typestore=typestore) as n:
+    with RosNode(
+        "talker", "/tb4_01", domain_id=domain, config=zenoh_peer_config(zenoh_router), typestore=typestore
+    ) as n:
         yield n
 
 
@@ -56,10 +57,15 @@ def test_publisher_puts_exact_key_cdr_and_attachment(
 ) -> None:
     got: list[tuple[str, bytes, bytes | None]] = []
     tokens: list[str] = []
-    raw.declare_subscriber(f"{domain}/**", lambda s: got.append(
-        (str(s.key_expr), s.payload.to_bytes(), s.attachment.to_bytes() if s.attachment else None)))
-    raw.liveliness().declare_subscriber(f"@ros2_lv/{domain}/**", lambda s: tokens.append(str(s.key_expr)),
-                                        history=True)
+    raw.declare_subscriber(
+        f"{domain}/**",
+        lambda s: got.append(
+            (str(s.key_expr), s.payload.to_bytes(), s.attachment.to_bytes() if s.attachment else None)
+        ),
+    )
+    raw.liveliness().declare_subscriber(
+        f"@ros2_lv/{domain}/**", lambda s: tokens.append(str(s.key_expr)), history=True
+    )
     pub = node.create_publisher("chatter", STRING)
     wait_until(lambda: pub.matching, timeout=5, message="raw subscriber matched")
     before = time.time_ns()
@@ -69,13 +75,15 @@ def test_publisher_puts_exact_key_cdr_and_attachment(
     after = time.time_ns()
     key = f"{domain}/tb4_01/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}"
     assert [k for k, _, _ in got] == [key] * 3
-    assert got[0][1] == bytes.fromhex("00010000" "08000000" "68656c6c6f203000")
+    assert got[0][1] == bytes.fromhex("000100000800000068656c6c6f203000")
     atts = [decode(a or b"") for _, _, a in got]
     assert [a.seq for a in atts] == [1, 2, 3]
     assert all(len(a or b"") == 33 for _, _, a in got)
     assert all(before <= a.source_ts_ns <= after for a in atts)
-    expected_token = (f"@ros2_lv/{domain}/{node.zid}/{node.nid}/{pub.eid}/MP/%/%tb4_01/talker/"
-                      f"%tb4_01%chatter/std_msgs::msg::dds_::String_/{STRING_HASH}/::,10:,:,:,,")
+    expected_token = (
+        f"@ros2_lv/{domain}/{node.zid}/{node.nid}/{pub.eid}/MP/%/%tb4_01/talker/"
+        f"%tb4_01%chatter/std_msgs::msg::dds_::String_/{STRING_HASH}/::,10:,:,:,,"
+    )
     wait_until(lambda: expected_token in tokens, timeout=5, message="MP token with honest QoS")
     assert f"@ros2_lv/{domain}/{node.zid}/{node.nid}/{node.nid}/NN/%/%tb4_01/talker" in tokens
     assert {a.gid for a in atts} == {entity_gid(expected_token)}
@@ -125,20 +133,24 @@ def test_bad_traffic_is_counted_reported_and_never_stops_the_subscription(
 ) -> None:
     samples: list[RosSample] = []
     errors: list[RoswireError] = []
-    sub = node.create_subscriber("/noisy", None, samples.append, decode=True, on_error=errors.append,
-                                 ring=ring)
+    sub = node.create_subscriber(
+        "/noisy", None, samples.append, decode=True, on_error=errors.append, ring=ring
+    )
     key = data_key(domain, "/noisy", STRING, STRING_HASH)
     good_payload = b"\x00\x01\x00\x00\x03\x00\x00\x00ok\x00"
     good_att = encode(1, time.time_ns(), b"\x01" * 16)
-    wait_until(lambda: raw.declare_publisher(key).matching_status.matching,  # type: ignore[attr-defined]
-               timeout=5, message="subscriber matched")
-    raw.put(key, good_payload)                                     # no attachment
-    raw.put(key, good_payload, attachment=b"\x01\x02\x03")        # broken attachment
+    wait_until(
+        lambda: raw.declare_publisher(key).matching_status.matching,  # type: ignore[attr-defined]
+        timeout=5,
+        message="subscriber matched",
+    )
+    raw.put(key, good_payload)  # no attachment
+    raw.put(key, good_payload, attachment=b"\x01\x02\x03")  # broken attachment
     raw.put(key, good_payload, attachment=good_att[:16] + b"\x0f" + good_att[17:])  # bad gid length
     raw.put(key, b"\xde\xad\xbe\xef garbage", attachment=good_att)  # no CDR header
     raw.put(key, b"\x00\x01\x00\x00\xff\xff\xff\x7f", attachment=good_att)  # CDR header, does not decode
     raw.put(f"{domain}/noisy/not_a_type/xyz", good_payload, attachment=good_att)  # not a data key
-    raw.put(key, good_payload, attachment=good_att)                # finally a good one
+    raw.put(key, good_payload, attachment=good_att)  # finally a good one
     wait_until(lambda: sub.stats.received == 7, timeout=5, message="all 7 samples seen")
     wait_until(lambda: len(samples) == 1, timeout=5, message="the good sample delivered")
     assert samples[0].message.data == "ok"
@@ -184,8 +196,9 @@ def test_ring_subscriber_drains_a_burst_on_its_own_thread_in_order(
 
 def test_ring_hands_over_bursts_with_on_samples(node: RosNode) -> None:
     bursts: list[list[RosSample]] = []
-    sub = RosSubscriber(node, "/bursts", STRING, None, type_hash=STRING_HASH, ring=10_000,
-                        on_samples=bursts.append).start()
+    sub = RosSubscriber(
+        node, "/bursts", STRING, None, type_hash=STRING_HASH, ring=10_000, on_samples=bursts.append
+    ).start()
     pub = node.create_publisher("/bursts", STRING, type_hash=STRING_HASH)
     wait_until(lambda: pub.matching, timeout=5, message="matched")
     for _ in range(2000):
@@ -234,13 +247,15 @@ def test_transient_local_late_joiner_gets_the_cached_sample(
     zenoh_router: str, domain: int, typestore: Typestore
 ) -> None:
     latched = b"\x00\x01\x00\x00\x07\x00\x00\x00map v1\x00"
-    with RosNode("map_server", domain_id=domain, config=zenoh_peer_config(zenoh_router),
-                 typestore=typestore) as server:
+    with RosNode(
+        "map_server", domain_id=domain, config=zenoh_peer_config(zenoh_router), typestore=typestore
+    ) as server:
         pub = server.create_publisher("/map_name", STRING, TRANSIENT_LOCAL)
         pub.publish_cdr(b"\x00\x01\x00\x00\x07\x00\x00\x00map v0\x00")
         pub.publish_cdr(latched)  # depth 1: only this one stays in the cache
-        with RosNode("late", domain_id=domain, config=zenoh_peer_config(zenoh_router),
-                     typestore=typestore) as late:
+        with RosNode(
+            "late", domain_id=domain, config=zenoh_peer_config(zenoh_router), typestore=typestore
+        ) as late:
             samples: list[RosSample] = []
             late.create_subscriber("/map_name", STRING, samples.append, TRANSIENT_LOCAL)
             wait_until(lambda: len(samples) >= 1, timeout=10, message="cached sample replayed")
@@ -284,9 +299,12 @@ def test_stopped_node_rejects_publishing(zenoh_router: str, domain: int) -> None
 
 
 def test_probe_detects_an_older_network(zenoh_router: str, domain: int) -> None:
-    with RosNode("old_talker", domain_id=domain, config=zenoh_peer_config(zenoh_router),
-                 attachment_version=1) as old, \
-         RosNode("prober", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as prober:
+    with (
+        RosNode(
+            "old_talker", domain_id=domain, config=zenoh_peer_config(zenoh_router), attachment_version=1
+        ) as old,
+        RosNode("prober", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as prober,
+    ):
         pub = old.create_publisher("/chatter", STRING, type_hash="TypeHashNotSupported")
         stop = threading.Event()
 

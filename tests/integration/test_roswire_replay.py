@@ -69,18 +69,25 @@ def test_every_message_of_a_real_bag_is_received_and_decodes_to_the_bag_values(
         with lock:
             received[sample.topic].append(sample)
 
-    with RosNode("recorder", domain_id=domain, config=zenoh_peer_config(zenoh_router),
-                 typestore=receiver_ts) as recorder:
-        subs = [recorder.create_subscriber(robot_topic("husky_07", t), msgtype, keep)
-                for t, msgtype in types.items()]
-        with BagReplayer(bag, "husky_07", config=zenoh_peer_config(zenoh_router), domain_id=domain,
-                         rate=0) as replayer:
+    with RosNode(
+        "recorder", domain_id=domain, config=zenoh_peer_config(zenoh_router), typestore=receiver_ts
+    ) as recorder:
+        subs = [
+            recorder.create_subscriber(robot_topic("husky_07", t), msgtype, keep)
+            for t, msgtype in types.items()
+        ]
+        with BagReplayer(
+            bag, "husky_07", config=zenoh_peer_config(zenoh_router), domain_id=domain, rate=0
+        ) as replayer:
             assert replayer.wait_for_subscribers(timeout=10)
             stats = replayer.run()
         total = sum(len(v) for v in expected.values())
         assert stats.total == total
-        wait_until(lambda: sum(len(v) for v in received.values()) >= total, timeout=20,
-                   message=f"all {total} messages received")
+        wait_until(
+            lambda: sum(len(v) for v in received.values()) >= total,
+            timeout=20,
+            message=f"all {total} messages received",
+        )
         for sub in subs:
             assert sub.stats.rejected == 0
             assert sub.stats.gaps == 0
@@ -94,7 +101,8 @@ def test_every_message_of_a_real_bag_is_received_and_decodes_to_the_bag_values(
         for sample, raw in zip(got, raws, strict=True):
             assert sample.typename == msgtype
             assert values(receiver_ts, receiver_ts.deserialize_cdr(sample.payload, msgtype)) == values(
-                reference_ts, reference_ts.deserialize_cdr(raw, msgtype)), topic
+                reference_ts, reference_ts.deserialize_cdr(raw, msgtype)
+            ), topic
 
 
 def test_replay_follows_recorded_timing_scaled_by_rate(zenoh_router: str) -> None:
@@ -102,11 +110,15 @@ def test_replay_follows_recorded_timing_scaled_by_rate(zenoh_router: str) -> Non
     domain = next(_domains)
     arrivals: list[int] = []
     with RosNode("recorder", domain_id=domain, config=zenoh_peer_config(zenoh_router)) as recorder:
-        recorder.create_subscriber(robot_topic("tb4_01", "/scan"), "sensor_msgs/msg/LaserScan",
-                                   lambda s: arrivals.append(s.received_ns),
-                                   type_hash="RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828")
-        with BagReplayer(bag, "tb4_01", config=zenoh_peer_config(zenoh_router), domain_id=domain,
-                         rate=50, topics=["/scan"]) as replayer:
+        recorder.create_subscriber(
+            robot_topic("tb4_01", "/scan"),
+            "sensor_msgs/msg/LaserScan",
+            lambda s: arrivals.append(s.received_ns),
+            type_hash="RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
+        )
+        with BagReplayer(
+            bag, "tb4_01", config=zenoh_peer_config(zenoh_router), domain_id=domain, rate=50, topics=["/scan"]
+        ) as replayer:
             assert replayer.wait_for_subscribers(timeout=10)
             stats = replayer.run()
     recorded_s = 91.1  # first to last /scan message in the recording

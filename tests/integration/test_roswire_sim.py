@@ -47,18 +47,32 @@ def test_fleet_is_discovered_and_changes_at_runtime(
     zenoh_router: str, domain: int, ts: Typestore, operator: RosNode
 ) -> None:
     events: list[RobotEvent] = []
-    with RobotWatcher(operator, [RobotType("turtlebot4", "/tb4_*")], grace_s=0.2, tick_s=0.05,
-                      listeners=(events.append,)) as watcher, \
-         Fleet(zenoh_peer_config(zenoh_router), ts, robots=2, rate=10, domain_id=domain) as fleet:
-        wait_until(lambda: [r.name for r in watcher.robots()] == ["tb4_01", "tb4_02"], timeout=5,
-                   message="two simulated robots discovered")
+    with (
+        RobotWatcher(
+            operator,
+            [RobotType("turtlebot4", "/tb4_*")],
+            grace_s=0.2,
+            tick_s=0.05,
+            listeners=(events.append,),
+        ) as watcher,
+        Fleet(zenoh_peer_config(zenoh_router), ts, robots=2, rate=10, domain_id=domain) as fleet,
+    ):
+        wait_until(
+            lambda: [r.name for r in watcher.robots()] == ["tb4_01", "tb4_02"],
+            timeout=5,
+            message="two simulated robots discovered",
+        )
         graph = watcher.watcher
         assert graph is not None
         topics = graph.topics()
-        for name, typename in [("ir_intensity", IR_VECTOR), ("kidnap_status", KIDNAP),
-                               ("odom", "nav_msgs/msg/Odometry"), ("imu", "sensor_msgs/msg/Imu"),
-                               ("hazard_detection", "irobot_create_msgs/msg/HazardDetectionVector"),
-                               ("battery_state", "sensor_msgs/msg/BatteryState")]:
+        for name, typename in [
+            ("ir_intensity", IR_VECTOR),
+            ("kidnap_status", KIDNAP),
+            ("odom", "nav_msgs/msg/Odometry"),
+            ("imu", "sensor_msgs/msg/Imu"),
+            ("hazard_detection", "irobot_create_msgs/msg/HazardDetectionVector"),
+            ("battery_state", "sensor_msgs/msg/BatteryState"),
+        ]:
             assert topics[f"/tb4_01/{name}"].types == (typename,)
         assert topics["/tb4_01/cmd_lightring"].types == (LIGHTRING,)
         assert topics["/tb4_01/cmd_lightring"].subscribers
@@ -67,8 +81,11 @@ def test_fleet_is_discovered_and_changes_at_runtime(
         assert added == "tb4_03"
         wait_until(lambda: "tb4_03" in [r.name for r in watcher.robots()], timeout=2, message="added robot")
         fleet.remove_robot("tb4_01")
-        wait_until(lambda: [r.name for r in watcher.robots()] == ["tb4_02", "tb4_03"], timeout=3,
-                   message="removed robot deregistered")
+        wait_until(
+            lambda: [r.name for r in watcher.robots()] == ["tb4_02", "tb4_03"],
+            timeout=3,
+            message="removed robot deregistered",
+        )
         assert fleet.names() == ["tb4_02", "tb4_03"]
     kinds = [(e.robot, e.kind) for e in events]
     assert ("tb4_01", RobotEventKind.DEREGISTERED) in kinds
@@ -105,8 +122,14 @@ def test_robot_shows_the_lightring_colour_it_is_sent(
     zenoh_router: str, domain: int, ts: Typestore, operator: RosNode
 ) -> None:
     shown: list[tuple[str, LedState]] = []
-    with Fleet(zenoh_peer_config(zenoh_router), ts, robots=2, rate=10, domain_id=domain,
-               on_led=lambda robot, state: shown.append((robot, state))) as fleet:
+    with Fleet(
+        zenoh_peer_config(zenoh_router),
+        ts,
+        robots=2,
+        rate=10,
+        domain_id=domain,
+        on_led=lambda robot, state: shown.append((robot, state)),
+    ) as fleet:
         assert fleet.led("tb4_02").name == "green"  # system colour before any command
         cmd = operator.create_publisher("/tb4_02/cmd_lightring", LIGHTRING)
         wait_until(lambda: cmd.matching, timeout=5, message="robot subscribed to cmd_lightring")

@@ -30,13 +30,15 @@ from tests.paths import HUSKY
 
 @pytest.fixture(scope="module")
 def uplink_config(kafka_bootstrap: str, schema_registry_url: str, zenoh_router: str) -> UplinkConfig:
-    return UplinkConfig.model_validate({
-        "kafka": {"bootstrap_servers": kafka_bootstrap, "message_max_bytes": 200_000},
-        "registry": {"url": schema_registry_url},
-        "zenoh": {"mode": "client", "connect": [zenoh_router]},
-        "topics": {"dead_letter": f"dlq.{uuid.uuid4().hex[:6]}"},
-        "metrics": {"listen": "127.0.0.1:0"},
-    })
+    return UplinkConfig.model_validate(
+        {
+            "kafka": {"bootstrap_servers": kafka_bootstrap, "message_max_bytes": 200_000},
+            "registry": {"url": schema_registry_url},
+            "zenoh": {"mode": "client", "connect": [zenoh_router]},
+            "topics": {"dead_letter": f"dlq.{uuid.uuid4().hex[:6]}"},
+            "metrics": {"listen": "127.0.0.1:0"},
+        }
+    )
 
 
 @pytest.fixture(scope="module")
@@ -55,8 +57,14 @@ def send(session: zenoh.Session, batch: Batch, timeout: float = 30.0) -> Ack:
     """Send like an edge does; retry while the uplink's queryable is not yet visible."""
     payload = encode_batch(batch, codec="zlib")
     for _ in range(100):
-        replies = list(session.get(ingest_key(batch.site, batch.edge_id), payload=payload,
-                                   target=zenoh.QueryTarget.BEST_MATCHING, timeout=timeout))
+        replies = list(
+            session.get(
+                ingest_key(batch.site, batch.edge_id),
+                payload=payload,
+                target=zenoh.QueryTarget.BEST_MATCHING,
+                timeout=timeout,
+            )
+        )
         for reply in replies:
             if reply.ok is not None:
                 return decode_ack(reply.ok.payload.to_bytes())
@@ -66,8 +74,9 @@ def send(session: zenoh.Session, batch: Batch, timeout: float = 30.0) -> Ack:
 
 
 def read_topic(bootstrap: str, topic: str, count: int) -> list[Message]:
-    consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"t-{uuid.uuid4()}",
-                         "auto.offset.reset": "earliest"})
+    consumer = Consumer(
+        {"bootstrap.servers": bootstrap, "group.id": f"t-{uuid.uuid4()}", "auto.offset.reset": "earliest"}
+    )
     consumer.subscribe([topic])
     out: list[Message] = []
     try:
@@ -102,9 +111,14 @@ def test_batch_lands_as_avro_readable_by_stock_deserializer(
     topic = f"fleet.imu.{uuid.uuid4().hex[:6]}"
     msgs = husky_imu(200)
     records = tuple(
-        Record(topic, f"r{i % 2}".encode(), single_object(fp, codec.cdr_to_avro(raw)),
-               headers=(("fleetlink.robot", f"r{i % 2}".encode()),), timestamp_ms=stamp // 1_000_000,
-               seq=i + 1)
+        Record(
+            topic,
+            f"r{i % 2}".encode(),
+            single_object(fp, codec.cdr_to_avro(raw)),
+            headers=(("fleetlink.robot", f"r{i % 2}".encode()),),
+            timestamp_ms=stamp // 1_000_000,
+            seq=i + 1,
+        )
         for i, (stamp, raw) in enumerate(msgs)
     )
     ack = send(edge_session, Batch("site-a", "edge-1", "durable", 1, records, {fp: json.dumps(codec.schema)}))
@@ -120,7 +134,7 @@ def test_batch_lands_as_avro_readable_by_stock_deserializer(
         assert value is not None
         by_seq[msg.timestamp()[1]] = (msg.key(), headers["fleetlink.robot"], value)
     assert len(by_seq) == 200
-    for (stamp, raw) in msgs:
+    for stamp, raw in msgs:
         key, robot, value = by_seq[stamp // 1_000_000]
         assert key == robot
         assert value == codec.decode(raw)
@@ -128,12 +142,18 @@ def test_batch_lands_as_avro_readable_by_stock_deserializer(
     assert uplink.metrics_url is not None
     exposition = httpx.get(f"{uplink.metrics_url}/metrics").text
     families = {f.name: f for f in text_string_to_metric_families(exposition)}
-    ok_batches = [s.value for s in families["fleetlink_ingest_batches"].samples
-                  if s.labels.get("site") == "site-a" and s.labels.get("status") == "ok"]
+    ok_batches = [
+        s.value
+        for s in families["fleetlink_ingest_batches"].samples
+        if s.labels.get("site") == "site-a" and s.labels.get("status") == "ok"
+    ]
     assert ok_batches
     assert ok_batches[0] >= 1
-    delivered = sum(s.value for s in families["fleetlink_kafka_delivered"].samples
-                    if s.labels.get("topic") == topic and s.labels.get("result") == "ok")
+    delivered = sum(
+        s.value
+        for s in families["fleetlink_kafka_delivered"].samples
+        if s.labels.get("topic") == topic and s.labels.get("result") == "ok"
+    )
     assert delivered == 200
 
 
@@ -147,8 +167,10 @@ def test_unknown_schema_and_oversized_record_are_dead_lettered(
     no_schema = Record(topic, b"k", single_object(b"\x01" * 8, b"\x00"), seq=2)
     huge = Record(topic, b"k", single_object(fp, b"\x80\x9a\x0c" + b"x" * 300_000), seq=3)
     after = Record(topic, b"k", single_object(fp, b"\x06xyz"), seq=4)
-    ack = send(edge_session, Batch("site-a", "edge-1", "durable", 1, (good, no_schema, huge, after),
-                                   {fp: json.dumps(schema)}))
+    ack = send(
+        edge_session,
+        Batch("site-a", "edge-1", "durable", 1, (good, no_schema, huge, after), {fp: json.dumps(schema)}),
+    )
     assert ack.status == "ok"
     assert [(f.seq, f.dead_lettered) for f in ack.failures] == [(2, True), (3, True)]
     assert "no schema for fingerprint" in ack.failures[0].reason
@@ -171,18 +193,26 @@ def test_a_left_out_schema_the_uplink_never_read_is_asked_for_and_nothing_is_pro
     uplink: Uplink, edge_session: zenoh.Session, kafka_bootstrap: str
 ) -> None:
     topic = f"fleet.lean.{uuid.uuid4().hex[:6]}"
-    schema = {"type": "record", "name": f"Lean{uuid.uuid4().hex[:6]}",
-              "fields": [{"name": "n", "type": "long"}]}
+    schema = {
+        "type": "record",
+        "name": f"Lean{uuid.uuid4().hex[:6]}",
+        "fields": [{"name": "n", "type": "long"}],
+    }
     fp = fingerprint(schema)
 
     def records(first: int) -> tuple[Record, ...]:
-        return tuple(Record(topic, b"k", single_object(fp, bytes([2 * n])), seq=n)
-                     for n in range(first, first + 3))
+        return tuple(
+            Record(topic, b"k", single_object(fp, bytes([2 * n])), seq=n) for n in range(first, first + 3)
+        )
 
     lean = Batch("site-a", "edge-2", "durable", 1, records(1), elided=frozenset({fp}))
     refused = send(edge_session, lean)
     assert (refused.status, refused.missing_schemas, refused.first_seq, refused.last_seq) == (
-        "need_schemas", (fp,), 1, 3)
+        "need_schemas",
+        (fp,),
+        1,
+        3,
+    )
     ack = send(edge_session, Batch("site-a", "edge-2", "durable", 1, records(1), {fp: json.dumps(schema)}))
     assert ack.status == "ok"
     # from now on the fingerprint alone will do, from any edge

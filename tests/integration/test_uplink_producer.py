@@ -21,8 +21,14 @@ def test_every_record_gets_one_successful_report(kafka_bootstrap: str) -> None:
 
     with KafkaSink(KafkaSettings(bootstrap_servers=kafka_bootstrap)) as sink:
         for i in range(500):
-            sink.produce(topic, f"tb4_{i % 5:02d}".encode(), b"v%d" % i, headers=[("seq", b"%d" % i)],
-                         timestamp_ms=1_700_000_000_000 + i, on_delivery=on_delivery)
+            sink.produce(
+                topic,
+                f"tb4_{i % 5:02d}".encode(),
+                b"v%d" % i,
+                headers=[("seq", b"%d" % i)],
+                timestamp_ms=1_700_000_000_000 + i,
+                on_delivery=on_delivery,
+            )
         assert done.wait(30)
     assert all(d.error is None for d in reports)
     assert sorted(d.offset for d in reports) == list(range(500))

@@ -90,11 +90,15 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fleet]:
             robot_a.declare_queryable("fleetlink/site-a/admin/**", admin_replier("site-a")),
             robot_b.declare_queryable("fleetlink/site-b/admin/**", admin_replier("site-b")),
         ]
-        fleet = Fleet(bundle, cloud.session, uplink, robot_a, robot_b, at_cloud, at_cloud_a, at_site_a,
-                      cloud.endpoint)
+        fleet = Fleet(
+            bundle, cloud.session, uplink, robot_a, robot_b, at_cloud, at_cloud_a, at_site_a, cloud.endpoint
+        )
         # Routes are in place once site A's data reaches the cloud.
-        wait_until(lambda: _put_seen(fleet.robot_a, "fleetlink/site-a/events/warm-up", at_cloud), 10,
-                   message="site A -> cloud route")
+        wait_until(
+            lambda: _put_seen(fleet.robot_a, "fleetlink/site-a/events/warm-up", at_cloud),
+            10,
+            message="site A -> cloud route",
+        )
         yield fleet
         del entities
 
@@ -139,11 +143,23 @@ def _attack_then_sentinel(attacker: zenoh.Session, fleet: Fleet, own_site: str) 
 def _site_a_still_works(fleet: Fleet) -> None:
     # Site A -> cloud, and cloud -> site A (a command), both after the attack.
     marker = _unique("a-after").encode()
-    wait_until(lambda: (fleet.robot_a.put("fleetlink/site-a/events/y", marker),
-                        marker in _payloads(fleet.at_cloud_a))[1], 10, message="site A -> cloud")
+    wait_until(
+        lambda: (
+            fleet.robot_a.put("fleetlink/site-a/events/y", marker),
+            marker in _payloads(fleet.at_cloud_a),
+        )[1],
+        10,
+        message="site A -> cloud",
+    )
     command = _unique("command").encode()
-    wait_until(lambda: (fleet.uplink.put("fleetlink/site-a/commands/robot1/x", command),
-                        command in _payloads(fleet.at_site_a))[1], 10, message="cloud -> site A")
+    wait_until(
+        lambda: (
+            fleet.uplink.put("fleetlink/site-a/commands/robot1/x", command),
+            command in _payloads(fleet.at_site_a),
+        )[1],
+        10,
+        message="cloud -> site A",
+    )
 
 
 def test_site_b_edge_cannot_publish_into_site_a(fleet: Fleet) -> None:
@@ -227,8 +243,11 @@ def test_edge_keeps_raw_ros_traffic_and_other_sites_keys_on_the_site(tmp_path: P
         # Control: with this permissive cloud, site B's certificate CAN write into site A's keys,
         # so the checks above and in the fleet tests would see a leak if there were one.
         with opened(edge_identity_config(bundle, "site-b", cloud.endpoint)) as rogue:
-            wait_until(lambda: (rogue.put("fleetlink/site-a/events/x", b"leak"),
-                                b"leak" in _payloads(at_cloud))[1], 10, message="leak without ACL")
+            wait_until(
+                lambda: (rogue.put("fleetlink/site-a/events/x", b"leak"), b"leak" in _payloads(at_cloud))[1],
+                10,
+                message="leak without ACL",
+            )
 
 
 def test_dev_variants_carry_fleetlink_keys_and_keep_raw_traffic_on_site() -> None:
@@ -248,7 +267,13 @@ def test_dev_variants_carry_fleetlink_keys_and_keep_raw_traffic_on_site() -> Non
         cloud.declare_subscriber("0/**", at_cloud)
         cloud.declare_subscriber("fleetlink/**", at_cloud)
         sentinel = _unique("dev").encode()
-        wait_until(lambda: (robot.put("0/robot1/imu/T/H", b"raw"),
-                            robot.put("fleetlink/site-a/events/x", sentinel),
-                            sentinel in _payloads(at_cloud))[2], 10, message="dev: fleetlink put at cloud")
+        wait_until(
+            lambda: (
+                robot.put("0/robot1/imu/T/H", b"raw"),
+                robot.put("fleetlink/site-a/events/x", sentinel),
+                sentinel in _payloads(at_cloud),
+            )[2],
+            10,
+            message="dev: fleetlink put at cloud",
+        )
         assert set(at_cloud.key_exprs()) == {"fleetlink/site-a/events/x"}

@@ -67,10 +67,14 @@ def setup(tmp_path: Path) -> Iterator[Setup]:
             neighbour.declare_subscriber("0/**", s.on_site_raw),
         ]
         # Both paths are up once one sample of each has crossed the WAN.
-        wait_until(lambda: (robot.put("fleetlink/site-a/events/warm-up", b""),
-                            s.at_cloud_fleetlink.items)[1], 10, message="fleetlink path up")
-        wait_until(lambda: (robot.put(imu_key("warm-up"), b""), s.at_cloud_raw.items)[1], 10,
-                   message="raw path up")
+        wait_until(
+            lambda: (robot.put("fleetlink/site-a/events/warm-up", b""), s.at_cloud_fleetlink.items)[1],
+            10,
+            message="fleetlink path up",
+        )
+        wait_until(
+            lambda: (robot.put(imu_key("warm-up"), b""), s.at_cloud_raw.items)[1], 10, message="raw path up"
+        )
         yield s
         del keep
 
@@ -98,13 +102,18 @@ def test_raw_topic_is_downsampled_on_the_wan_while_fleetlink_keys_pass(setup: Se
     seconds = publish_paced(setup.robot, [raw, events], count=COUNT, rate_hz=RATE_HZ)
     # The fleetlink samples were put after each raw one on the same link: once the last has
     # arrived, every raw sample the router let through has arrived too.
-    wait_until(lambda: _count(setup.at_cloud_fleetlink, events) == COUNT, 10,
-               message="all fleetlink samples at the cloud")
+    wait_until(
+        lambda: _count(setup.at_cloud_fleetlink, events) == COUNT,
+        10,
+        message="all fleetlink samples at the cloud",
+    )
     wait_until(lambda: _count(setup.on_site_raw, raw) == COUNT, 10, message="all raw samples on site")
     crossed = _count(setup.at_cloud_raw, raw)
     budget = seconds * RULE_HZ + 2  # the first sample of a window passes, plus jitter
-    print(f"\nraw: {COUNT} published in {seconds:.2f} s, {crossed} crossed the WAN "
-          f"({crossed / seconds:.1f} Hz); fleetlink: {COUNT}/{COUNT}")
+    print(
+        f"\nraw: {COUNT} published in {seconds:.2f} s, {crossed} crossed the WAN "
+        f"({crossed / seconds:.1f} Hz); fleetlink: {COUNT}/{COUNT}"
+    )
     assert seconds >= 1.9  # really ~50 Hz for ~2 s
     assert 0.5 * seconds * RULE_HZ <= crossed <= budget
 
@@ -112,10 +121,14 @@ def test_raw_topic_is_downsampled_on_the_wan_while_fleetlink_keys_pass(setup: Se
 def test_a_rule_rate_is_shared_by_every_key_it_matches(setup: Setup) -> None:
     # One rule, two robots: 5 Hz is the budget of the rule on the link, not of each key.
     keys = [imu_key("robot1"), imu_key("robot2")]
-    seconds = publish_paced(setup.robot, [*keys, "fleetlink/site-a/events/last"], count=COUNT,
-                            rate_hz=RATE_HZ)
-    wait_until(lambda: _count(setup.at_cloud_fleetlink, "fleetlink/site-a/events/last") == COUNT, 10,
-               message="all fleetlink samples at the cloud")
+    seconds = publish_paced(
+        setup.robot, [*keys, "fleetlink/site-a/events/last"], count=COUNT, rate_hz=RATE_HZ
+    )
+    wait_until(
+        lambda: _count(setup.at_cloud_fleetlink, "fleetlink/site-a/events/last") == COUNT,
+        10,
+        message="all fleetlink samples at the cloud",
+    )
     crossed = sum(_count(setup.at_cloud_raw, key) for key in keys)
     print(f"\ntwo robots x {COUNT} in {seconds:.2f} s: {crossed} raw samples crossed in total")
     assert crossed <= seconds * RULE_HZ + 2

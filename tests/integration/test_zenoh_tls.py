@@ -87,11 +87,17 @@ def test_edge_and_cloud_exchange_data_over_mutual_tls(bundle: CertBundle, cloud:
             uplink.declare_queryable("fleetlink/*/ingest/*", _ack),
         ]
         # site -> cloud
-        wait_until(lambda: (agent.put("fleetlink/site-a/events/robot1", b"up"), at_cloud.items)[1], 10,
-                   message="event reaches the cloud over TLS")
+        wait_until(
+            lambda: (agent.put("fleetlink/site-a/events/robot1", b"up"), at_cloud.items)[1],
+            10,
+            message="event reaches the cloud over TLS",
+        )
         # cloud -> site
-        wait_until(lambda: (uplink.put("fleetlink/site-a/commands/robot1", b"down"), at_site.items)[1], 10,
-                   message="command reaches the site over TLS")
+        wait_until(
+            lambda: (uplink.put("fleetlink/site-a/commands/robot1", b"down"), at_site.items)[1],
+            10,
+            message="command reaches the site over TLS",
+        )
         # an ingest batch as a query, acknowledged by the uplink's reply
         replies = [r.ok for r in agent.get("fleetlink/site-a/ingest/edge-1", payload=b"batch-7", timeout=5)]
         assert [(str(r.key_expr), r.payload.to_bytes()) for r in replies if r is not None] == [
@@ -104,8 +110,12 @@ def test_edge_and_cloud_exchange_data_over_mutual_tls(bundle: CertBundle, cloud:
 
 @pytest.mark.parametrize(
     "who",
-    ["no client certificate", "certificate from another CA", "plain TCP to the TLS port",
-     "certificate from another CA, trusting it"],
+    [
+        "no client certificate",
+        "certificate from another CA",
+        "plain TCP to the TLS port",
+        "certificate from another CA, trusting it",
+    ],
 )
 def test_clients_without_a_valid_certificate_are_refused(
     who: str, bundle: CertBundle, foreign: CertBundle, cloud: Cloud
@@ -188,7 +198,12 @@ def test_no_private_key_material_in_logs(tmp_path: Path) -> None:
     env = dict(os.environ, RUST_LOG="debug", PYTHONPATH=str(REPO), NO_COLOR="1")
     proc = subprocess.run(
         [sys.executable, "-m", "tests.integration.test_zenoh_tls", str(tmp_path / "certs")],
-        cwd=REPO, env=env, capture_output=True, text=True, timeout=60, check=False,
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     output = proc.stdout + proc.stderr
     assert proc.returncode == 0, output[-3000:]

@@ -43,8 +43,11 @@ def client_config(
         tls["root_ca_certificate"] = str(bundle.ca_certificate)
     if bundle is not None and identity is not None:
         files = bundle[identity]
-        tls |= {"enable_mtls": True, "connect_certificate": str(files.certificate),
-                "connect_private_key": str(files.key)}
+        tls |= {
+            "enable_mtls": True,
+            "connect_certificate": str(files.certificate),
+            "connect_private_key": str(files.key),
+        }
     conf: dict[str, object] = {
         "mode": "client",
         "connect": {"endpoints": [endpoint]},
@@ -111,8 +114,11 @@ def tls_cloud(
 ) -> Iterator[Cloud]:
     endpoint = f"tls/127.0.0.1:{free_port()}"
     conf = render_router_config(
-        DEPLOY / "cloud-router.json5", listen=[endpoint], cert_dir=bundle.directory,
-        sites=sites, raw_from=raw_from,
+        DEPLOY / "cloud-router.json5",
+        listen=[endpoint],
+        cert_dir=bundle.directory,
+        sites=sites,
+        raw_from=raw_from,
     )
     if not acl:
         conf.insert_json5("access_control/enabled", "false")
@@ -126,8 +132,12 @@ def tls_edge(
 ) -> Iterator[Edge]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     conf = render_router_config(
-        DEPLOY / "edge-router.json5", site=site, listen=[endpoint], connect=[cloud_endpoint],
-        cert_dir=bundle.directory, raw_to_cloud=raw_to_cloud,
+        DEPLOY / "edge-router.json5",
+        site=site,
+        listen=[endpoint],
+        connect=[cloud_endpoint],
+        cert_dir=bundle.directory,
+        raw_to_cloud=raw_to_cloud,
     )
     with opened(conf) as session:
         yield Edge(session, site, endpoint)
@@ -147,7 +157,18 @@ def routers_connected(session: zenoh.Session) -> int:
 
 
 __all__ = [
-    "CLOUD_NAME", "DEPLOY", "SITES", "Cloud", "Collector", "Edge", "client_config",
-    "edge_identity_config", "make_bundle", "opened", "routers_connected", "tls_cloud",
-    "tls_edge", "uplink_config",
+    "CLOUD_NAME",
+    "DEPLOY",
+    "SITES",
+    "Cloud",
+    "Collector",
+    "Edge",
+    "client_config",
+    "edge_identity_config",
+    "make_bundle",
+    "opened",
+    "routers_connected",
+    "tls_cloud",
+    "tls_edge",
+    "uplink_config",
 ]

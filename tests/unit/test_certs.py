@@ -52,7 +52,10 @@ def test_ca_is_a_ca_for_end_entities_only() -> None:
     ],
 )
 def test_issue_sets_usages_and_names(
-    server: bool, client: bool, hosts: list[str], expected_usages: list[x509.ObjectIdentifier],
+    server: bool,
+    client: bool,
+    hosts: list[str],
+    expected_usages: list[x509.ObjectIdentifier],
     expected_alt: list[str] | None,
 ) -> None:
     ca = new_ca(now=NOW)

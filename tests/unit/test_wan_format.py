@@ -50,17 +50,26 @@ CODECS: list[Codec] = ["none", "zlib", "zstd"]
 
 def rec(seq: int, **kw: object) -> Record:
     base: dict[str, object] = {
-        "kafka_topic": "fleet.imu", "key": b"tb4_01", "value": single_object(FP, b"\x00" * 8),
+        "kafka_topic": "fleet.imu",
+        "key": b"tb4_01",
+        "value": single_object(FP, b"\x00" * 8),
         "headers": (("ros.topic", b"/tb4_01/imu"), ("site", b"warehouse-a")),
-        "timestamp_ms": 1_700_000_000_123, "seq": seq,
+        "timestamp_ms": 1_700_000_000_123,
+        "seq": seq,
     }
     base.update(kw)
     return Record(**base)  # type: ignore[arg-type]
 
 
 def batch(records: tuple[Record, ...], **kw: object) -> Batch:
-    return Batch(site="warehouse-a", edge_id="edge-1", stream="durable", first_seq=records[0].seq,
-                 records=records, schemas=kw.get("schemas", {FP: SCHEMA}))  # type: ignore[arg-type]
+    return Batch(
+        site="warehouse-a",
+        edge_id="edge-1",
+        stream="durable",
+        first_seq=records[0].seq,
+        records=records,
+        schemas=kw.get("schemas", {FP: SCHEMA}),  # type: ignore[arg-type]
+    )
 
 
 def test_zstd_is_available_here() -> None:
@@ -90,8 +99,9 @@ def test_payload_round_trip(record: Record) -> None:
 @pytest.mark.parametrize("codec", CODECS)
 def test_batch_round_trip_every_codec(codec: Codec) -> None:
     records = tuple(r for r in RECORDS if r.seq < 2**63)
-    original = Batch(site="s", edge_id="e", stream="durable", first_seq=1, records=records,
-                     schemas={FP: SCHEMA, FP2: "{}"})
+    original = Batch(
+        site="s", edge_id="e", stream="durable", first_seq=1, records=records, schemas={FP: SCHEMA, FP2: "{}"}
+    )
     data = encode_batch(original, codec=codec)
     assert data[:3] == b"FLB"
     assert data[4] == {"none": 0, "zlib": 1, "zstd": 2}[codec]
@@ -103,8 +113,13 @@ def test_batch_round_trip_every_codec(codec: Codec) -> None:
 def test_payload_fast_path_matches_record_encoding() -> None:
     records = (rec(10), rec(11), rec(15))
     slow = encode_batch(batch(records))
-    fast = encode_batch_payloads(site="warehouse-a", edge_id="edge-1", stream="durable",
-                                 items=[(r.seq, encode_payload(r)) for r in records], schemas={FP: SCHEMA})
+    fast = encode_batch_payloads(
+        site="warehouse-a",
+        edge_id="edge-1",
+        stream="durable",
+        items=[(r.seq, encode_payload(r)) for r in records],
+        schemas={FP: SCHEMA},
+    )
     assert slow == fast
 
 
@@ -150,7 +165,8 @@ def test_version_3_is_written_and_versions_1_and_2_still_read() -> None:
     with pytest.raises(WireError, match="unknown record flags 0x04"):
         decode_batch(_raw(_body([(1, seq_payload)]), version=1))
     assert decode_batch(_raw(_body([(1, seq_payload)]), version=2)).records[0].headers == (
-        (SOURCE_SEQ_HEADER, b"5"),)
+        (SOURCE_SEQ_HEADER, b"5"),
+    )
 
 
 def test_records_sharing_a_tail_keep_their_own_key_value_and_seq() -> None:
@@ -160,8 +176,10 @@ def test_records_sharing_a_tail_keep_their_own_key_value_and_seq() -> None:
     items = [(1, template.payload(b"x", 1, 10)), (2, null_key), (3, template.payload(b"yy", 3, 11))]
     got = decode_batch(encode_batch_payloads(site="s", edge_id="e", stream="d", items=items, schemas={}))
     assert [(r.key, r.value, r.headers[-1]) for r in got.records] == [
-        (b"", b"x", (SOURCE_SEQ_HEADER, b"10")), (None, rec(2).value, ("a", b"1")),
-        (b"", b"yy", (SOURCE_SEQ_HEADER, b"11"))]
+        (b"", b"x", (SOURCE_SEQ_HEADER, b"10")),
+        (None, rec(2).value, ("a", b"1")),
+        (b"", b"yy", (SOURCE_SEQ_HEADER, b"11")),
+    ]
 
 
 def test_compression_pays_on_repetitive_records() -> None:
@@ -252,12 +270,32 @@ def test_encoder_refuses_what_the_decoder_would_refuse() -> None:
 
 ACKS: list[Ack] = [
     Ack(edge_id="edge-1", stream="durable", first_seq=1, last_seq=500, status="ok"),
-    Ack(edge_id="edge-1", stream="durable", first_seq=1, last_seq=1, status="ok",
-        failures=(RecordFailure(seq=1, reason="message too large: 2 MB", dead_lettered=True),)),
-    Ack(edge_id="e", stream="memory", first_seq=7, last_seq=9, status="error", detail="Kafka unavailable",
-        failures=(RecordFailure(seq=8, reason="timed out", dead_lettered=False),)),
-    Ack(edge_id="e", stream="durable", first_seq=3, last_seq=4, status="need_schemas",
-        missing_schemas=(FP, FP2), detail="send the batch again with these schemas"),
+    Ack(
+        edge_id="edge-1",
+        stream="durable",
+        first_seq=1,
+        last_seq=1,
+        status="ok",
+        failures=(RecordFailure(seq=1, reason="message too large: 2 MB", dead_lettered=True),),
+    ),
+    Ack(
+        edge_id="e",
+        stream="memory",
+        first_seq=7,
+        last_seq=9,
+        status="error",
+        detail="Kafka unavailable",
+        failures=(RecordFailure(seq=8, reason="timed out", dead_lettered=False),),
+    ),
+    Ack(
+        edge_id="e",
+        stream="durable",
+        first_seq=3,
+        last_seq=4,
+        status="need_schemas",
+        missing_schemas=(FP, FP2),
+        detail="send the batch again with these schemas",
+    ),
 ]
 
 
@@ -265,14 +303,30 @@ def test_a_batch_lists_left_out_schemas_by_fingerprint_alone() -> None:
     schema = '{"type": "record", "name": "Imu", "fields": []}' * 20
     records = (rec(1), rec(2))
     full = batch(records, schemas={FP: schema})
-    lean = Batch(site=full.site, edge_id=full.edge_id, stream=full.stream, first_seq=1, records=records,
-                 elided=frozenset({FP}))
+    lean = Batch(
+        site=full.site,
+        edge_id=full.edge_id,
+        stream=full.stream,
+        first_seq=1,
+        records=records,
+        elided=frozenset({FP}),
+    )
     decoded = decode_batch(encode_batch(lean, codec="none"))
     assert (decoded.schemas, decoded.elided) == ({}, frozenset({FP}))
     assert len(encode_batch(full, codec="none")) - len(encode_batch(lean, codec="none")) == len(schema)
     with pytest.raises(WireError, match="both carried and elided"):
-        encode_batch(Batch(site="s", edge_id="e", stream="d", first_seq=1, records=records,
-                           schemas={FP: schema}, elided=frozenset({FP})))
+        encode_batch(
+            Batch(
+                site="s",
+                edge_id="e",
+                stream="d",
+                first_seq=1,
+                records=records,
+                schemas={FP: schema},
+                elided=frozenset({FP}),
+            )
+        )
+
     # before version 3 the marker is a length like any other (here: far past the end)
     def body(entries: int) -> bytes:
         head = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QH", 1, entries)
@@ -292,8 +346,14 @@ def test_ack_round_trip(ack: Ack) -> None:
 
 def test_ack_invariants() -> None:
     with pytest.raises(WireError, match="only dead-lettered"):
-        Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="ok",
-            failures=(RecordFailure(seq=1, reason="x", dead_lettered=False),))
+        Ack(
+            edge_id="e",
+            stream="d",
+            first_seq=1,
+            last_seq=2,
+            status="ok",
+            failures=(RecordFailure(seq=1, reason="x", dead_lettered=False),),
+        )
     with pytest.raises(WireError, match="empty"):
         Ack(edge_id="e", stream="d", first_seq=3, last_seq=2, status="ok")
     with pytest.raises(WireError, match="missing schemas"):
@@ -331,9 +391,17 @@ def test_keys_live_under_the_site_prefix(key: str, expected: str) -> None:
 
 @pytest.mark.parametrize(
     "call",
-    [lambda: site_prefix("a/b"), lambda: site_prefix("*"), lambda: site_prefix(""),
-     lambda: ingest_key("s", "e/1"), lambda: ingest_key("s", "$e"), lambda: command_key("s", "r//x", "c"),
-     lambda: command_key("s", "r", "a/b"), lambda: events_key("s p"), lambda: ack_key("s", "**")],
+    [
+        lambda: site_prefix("a/b"),
+        lambda: site_prefix("*"),
+        lambda: site_prefix(""),
+        lambda: ingest_key("s", "e/1"),
+        lambda: ingest_key("s", "$e"),
+        lambda: command_key("s", "r//x", "c"),
+        lambda: command_key("s", "r", "a/b"),
+        lambda: events_key("s p"),
+        lambda: ack_key("s", "**"),
+    ],
 )
 def test_names_that_would_escape_the_site_are_refused(call: object) -> None:
     with pytest.raises(WireError):
@@ -357,13 +425,23 @@ records_st = st.builds(
 def batches(draw: st.DrawFn) -> Batch:
     rs = draw(st.lists(records_st, min_size=1, max_size=8))
     seqs = sorted(draw(st.sets(st.integers(0, 2**64 - 1), min_size=len(rs), max_size=len(rs))))
-    records = tuple(Record(r.kafka_topic, r.key, r.value, r.headers, r.timestamp_ms, s, r.raw_value)
-                    for r, s in zip(rs, seqs, strict=True))
+    records = tuple(
+        Record(r.kafka_topic, r.key, r.value, r.headers, r.timestamp_ms, s, r.raw_value)
+        for r, s in zip(rs, seqs, strict=True)
+    )
     schemas = draw(st.dictionaries(st.binary(min_size=8, max_size=8), texts, max_size=3))
-    elided = draw(st.frozensets(st.binary(min_size=8, max_size=8).filter(lambda fp: fp not in schemas),
-                                max_size=3))
-    return Batch(site=draw(texts), edge_id=draw(texts), stream=draw(texts), first_seq=seqs[0],
-                 records=records, schemas=schemas, elided=elided)
+    elided = draw(
+        st.frozensets(st.binary(min_size=8, max_size=8).filter(lambda fp: fp not in schemas), max_size=3)
+    )
+    return Batch(
+        site=draw(texts),
+        edge_id=draw(texts),
+        stream=draw(texts),
+        first_seq=seqs[0],
+        records=records,
+        schemas=schemas,
+        elided=elided,
+    )
 
 
 @settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
@@ -396,17 +474,30 @@ def test_mutated_batches_decode_or_raise_wire_error(original: Batch, data: st.Da
 
 
 @settings(max_examples=300)
-@given(st.lists(st.builds(RecordFailure, seq=st.integers(0, 2**64 - 1), reason=texts,
-                          dead_lettered=st.booleans()), max_size=5),
-       st.integers(0, 2**63), st.integers(0, 2**63), texts)
+@given(
+    st.lists(
+        st.builds(RecordFailure, seq=st.integers(0, 2**64 - 1), reason=texts, dead_lettered=st.booleans()),
+        max_size=5,
+    ),
+    st.integers(0, 2**63),
+    st.integers(0, 2**63),
+    texts,
+)
 def test_any_ack_round_trips(failures: list[RecordFailure], a: int, n: int, detail: str) -> None:
     status: Literal["ok", "error"] = "ok" if all(f.dead_lettered for f in failures) else "error"
     if a + n >= 2**64:  # a sequence number is a u64: such a range is refused, not wrapped
         with pytest.raises(WireError, match="not within"):
             Ack(edge_id="e", stream="s", first_seq=a, last_seq=a + n, status=status)
         return
-    ack = Ack(edge_id="e", stream="s", first_seq=a, last_seq=a + n, status=status,
-              failures=tuple(failures), detail=detail)
+    ack = Ack(
+        edge_id="e",
+        stream="s",
+        first_seq=a,
+        last_seq=a + n,
+        status=status,
+        failures=tuple(failures),
+        detail=detail,
+    )
     assert decode_ack(encode_ack(ack)) == ack
 
 
@@ -427,8 +518,14 @@ def test_templated_batches_round_trip_or_raise_wire_error_when_mutated(
         extra = () if source_seq is None else ((SOURCE_SEQ_HEADER, str(source_seq).encode()),)
         expected.append(record._replace(headers=record.headers + extra))
     codec = data.draw(st.sampled_from(CODECS))
-    encoded = encode_batch_payloads(site=original.site, edge_id=original.edge_id, stream=original.stream,
-                                    items=items, schemas=original.schemas, codec=codec)
+    encoded = encode_batch_payloads(
+        site=original.site,
+        edge_id=original.edge_id,
+        stream=original.stream,
+        items=items,
+        schemas=original.schemas,
+        codec=codec,
+    )
     assert decode_batch(encoded).records == tuple(expected)
     mutated = bytearray(encoded)
     i = data.draw(st.integers(0, len(mutated) - 1))

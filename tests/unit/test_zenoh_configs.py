@@ -55,7 +55,10 @@ def get(conf: zenoh.Config, key: str) -> Any:
 
 def test_deploy_has_the_four_templates() -> None:
     assert [p.name for p in TEMPLATES] == [
-        "cloud-router-dev.json5", "cloud-router.json5", "edge-router-dev.json5", "edge-router.json5",
+        "cloud-router-dev.json5",
+        "cloud-router.json5",
+        "edge-router-dev.json5",
+        "edge-router.json5",
     ]
 
 
@@ -90,17 +93,26 @@ def test_templates_use_only_builtin_placeholders(path: str, names: set[str]) -> 
     [
         ("cloud-router.json5", "transport/link/tls/enable_mtls", True),
         ("cloud-router.json5", "transport/link/protocols", ["tls"]),
-        ("cloud-router.json5", "transport/link/tls/listen_private_key",
-         "/etc/fleetlink/certs/fleetlink-cloud-key.pem"),
+        (
+            "cloud-router.json5",
+            "transport/link/tls/listen_private_key",
+            "/etc/fleetlink/certs/fleetlink-cloud-key.pem",
+        ),
         ("cloud-router.json5", "access_control/enabled", True),
         ("cloud-router.json5", "access_control/default_permission", "deny"),
         ("cloud-router.json5", "scouting/gossip/enabled", False),
         ("edge-router.json5", "transport/link/tls/enable_mtls", True),
         ("edge-router.json5", "transport/link/tls/verify_name_on_connect", True),
-        ("edge-router.json5", "transport/link/tls/connect_certificate",
-         "/etc/fleetlink/certs/edge-site-a.pem"),
-        ("edge-router.json5", "transport/link/tls/connect_private_key",
-         "/etc/fleetlink/certs/edge-site-a-key.pem"),
+        (
+            "edge-router.json5",
+            "transport/link/tls/connect_certificate",
+            "/etc/fleetlink/certs/edge-site-a.pem",
+        ),
+        (
+            "edge-router.json5",
+            "transport/link/tls/connect_private_key",
+            "/etc/fleetlink/certs/edge-site-a-key.pem",
+        ),
         ("edge-router.json5", "access_control/default_permission", "deny"),
         ("edge-router.json5", "connect/exit_on_failure", False),
         ("cloud-router-dev.json5", "access_control/default_permission", "deny"),
@@ -177,8 +189,9 @@ def test_render_text(text: str, values: dict[str, Any], expected: str) -> None:
     ],
 )
 def test_render_text_errors(text: str, values: dict[str, Any], message: str) -> None:
-    with pytest.raises(RouterConfigError, match=message.replace("$", r"\$").replace("(", r"\(")
-                       .replace(")", r"\)")) as info:
+    with pytest.raises(
+        RouterConfigError, match=message.replace("$", r"\$").replace("(", r"\(").replace(")", r"\)")
+    ) as info:
         render_text(text, values, source="t.json5")
     assert str(info.value).startswith("t.json5: ")
     assert isinstance(info.value, ConfigError)
@@ -192,8 +205,11 @@ def test_cloud_site_acl_scopes_one_site() -> None:
     assert block.subjects == [{"id": "site-site-a", "cert_common_names": ["edge-site-a"]}]
     by_id = {r["id"]: r for r in block.rules}
     assert by_id["site-site-a-in"] == {
-        "id": "site-site-a-in", "permission": "allow", "flows": ["ingress"],
-        "messages": list(ALL_MESSAGES), "key_exprs": ["fleetlink/site-a/**"],
+        "id": "site-site-a-in",
+        "permission": "allow",
+        "flows": ["ingress"],
+        "messages": list(ALL_MESSAGES),
+        "key_exprs": ["fleetlink/site-a/**"],
     }
     assert by_id["site-site-a-out"]["key_exprs"] == ["fleetlink/site-a/**"]
     assert set(by_id["site-site-a-out"]["messages"]) == {"put", "delete", "reply", "liveliness_token"}
@@ -274,8 +290,11 @@ def test_cloud_render_raw_from_opens_raw_keys_to_services() -> None:
 def test_edge_render_raw_to_cloud_adds_wan_rules() -> None:
     conf = render_router_config(DEPLOY / "edge-router.json5", raw_to_cloud=["0/r1/imu/**"], **RENDER_ARGS)
     assert rule(conf, "wan-raw-out") == {
-        "id": "wan-raw-out", "permission": "allow", "flows": ["egress"],
-        "messages": ["put", "delete"], "key_exprs": ["0/r1/imu/**"],
+        "id": "wan-raw-out",
+        "permission": "allow",
+        "flows": ["egress"],
+        "messages": ["put", "delete"],
+        "key_exprs": ["0/r1/imu/**"],
     }
 
 
@@ -306,12 +325,16 @@ def test_acl_generated_for_a_config_without_acl_is_refused() -> None:
 
 
 def test_policy_naming_an_unknown_subject_is_refused() -> None:
-    text = json.dumps({"access_control": {
-        "enabled": True,
-        "rules": [{"id": "r", "permission": "allow", "messages": ["put"], "key_exprs": ["a"]}],
-        "subjects": [{"id": "s"}],
-        "policies": [{"rules": ["r"], "subjects": ["nobody"]}],
-    }})
+    text = json.dumps(
+        {
+            "access_control": {
+                "enabled": True,
+                "rules": [{"id": "r", "permission": "allow", "messages": ["put"], "key_exprs": ["a"]}],
+                "subjects": [{"id": "s"}],
+                "policies": [{"rules": ["r"], "subjects": ["nobody"]}],
+            }
+        }
+    )
     with pytest.raises(RouterConfigError, match=r"unknown subjects \['nobody'\]"):
         render_router_json5(text, sites=["a"])
 

@@ -22,8 +22,16 @@ from fleetlink.schemas.registry import RegistryUnavailableError
 from fleetlink.schemas.single_object import confluent_unframe, fingerprint
 from fleetlink.uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
 
-_READ_ERRORS = (EOFError, ValueError, TypeError, KeyError, IndexError, UnicodeDecodeError, OverflowError,
-                SchemaResolutionError)
+_READ_ERRORS = (
+    EOFError,
+    ValueError,
+    TypeError,
+    KeyError,
+    IndexError,
+    UnicodeDecodeError,
+    OverflowError,
+    SchemaResolutionError,
+)
 
 
 class SchemaSource(Protocol):
@@ -69,7 +77,8 @@ class CommandDecoder:
         if stream.tell() != len(body):
             raise UndecodableValueError(
                 f"{len(body) - stream.tell()} bytes left over after the Avro record (schema id {schema_id})",
-                value)
+                value,
+            )
         if not isinstance(record, dict):
             raise UndecodableValueError(f"schema id {schema_id} is not a record schema", value)
         return DecodedValue(writer, bytes(body), record)

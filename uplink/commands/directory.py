@@ -44,8 +44,13 @@ class RobotDirectory:
         robot = value.get("robot") or key
         site = value.get("site")
         event = value.get("event", "registered")
-        if not isinstance(robot, str) or not robot or not isinstance(site, str) or not site \
-                or event not in ("registered", "deregistered"):
+        if (
+            not isinstance(robot, str)
+            or not robot
+            or not isinstance(site, str)
+            or not site
+            or event not in ("registered", "deregistered")
+        ):
             self.ignored += 1
             return False
         with self._lock:

@@ -15,8 +15,9 @@ class UndecodableCommandError(CommandError):
     Carries the record's coordinates and raw bytes so the dead letter has them.
     """
 
-    def __init__(self, reason: str, *, topic: str, partition: int, offset: int, key: bytes | None,
-                 raw: bytes | None) -> None:
+    def __init__(
+        self, reason: str, *, topic: str, partition: int, offset: int, key: bytes | None, raw: bytes | None
+    ) -> None:
         self.reason = reason
         self.topic = topic
         self.partition = partition

@@ -88,8 +88,12 @@ class Forwarder:
                 replies = [r for r in replies if r.result != "need-schema"]
                 for reply in needy:
                     if reply.site:
-                        more, _ = self._query(command_key(reply.site, full.robot, full.mapping),
-                                              encode_envelope(full), zenoh.QueryTarget.BEST_MATCHING, timeout)
+                        more, _ = self._query(
+                            command_key(reply.site, full.robot, full.mapping),
+                            encode_envelope(full),
+                            zenoh.QueryTarget.BEST_MATCHING,
+                            timeout,
+                        )
                         replies += more
             result.replies = replies
             settled = [r for r in replies if r.result in SETTLED]
@@ -99,21 +103,32 @@ class Forwarder:
                 result.settled = True
                 return result
             result.detail = problem or "; ".join(f"{r.result}: {r.detail}" for r in replies) or "no reply"
-            self._limiter.log(logging.WARNING, f"forward:{fwd.site}",
-                              "command %s for %s not acknowledged yet (%s); retrying",
-                              env.command_id, fwd.key_expr, result.detail)
+            self._limiter.log(
+                logging.WARNING,
+                f"forward:{fwd.site}",
+                "command %s for %s not acknowledged yet (%s); retrying",
+                env.command_id,
+                fwd.key_expr,
+                result.detail,
+            )
             self._stop.wait(delay)
             delay = min(delay * 2, MAX_BACKOFF_S)
         result.detail = "uplink stopping"
         return result
 
-    def _query(self, key: str, payload: bytes, target: zenoh.QueryTarget,
-               timeout: float) -> tuple[list[CommandReply], str]:
+    def _query(
+        self, key: str, payload: bytes, target: zenoh.QueryTarget, timeout: float
+    ) -> tuple[list[CommandReply], str]:
         replies: list[CommandReply] = []
         problems: list[str] = []
         try:
-            for reply in self._session.get(key, payload=payload, target=target, timeout=timeout,
-                                           consolidation=zenoh.ConsolidationMode.NONE):
+            for reply in self._session.get(
+                key,
+                payload=payload,
+                target=target,
+                timeout=timeout,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            ):
                 if reply.ok is not None:
                     try:
                         replies.append(decode_reply(reply.ok.payload.to_bytes()))

@@ -90,7 +90,7 @@ def parse_template(text: str) -> Template:
     parts: list[str | Ref] = []
     pos = 0
     for match in _PLACEHOLDER.finditer(text):
-        literal = text[pos:match.start()]
+        literal = text[pos : match.start()]
         if "{" in literal or "}" in literal:
             raise ValueError(f"unbalanced brace in {text!r}")
         if literal:
@@ -101,8 +101,9 @@ def parse_template(text: str) -> Template:
         elif _FIELD_PATH.fullmatch(name):
             parts.append(Ref("msg", tuple(name.split(".")[1:])))
         else:
-            raise ValueError(f"unknown placeholder {{{name}}} in {text!r}: use {{key}}, {{robot}} "
-                             "or {msg.<field>}")
+            raise ValueError(
+                f"unknown placeholder {{{name}}} in {text!r}: use {{key}}, {{robot}} or {{msg.<field>}}"
+            )
         pos = match.end()
     tail = text[pos:]
     if "{" in tail or "}" in tail:
@@ -127,8 +128,10 @@ def resolve(ref: Ref, *, key: str | None, robot: str | None, record: Mapping[str
             raise RoutingError(f"the record has no field {'.'.join(ref.path)} (for {ref.text})")
         value = value[name]
     if isinstance(value, bool) or not isinstance(value, str | int):
-        raise RoutingError(f"field {'.'.join(ref.path)} is a {type(value).__name__}, "
-                           f"not a string or an integer (for {ref.text})")
+        raise RoutingError(
+            f"field {'.'.join(ref.path)} is a {type(value).__name__}, "
+            f"not a string or an integer (for {ref.text})"
+        )
     return str(value)
 
 
@@ -214,7 +217,7 @@ class CommandMapping(BaseModel):
             return None
         refs = parse_template(value).refs
         if len(refs) != 1 or value.strip() != refs[0].text or refs[0].kind == "robot":
-            raise ValueError(f"robot {value!r} must be exactly one of \"{{key}}\" or \"{{msg.<field>}}\"")
+            raise ValueError(f'robot {value!r} must be exactly one of "{{key}}" or "{{msg.<field>}}"')
         return value
 
     @model_validator(mode="after")
@@ -226,8 +229,10 @@ class CommandMapping(BaseModel):
             if Ref("robot") not in refs:
                 raise ValueError("broadcast: true needs {robot} in 'to'")
         if self.repeat.period > self.repeat.lease:
-            raise ValueError(f"repeat.period ({self.repeat.period} s) is longer than repeat.lease "
-                             f"({self.repeat.lease} s): the command would be published once")
+            raise ValueError(
+                f"repeat.period ({self.repeat.period} s) is longer than repeat.lease "
+                f"({self.repeat.lease} s): the command would be published once"
+            )
         return self
 
     # -- derived --------------------------------------------------------------------------
@@ -268,13 +273,13 @@ class Target:
     ros_topic: str
 
 
-def targets(mapping: CommandMapping, *, key: str | None, record: Mapping[str, Any],
-            known_robots: Iterable[str] = ()) -> list[Target]:
+def targets(
+    mapping: CommandMapping, *, key: str | None, record: Mapping[str, Any], known_robots: Iterable[str] = ()
+) -> list[Target]:
     """The (robot, ROS topic) pairs a decoded record addresses; ``RoutingError`` when none can be."""
     template = mapping.to_template
     ref = mapping.robot_ref
-    robots = sorted(set(known_robots)) if ref is None else [
-        resolve(ref, key=key, robot=None, record=record)]
+    robots = sorted(set(known_robots)) if ref is None else [resolve(ref, key=key, robot=None, record=record)]
     out: list[Target] = []
     for robot in robots:
         try:

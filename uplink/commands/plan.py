@@ -90,10 +90,20 @@ def plan(
     out: list[Forward] = []
     for target in targets(mapping, key=record.text_key, record=decoded.record, known_robots=registered):
         env = CommandEnvelope(
-            command_id=cid, robot=target.robot, ros_topic=target.ros_topic, ros_type=mapping.type,
-            mapping=mapping.name, issued_at_ms=issued, lease_until_ms=issued + mapping.lease_ms,
-            period_ms=mapping.period_ms, schema_fp=decoded.writer.fingerprint, body=decoded.body,
-            schema=decoded.writer.text, qos=mapping.qos_text, order=record.offset, source=record.source,
+            command_id=cid,
+            robot=target.robot,
+            ros_topic=target.ros_topic,
+            ros_type=mapping.type,
+            mapping=mapping.name,
+            issued_at_ms=issued,
+            lease_until_ms=issued + mapping.lease_ms,
+            period_ms=mapping.period_ms,
+            schema_fp=decoded.writer.fingerprint,
+            body=decoded.body,
+            schema=decoded.writer.text,
+            qos=mapping.qos_text,
+            order=record.offset,
+            source=record.source,
         )
         site = site_of(target.robot)
         if site:

@@ -30,8 +30,9 @@ METADATA_EVERY_S = 5.0
 
 
 class RegistrationsReader:
-    def __init__(self, kafka: KafkaSettings, topic: str, decoder: CommandDecoder,
-                 directory: RobotDirectory) -> None:
+    def __init__(
+        self, kafka: KafkaSettings, topic: str, decoder: CommandDecoder, directory: RobotDirectory
+    ) -> None:
         self._kafka = kafka
         self._topic = topic
         self._decoder = decoder
@@ -46,19 +47,26 @@ class RegistrationsReader:
 
     def start(self, catch_up_s: float = 10.0) -> RegistrationsReader:
         conf: dict[str, Any] = dict(self._kafka.common_config())
-        conf.update({
-            "group.id": f"fleetlink-registrations-{uuid.uuid4().hex[:12]}",  # required; never joined
-            "enable.auto.commit": False, "auto.offset.reset": "earliest",
-            "enable.partition.eof": False,
-        })
+        conf.update(
+            {
+                "group.id": f"fleetlink-registrations-{uuid.uuid4().hex[:12]}",  # required; never joined
+                "enable.auto.commit": False,
+                "auto.offset.reset": "earliest",
+                "enable.partition.eof": False,
+            }
+        )
         self._consumer = Consumer(conf)
         self._assign_new(self._consumer)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="uplink-registrations", daemon=True)
         self._thread.start()
         if not self._caught_up.wait(catch_up_s):
-            log.warning("registrations topic %s not read to its end within %.0f s; commands for robots "
-                        "not known yet go to every site", self._topic, catch_up_s)
+            log.warning(
+                "registrations topic %s not read to its end within %.0f s; commands for robots "
+                "not known yet go to every site",
+                self._topic,
+                catch_up_s,
+            )
         return self
 
     def stop(self) -> None:
@@ -87,14 +95,18 @@ class RegistrationsReader:
         try:
             meta = consumer.list_topics(self._topic, timeout=5.0).topics.get(self._topic)
         except KafkaException as exc:
-            self._limiter.log(logging.WARNING, "metadata", "registrations: no metadata for %s: %s",
-                              self._topic, exc)
+            self._limiter.log(
+                logging.WARNING, "metadata", "registrations: no metadata for %s: %s", self._topic, exc
+            )
             return
         if meta is None or meta.error is not None:
             return
         known = {tp.partition for tp in self._assigned}
-        new = [TopicPartition(self._topic, p, OFFSET_BEGINNING)
-               for p in sorted(meta.partitions) if p not in known]
+        new = [
+            TopicPartition(self._topic, p, OFFSET_BEGINNING)
+            for p in sorted(meta.partitions)
+            if p not in known
+        ]
         if new:
             consumer.incremental_assign(new)
             self._assigned += new
@@ -115,8 +127,11 @@ class RegistrationsReader:
                 last_check = time.monotonic()
                 if self._at_end(consumer):
                     self._caught_up.set()
-                    log.info("registrations read: %d robots at %d sites", len(self.directory),
-                             len(self.directory.sites()))
+                    log.info(
+                        "registrations read: %d robots at %d sites",
+                        len(self.directory),
+                        len(self.directory.sites()),
+                    )
 
     def _at_end(self, consumer: Consumer) -> bool:
         if not self._assigned:
@@ -154,10 +169,23 @@ class RegistrationsReader:
                 continue
             except UndecodableValueError as exc:
                 self.undecodable += 1
-                self._limiter.log(logging.WARNING, "undecodable", "registrations: skipping %s[%d]@%d: %s",
-                                  msg.topic(), msg.partition(), msg.offset(), exc.reason)
+                self._limiter.log(
+                    logging.WARNING,
+                    "undecodable",
+                    "registrations: skipping %s[%d]@%d: %s",
+                    msg.topic(),
+                    msg.partition(),
+                    msg.offset(),
+                    exc.reason,
+                )
                 return
             if not self.directory.apply(key, decoded.record):
-                self._limiter.log(logging.WARNING, "unusable", "registrations: record %s[%d]@%d has no "
-                                  "robot/site/event", msg.topic(), msg.partition(), msg.offset())
+                self._limiter.log(
+                    logging.WARNING,
+                    "unusable",
+                    "registrations: record %s[%d]@%d has no robot/site/event",
+                    msg.topic(),
+                    msg.partition(),
+                    msg.offset(),
+                )
             return

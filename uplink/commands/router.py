@@ -114,8 +114,9 @@ class CommandRouter:
         cfg = self.config
         self._stop.clear()
         self._queryable = self._session.declare_queryable(STATUS_KEY, self.intake.on_query)
-        self._reader = RegistrationsReader(cfg.kafka, cfg.topics.registrations, self.decoder,
-                                           self.directory).start(registrations_catch_up_s)
+        self._reader = RegistrationsReader(
+            cfg.kafka, cfg.topics.registrations, self.decoder, self.directory
+        ).start(registrations_catch_up_s)
         self._pool = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="uplink-command")
         self._consumer = Consumer(dict(cfg.kafka.consumer_config(self.group_id)))
         self._thread = threading.Thread(target=self._run, name="uplink-commands", daemon=True)
@@ -203,8 +204,9 @@ class CommandRouter:
         if not positions:
             return
         try:
-            consumer.commit(offsets=[TopicPartition(t, p, o) for (t, p), o in positions.items()],
-                            asynchronous=False)
+            consumer.commit(
+                offsets=[TopicPartition(t, p, o) for (t, p), o in positions.items()], asynchronous=False
+            )
         except KafkaException as exc:
             self._limiter.log(logging.WARNING, "commit", "committing command offsets failed: %s", exc)
             return
@@ -219,8 +221,15 @@ class CommandRouter:
         if topic is None or partition is None or offset is None:
             return
         ts_type, ts = msg.timestamp()
-        record = CommandRecord(topic, partition, offset, msg.key(), msg.value(),
-                               tuple((k, v or b"") for k, v in (msg.headers() or [])), ts if ts_type else -1)
+        record = CommandRecord(
+            topic,
+            partition,
+            offset,
+            msg.key(),
+            msg.value(),
+            tuple((k, v or b"") for k, v in (msg.headers() or [])),
+            ts if ts_type else -1,
+        )
         with self._lock:
             mappings = list(self._mappings.get(topic, ()))
         self.stats.add(records=1)
@@ -258,8 +267,13 @@ class CommandRouter:
             except RegistryUnreachableError as exc:
                 now_ms = int(self._clock() * 1000)
                 if mappings and all(now_ms >= lease_until_ms(record, m, now_ms) for m in mappings):
-                    self._limiter.log(logging.WARNING, "registry-expired", "command %s expired while the "
-                                      "registry was unreachable: %s", record.source, exc)
+                    self._limiter.log(
+                        logging.WARNING,
+                        "registry-expired",
+                        "command %s expired while the registry was unreachable: %s",
+                        record.source,
+                        exc,
+                    )
                     self.stats.add(expired_before_forward=1)
                     return None
                 self._limiter.log(logging.WARNING, "registry", "command %s: %s; retrying", record.source, exc)
@@ -270,8 +284,14 @@ class CommandRouter:
     def _route(self, record: CommandRecord, mapping: CommandMapping, decoded: DecodedValue) -> bool:
         now_ms = int(self._clock() * 1000)
         try:
-            forwards = plan(record, mapping, decoded, now_ms=now_ms, site_of=self.directory.site_of,
-                            registered=self.directory.registered())
+            forwards = plan(
+                record,
+                mapping,
+                decoded,
+                now_ms=now_ms,
+                site_of=self.directory.site_of,
+                registered=self.directory.registered(),
+            )
         except RoutingError as exc:
             return self._dead_letter(record, "command-route", f"mapping {mapping.name}: {exc}")
         if not forwards:
@@ -308,8 +328,9 @@ class CommandRouter:
             problem = self.status_writer.write_and_wait(events)
             if problem is None:
                 return True
-            self._limiter.log(logging.WARNING, "status", "writing command status failed: %s; retrying",
-                              problem)
+            self._limiter.log(
+                logging.WARNING, "status", "writing command status failed: %s; retrying", problem
+            )
             if self._stop.wait(delay):
                 return False
             delay = min(delay * 2, 5.0)
@@ -318,13 +339,19 @@ class CommandRouter:
     def _dead_letter(self, record: CommandRecord, stage: str, reason: str) -> bool:
         cfg = self.config
         dl = dead_letter(
-            dlq_topic=cfg.topics.command_dead_letter, stage=stage, reason=reason, intended_topic=record.topic,
-            key=record.key, raw=record.value or b"", headers=record.headers,
+            dlq_topic=cfg.topics.command_dead_letter,
+            stage=stage,
+            reason=reason,
+            intended_topic=record.topic,
+            key=record.key,
+            raw=record.value or b"",
+            headers=record.headers,
             timestamp_ms=max(record.timestamp_ms, 0),
             max_value_bytes=max(1_000, cfg.kafka.message_max_bytes - 65_536),
         )
-        self._limiter.log(logging.WARNING, f"dlq:{stage}", "command %s dead-lettered: %s", record.source,
-                          reason)
+        self._limiter.log(
+            logging.WARNING, f"dlq:{stage}", "command %s dead-lettered: %s", record.source, reason
+        )
         delay = 0.2
         while True:
             done = threading.Event()
@@ -336,16 +363,26 @@ class CommandRouter:
                 done.set()
 
             try:
-                self._sink.produce(dl.topic, dl.key, dl.value, headers=dl.headers,
-                                   timestamp_ms=dl.timestamp_ms, on_delivery=delivered)
+                self._sink.produce(
+                    dl.topic,
+                    dl.key,
+                    dl.value,
+                    headers=dl.headers,
+                    timestamp_ms=dl.timestamp_ms,
+                    on_delivery=delivered,
+                )
                 done.wait(cfg.kafka.delivery_timeout_ms / 1000 + 5)
             except Exception as exc:  # noqa: BLE001 - retried below
                 errors.append(str(exc))
             if done.is_set() and not errors:
                 self.stats.add(dead_lettered=1)
                 return True
-            self._limiter.log(logging.WARNING, "dlq-write", "dead-letter write failed: %s; retrying",
-                              errors[0] if errors else "timeout")
+            self._limiter.log(
+                logging.WARNING,
+                "dlq-write",
+                "dead-letter write failed: %s; retrying",
+                errors[0] if errors else "timeout",
+            )
             if self._stop.wait(delay):
                 return False
             delay = min(delay * 2, 5.0)

@@ -41,8 +41,15 @@ _PARSED = fastavro.parse_schema(copy.deepcopy(STATUS_SCHEMA))
 
 
 def status_datum(event: StatusEvent) -> dict[str, Any]:
-    return {"command_id": event.command_id, "robot": event.robot, "ros_topic": event.ros_topic,
-            "status": event.status, "at": event.at_ms, "site": event.site, "detail": event.detail[:2000]}
+    return {
+        "command_id": event.command_id,
+        "robot": event.robot,
+        "ros_topic": event.ros_topic,
+        "status": event.status,
+        "at": event.at_ms,
+        "site": event.site,
+        "detail": event.detail[:2000],
+    }
 
 
 def status_value(schema_id: int, event: StatusEvent) -> bytes:

@@ -72,8 +72,13 @@ class StatusWriter:
 
         for event in events:
             try:
-                self._sink.produce(self.topic, event.robot.encode(), status_value(schema_id, event),
-                                   timestamp_ms=event.at_ms, on_delivery=delivered)
+                self._sink.produce(
+                    self.topic,
+                    event.robot.encode(),
+                    status_value(schema_id, event),
+                    timestamp_ms=event.at_ms,
+                    on_delivery=delivered,
+                )
             except Exception as exc:  # noqa: BLE001 - a fatal producer error fails this batch only
                 failure = ProduceError(f"produce failed: {exc}", code="_PRODUCE", retriable=True)
                 delivered(Delivery(self.topic, -1, -1, failure, 0.0))
@@ -108,8 +113,13 @@ class StatusIntake:
                 raise EnvelopeError("status batch", "the query carries no payload")
             batch = decode_status_batch(payload.to_bytes())
         except EnvelopeError as exc:
-            self._limiter.log(logging.WARNING, "bad-status", "refused a malformed status batch on %s: %s",
-                              query.key_expr, exc)
+            self._limiter.log(
+                logging.WARNING,
+                "bad-status",
+                "refused a malformed status batch on %s: %s",
+                query.key_expr,
+                exc,
+            )
             query.reply_err(str(exc).encode())
             query.drop()
             return
@@ -125,8 +135,13 @@ class StatusIntake:
             try:
                 ack = StatusAck(count) if problem is None else StatusAck(0, problem[:500])
                 if problem is not None:
-                    self._limiter.log(logging.WARNING, "status-write", "status batch from %s not written: %s",
-                                      batch.repeater, problem)
+                    self._limiter.log(
+                        logging.WARNING,
+                        "status-write",
+                        "status batch from %s not written: %s",
+                        batch.repeater,
+                        problem,
+                    )
                 query.reply(query.key_expr, encode_status_ack(ack))
             finally:
                 query.drop()

@@ -35,7 +35,13 @@ class Metrics(Protocol):
     def on_acked(self, batches: int, records: int, latency_s: float | None = None) -> None: ...
     def on_wan_failure(self, reason: str, n: int = 1) -> None: ...
     def set_spool(
-        self, stream: str, *, nbytes: int, capacity_bytes: int, depth: int, in_flight: int,
+        self,
+        stream: str,
+        *,
+        nbytes: int,
+        capacity_bytes: int,
+        depth: int,
+        in_flight: int,
         oldest_age_s: float,
     ) -> None: ...
     def set_wan(self, *, in_flight: int, link_up: bool) -> None: ...
@@ -117,7 +123,13 @@ class FamilyMetrics:
         self._count("fleetlink_wan_failures", reason, n=n)
 
     def set_spool(
-        self, stream: str, *, nbytes: int, capacity_bytes: int, depth: int, in_flight: int,
+        self,
+        stream: str,
+        *,
+        nbytes: int,
+        capacity_bytes: int,
+        depth: int,
+        in_flight: int,
         oldest_age_s: float,
     ) -> None:
         labels = (stream,)

@@ -13,7 +13,21 @@ from typing import Literal
 Kind = Literal["counter", "gauge", "histogram"]
 
 LATENCY_BUCKETS: tuple[float, ...] = (
-    0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0,
+    0.001,
+    0.0025,
+    0.005,
+    0.01,
+    0.025,
+    0.05,
+    0.1,
+    0.25,
+    0.5,
+    1.0,
+    2.5,
+    5.0,
+    10.0,
+    30.0,
+    60.0,
 )
 """Seconds: from a loopback round trip to a WAN outage that a retry bridged."""
 
@@ -46,21 +60,34 @@ def _h(name: str, text: str) -> Family:
 FAMILIES: tuple[Family, ...] = (
     # -- mappings (edge) ---------------------------------------------------------------------
     _c("fleetlink_mapping_received", ("mapping",), "ROS samples a mapping received"),
-    _c("fleetlink_mapping_emitted", ("mapping",),
-       "Records a mapping handed to its buffer (after its stages)"),
-    _c("fleetlink_mapping_dropped", ("mapping", "reason"),
-       "Samples a mapping dropped on purpose (reason: pipeline, type_mismatch)"),
-    _c("fleetlink_mapping_dead_lettered", ("mapping", "stage"),
-       "Samples or records a mapping sent to the dead-letter topic (stage where it failed, if known)"),
+    _c(
+        "fleetlink_mapping_emitted", ("mapping",), "Records a mapping handed to its buffer (after its stages)"
+    ),
+    _c(
+        "fleetlink_mapping_dropped",
+        ("mapping", "reason"),
+        "Samples a mapping dropped on purpose (reason: pipeline, type_mismatch)",
+    ),
+    _c(
+        "fleetlink_mapping_dead_lettered",
+        ("mapping", "stage"),
+        "Samples or records a mapping sent to the dead-letter topic (stage where it failed, if known)",
+    ),
     _c("fleetlink_stage_emitted", ("mapping", "stage"), "Outputs of one stage of a mapping"),
-    _c("fleetlink_stage_dropped", ("mapping", "stage", "reason"),
-       "Samples one stage dropped (reason: dropped, late, error)"),
+    _c(
+        "fleetlink_stage_dropped",
+        ("mapping", "stage", "reason"),
+        "Samples one stage dropped (reason: dropped, late, error)",
+    ),
     _c("fleetlink_sequence_gaps", ("topic",), "ROS messages missing from a publisher's sequence numbers"),
     # -- buffers and the WAN (edge) --------------------------------------------------------
     _c("fleetlink_spool_appended_records", ("stream",), "Records appended to a buffer"),
     _c("fleetlink_spool_appended_bytes", ("stream",), "Bytes appended to a buffer"),
-    _c("fleetlink_spool_dropped_records", ("stream", "reason"),
-       "Records a buffer lost (reason: dropped_oldest, dropped_newest, corrupt, block_timeout)"),
+    _c(
+        "fleetlink_spool_dropped_records",
+        ("stream", "reason"),
+        "Records a buffer lost (reason: dropped_oldest, dropped_newest, corrupt, block_timeout)",
+    ),
     _g("fleetlink_spool_bytes", ("stream",), "Bytes held by a buffer (unacknowledged records)"),
     _g("fleetlink_spool_capacity_bytes", ("stream",), "The buffer's size limit in bytes"),
     _g("fleetlink_spool_depth_records", ("stream",), "Unacknowledged records held (in flight included)"),
@@ -71,22 +98,31 @@ FAMILIES: tuple[Family, ...] = (
     _c("fleetlink_wan_sent_bytes", (), "Encoded batch bytes sent to the uplink"),
     _c("fleetlink_wan_acked_batches", (), "Batches the uplink acknowledged (in Kafka)"),
     _c("fleetlink_wan_acked_records", (), "Records the uplink acknowledged (in Kafka)"),
-    _c("fleetlink_wan_failures", ("reason",),
-       "Batches that must be sent again (reason: timeout, error, refused)"),
+    _c(
+        "fleetlink_wan_failures",
+        ("reason",),
+        "Batches that must be sent again (reason: timeout, error, refused)",
+    ),
     _g("fleetlink_wan_in_flight_batches", (), "Batches sent and not yet answered"),
     _g("fleetlink_wan_link_up", (), "1 when the uplink answered recently, else 0"),
     _h("fleetlink_wan_ack_latency_seconds", "From sending a batch to its acknowledgement"),
     _g("fleetlink_robots_registered", (), "Robots registered at this edge"),
     # -- uplink ----------------------------------------------------------------------------------
-    _c("fleetlink_ingest_batches", ("site", "status"),
-       "Batches received from edges (status: ok, error, refused)"),
+    _c(
+        "fleetlink_ingest_batches",
+        ("site", "status"),
+        "Batches received from edges (status: ok, error, refused)",
+    ),
     _c("fleetlink_ingest_records", ("site",), "Records received from edges"),
     _c("fleetlink_ingest_dead_lettered", ("site",), "Records the uplink sent to the dead-letter topic"),
     _c("fleetlink_kafka_delivered", ("topic", "result"), "Kafka delivery reports (result: ok, error)"),
     _h("fleetlink_kafka_delivery_latency_seconds", "From produce() to Kafka's delivery report"),
     # -- repeater --------------------------------------------------------------------------------
-    _c("fleetlink_commands", ("command", "outcome"),
-       "Commands handled (outcome: published, repeated, expired, refused)"),
+    _c(
+        "fleetlink_commands",
+        ("command", "outcome"),
+        "Commands handled (outcome: published, repeated, expired, refused)",
+    ),
     # -- every process ---------------------------------------------------------------------------
     _g("fleetlink_health", ("state",), "1 for the process's current health state (ok, degraded, failed)"),
     _g("fleetlink_build_info", ("component", "version"), "Always 1; labels name the process and version"),

@@ -34,8 +34,13 @@ class Problem:
     severity: Literal["degraded", "failed"] = "degraded"
 
     def as_dict(self) -> dict[str, str]:
-        return {"component": self.component, "subject": self.subject, "reason": self.reason,
-                "detail": self.detail, "severity": self.severity}
+        return {
+            "component": self.component,
+            "subject": self.subject,
+            "reason": self.reason,
+            "detail": self.detail,
+            "severity": self.severity,
+        }
 
 
 @dataclass(frozen=True, slots=True)

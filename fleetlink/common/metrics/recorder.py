@@ -50,8 +50,11 @@ class MetricsRecorder(FamilyMetrics):
         fam = family(name)
         positions = {fam.labels.index(k): v for k, v in labels.items()}
         with self._lock:
-            return sum(v for (n, key), v in self._values.items()
-                       if n == fam.name and all(key[i] == want for i, want in positions.items()))
+            return sum(
+                v
+                for (n, key), v in self._values.items()
+                if n == fam.name and all(key[i] == want for i, want in positions.items())
+            )
 
     def observations(self, name: str) -> list[float]:
         with self._lock:

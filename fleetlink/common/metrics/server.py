@@ -51,16 +51,24 @@ def add_metrics_routes(
     ``metrics`` (pull model, nothing on the hot path).
     """
 
-    @app.get("/metrics", tags=["observability"], response_class=Response,
-             responses={200: {"content": {CONTENT_TYPE: {}}, "description": "Prometheus text format"}})
+    @app.get(
+        "/metrics",
+        tags=["observability"],
+        response_class=Response,
+        responses={200: {"content": {CONTENT_TYPE: {}}, "description": "Prometheus text format"}},
+    )
     def get_metrics() -> Response:
         if refresh is not None:
             refresh()
         metrics.set_health(health().state)
         return Response(content=metrics.render(), media_type=CONTENT_TYPE)
 
-    @app.get("/health", tags=["observability"], response_model=None,
-             responses={200: {"description": "ok or degraded"}, 503: {"description": "failed"}})
+    @app.get(
+        "/health",
+        tags=["observability"],
+        response_model=None,
+        responses={200: {"description": "ok or degraded"}, 503: {"description": "failed"}},
+    )
     def get_health() -> JSONResponse:
         if refresh is not None:
             refresh()
@@ -99,8 +107,14 @@ class HttpServer:
             return self
         host, port = split_listen(self.listen)
         sock = _bind(host, port, self.listen)
-        config = uvicorn.Config(self.app, log_config=None, access_log=False, lifespan="off",
-                                log_level=logging.WARNING, timeout_graceful_shutdown=2)
+        config = uvicorn.Config(
+            self.app,
+            log_config=None,
+            access_log=False,
+            lifespan="off",
+            log_level=logging.WARNING,
+            timeout_graceful_shutdown=2,
+        )
         server = uvicorn.Server(config)
         thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, name=self.name, daemon=True)
         thread.start()

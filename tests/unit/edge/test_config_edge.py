@@ -56,8 +56,11 @@ def test_the_example_declares_what_the_warehouse_needs() -> None:
     table = config.mapping_table()
     table.add_robot("tb4_01")
     table.add_robot("tb4_02")
-    for topic, kafka in [("ir_intensity", "fleet.ir_intensity"), ("hazard_detection", "fleet.hazards"),
-                         ("kidnap_status", "fleet.kidnap")]:
+    for topic, kafka in [
+        ("ir_intensity", "fleet.ir_intensity"),
+        ("hazard_detection", "fleet.hazards"),
+        ("kidnap_status", "fleet.kidnap"),
+    ]:
         bound = [b for r in ("tb4_01", "tb4_02") for b in table.match(f"/{r}/{topic}")]
         assert [(b.kafka_topic, b.key) for b in bound] == [(kafka, "tb4_01"), (kafka, "tb4_02")]
     (odom,) = table.match("/tb4_01/odom")
@@ -85,14 +88,17 @@ def test_minimal_config_and_defaults(tmp_path: Path) -> None:
 AGGREGATE = "{type: aggregate, window: %s, fields: [x], ops: [mean]}"
 
 
-@pytest.mark.parametrize(("extra", "expected_s"), [
-    ("", None),  # the edge's wan.linger
-    ("        linger: 250ms\n", 0.25),
-    (f"        stages: [{AGGREGATE % '2s'}]\n", 2.0),
-    (f"        stages: [{AGGREGATE % '2s'}]\n        linger: 0s\n", 0.0),
-    (f"        stages: [{AGGREGATE % '1m'}]\n", 5.0),
-    ("        stages: [{type: aggregate, window: 10s, hop: 3s, fields: [x], ops: [max]}]\n", 3.0),
-])
+@pytest.mark.parametrize(
+    ("extra", "expected_s"),
+    [
+        ("", None),  # the edge's wan.linger
+        ("        linger: 250ms\n", 0.25),
+        (f"        stages: [{AGGREGATE % '2s'}]\n", 2.0),
+        (f"        stages: [{AGGREGATE % '2s'}]\n        linger: 0s\n", 0.0),
+        (f"        stages: [{AGGREGATE % '1m'}]\n", 5.0),
+        ("        stages: [{type: aggregate, window: 10s, hop: 3s, fields: [x], ops: [max]}]\n", 3.0),
+    ],
+)
 def test_mapping_linger_defaults_to_the_aggregate_period(
     tmp_path: Path, extra: str, expected_s: float | None
 ) -> None:
@@ -117,52 +123,110 @@ VE = "Value error, "
 BAD: list[tuple[str, str, str]] = [
     ("unknown top-level key", BASE + "sitee: x\n", "sitee (line 10): unknown key"),
     ("unknown key in a mapping", BASE + "        topic: x\n", f"{M0}.topic (line 10): unknown key"),
-    ("wrong type", BASE + "wan: {max_in_flight: eight}\n",
-     "wan.max_in_flight (line 10): Input should be a valid integer"),
-    ("bad size", BASE.replace(SPOOL, "spool: {dir: /s, max_bytes: lots}"),
-     "spool.max_bytes (line 2): could not parse"),
-    ("bad template capture", BASE.replace("to: fleet.ir_intensity", "to: fleet.{sensor}"),
-     f"{M0}.to (line 9): {VE}Kafka topic template 'fleet.{{sensor}}' uses {{sensor}}, which the pattern "
-     "'/{robot}/ir_intensity' does not capture"),
-    ("bad key capture", BASE + "        key: '{sensor}'\n",
-     f"{M0}.key (line 10): {VE}key template '{{sensor}}' uses {{sensor}}"),
-    ("illegal topic", BASE.replace("to: fleet.ir_intensity", "to: fleet ir"),
-     f"{M0}.to (line 9): {VE}Kafka topic 'fleet ir': Kafka topic names use only [a-zA-Z0-9._-]; "
-     "' ' is not allowed"),
-    ("bad duration", BASE + "registration: {grace_period: 5 parsecs}\n",
-     f"registration.grace_period (line 10): {VE}invalid duration '5 parsecs'"),
+    (
+        "wrong type",
+        BASE + "wan: {max_in_flight: eight}\n",
+        "wan.max_in_flight (line 10): Input should be a valid integer",
+    ),
+    (
+        "bad size",
+        BASE.replace(SPOOL, "spool: {dir: /s, max_bytes: lots}"),
+        "spool.max_bytes (line 2): could not parse",
+    ),
+    (
+        "bad template capture",
+        BASE.replace("to: fleet.ir_intensity", "to: fleet.{sensor}"),
+        f"{M0}.to (line 9): {VE}Kafka topic template 'fleet.{{sensor}}' uses {{sensor}}, which the pattern "
+        "'/{robot}/ir_intensity' does not capture",
+    ),
+    (
+        "bad key capture",
+        BASE + "        key: '{sensor}'\n",
+        f"{M0}.key (line 10): {VE}key template '{{sensor}}' uses {{sensor}}",
+    ),
+    (
+        "illegal topic",
+        BASE.replace("to: fleet.ir_intensity", "to: fleet ir"),
+        f"{M0}.to (line 9): {VE}Kafka topic 'fleet ir': Kafka topic names use only [a-zA-Z0-9._-]; "
+        "' ' is not allowed",
+    ),
+    (
+        "bad duration",
+        BASE + "registration: {grace_period: 5 parsecs}\n",
+        f"registration.grace_period (line 10): {VE}invalid duration '5 parsecs'",
+    ),
     ("bad duration in wan", BASE + "wan: {linger: -1}\n", f"wan.linger (line 10): {VE}duration must not be"),
-    ("robot type mapping without {robot}", BASE.replace('"/{robot}/ir_intensity"', '"/ir_intensity"'),
-     f"{M0}.from (line 8): {VE}'/ir_intensity': a robot type's mappings capture the robot"),
-    ("bad pattern", BASE.replace('"/{robot}/ir_intensity"', '"/{robot}/ir-intensity"'),
-     f"{M0}.from (line 8): {VE}topic pattern '/{{robot}}/ir-intensity': segment 'ir-intensity'"),
-    ("site mapping without robot or key", BASE + "mappings:\n  - {name: m, from: /map, to: site.map}\n",
-     f"mappings[0].key (line 11): {VE}the key defaults to '{{robot}}' but 'from' ('/map') captures no robot"),
-    ("duplicate names", BASE + "mappings:\n  - {name: ir, from: '/{robot}/x', to: x}\n",
-     f"<root>: {VE}mapping name 'ir' is used twice (mappings[0] and {M0})"),
+    (
+        "robot type mapping without {robot}",
+        BASE.replace('"/{robot}/ir_intensity"', '"/ir_intensity"'),
+        f"{M0}.from (line 8): {VE}'/ir_intensity': a robot type's mappings capture the robot",
+    ),
+    (
+        "bad pattern",
+        BASE.replace('"/{robot}/ir_intensity"', '"/{robot}/ir-intensity"'),
+        f"{M0}.from (line 8): {VE}topic pattern '/{{robot}}/ir-intensity': segment 'ir-intensity'",
+    ),
+    (
+        "site mapping without robot or key",
+        BASE + "mappings:\n  - {name: m, from: /map, to: site.map}\n",
+        f"mappings[0].key (line 11): {VE}the key defaults to '{{robot}}' "
+        "but 'from' ('/map') captures no robot",
+    ),
+    (
+        "duplicate names",
+        BASE + "mappings:\n  - {name: ir, from: '/{robot}/x', to: x}\n",
+        f"<root>: {VE}mapping name 'ir' is used twice (mappings[0] and {M0})",
+    ),
     ("bad ros type", BASE + "        type: Imu\n", f"{M0}.type (line 10): {VE}ROS type 'Imu' must look like"),
-    ("bad stage", BASE + "        stages: [{type: throttle, hz: 0}]\n",
-     f"{M0}.stages[0].throttle.hz (line 10): Input should be greater than 0"),
-    ("bad delivery", BASE + "        delivery: sometimes\n",
-     f"{M0}.delivery (line 10): Input should be 'at_least_once' or 'best_effort'"),
-    ("bad glob", BASE.replace('match: "/tb4_*"', 'match: "/tb4 *"'),
-     f"robot_types.turtlebot4.match (line 5): {VE}'/tb4 *' is not a namespace glob"),
-    ("bad robot type name", BASE.replace("turtlebot4:", "turtle bot:"),
-     "robot_types.turtle bot.[key] (line 4): String should match pattern"),
-    ("site with a slash", BASE.replace("site: warehouse-a", "site: a/b"),
-     f"site (line 1): {VE}'a/b' must be a single key chunk"),
+    (
+        "bad stage",
+        BASE + "        stages: [{type: throttle, hz: 0}]\n",
+        f"{M0}.stages[0].throttle.hz (line 10): Input should be greater than 0",
+    ),
+    (
+        "bad delivery",
+        BASE + "        delivery: sometimes\n",
+        f"{M0}.delivery (line 10): Input should be 'at_least_once' or 'best_effort'",
+    ),
+    (
+        "bad glob",
+        BASE.replace('match: "/tb4_*"', 'match: "/tb4 *"'),
+        f"robot_types.turtlebot4.match (line 5): {VE}'/tb4 *' is not a namespace glob",
+    ),
+    (
+        "bad robot type name",
+        BASE.replace("turtlebot4:", "turtle bot:"),
+        "robot_types.turtle bot.[key] (line 4): String should match pattern",
+    ),
+    (
+        "site with a slash",
+        BASE.replace("site: warehouse-a", "site: a/b"),
+        f"site (line 1): {VE}'a/b' must be a single key chunk",
+    ),
     ("site with a wildcard", BASE.replace("site: warehouse-a", "site: '*'"), f"site (line 1): {VE}site '*'"),
-    ("segment too big", BASE.replace(SPOOL, "spool: {dir: /s, max_bytes: 1MiB, segment_bytes: 1MiB}"),
-     f"spool (line 2): {VE}max_bytes (1048576) must be at least twice segment_bytes"),
-    ("backoff upside down", BASE + "wan: {retry_backoff_min: 10s, retry_backoff_max: 1s}\n",
-     f"wan (line 10): {VE}retry_backoff_min must be above 0s and at most retry_backoff_max"),
+    (
+        "segment too big",
+        BASE.replace(SPOOL, "spool: {dir: /s, max_bytes: 1MiB, segment_bytes: 1MiB}"),
+        f"spool (line 2): {VE}max_bytes (1048576) must be at least twice segment_bytes",
+    ),
+    (
+        "backoff upside down",
+        BASE + "wan: {retry_backoff_min: 10s, retry_backoff_max: 1s}\n",
+        f"wan (line 10): {VE}retry_backoff_min must be above 0s and at most retry_backoff_max",
+    ),
     ("missing spool", "site: s\n", "spool: Field required"),
     ("bad admin listen", BASE + "admin: {listen: localhost}\n", f"admin.listen (line 10): {VE}'localhost'"),
-    ("bad registration topic", BASE + "registration: {topic: register}\n",
-     f"registration.topic (line 10): {VE}'register' is not an absolute ROS topic name"),
+    (
+        "bad registration topic",
+        BASE + "registration: {topic: register}\n",
+        f"registration.topic (line 10): {VE}'register' is not an absolute ROS topic name",
+    ),
     ("bad distro", BASE + "ros: {distro: foxy}\n", "ros.distro (line 10): Input should be 'humble'"),
-    ("linger too long", BASE + "        linger: 2m\n",
-     f"{M0}.linger (line 10): {VE}linger must be between 0s and 60s"),
+    (
+        "linger too long",
+        BASE + "        linger: 2m\n",
+        f"{M0}.linger (line 10): {VE}linger must be between 0s and 60s",
+    ),
 ]
 
 

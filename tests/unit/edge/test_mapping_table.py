@@ -14,14 +14,21 @@ TB4 = RobotTypeSpec(
         MappingSpec(name="ir", source="/{robot}/ir_intensity", topic="fleet.ir_intensity"),
         MappingSpec(name="hazard", source="/{robot}/hazard_detection", topic="fleet.hazards"),
         MappingSpec(name="kidnap", source="/{robot}/kidnap_status", topic="fleet.hazards"),
-        MappingSpec(name="imu", source="/{robot}/imu", topic="fleet.imu", delivery="best_effort",
-                    ros_type="sensor_msgs/msg/Imu"),
+        MappingSpec(
+            name="imu",
+            source="/{robot}/imu",
+            topic="fleet.imu",
+            delivery="best_effort",
+            ros_type="sensor_msgs/msg/Imu",
+        ),
         MappingSpec(name="all_sensors", source="/{robot}/{sensor}", topic="fleet.raw.{sensor}"),
     ),
 )
-CREATE3 = RobotTypeSpec(name="create3", match="/c3_*", mappings=(
-    MappingSpec(name="c3_odom", source="/{robot}/odom", topic="fleet.c3.odom", key="c3-{robot}"),
-))
+CREATE3 = RobotTypeSpec(
+    name="create3",
+    match="/c3_*",
+    mappings=(MappingSpec(name="c3_odom", source="/{robot}/odom", topic="fleet.c3.odom", key="c3-{robot}"),),
+)
 SITE = (
     MappingSpec(name="tasks", source="/{robot}/task_status", topic="fleet.tasks.{msg.zone}"),
     MappingSpec(name="site_map", source="/map", topic="site.map", key="warehouse-a"),
@@ -88,8 +95,12 @@ def test_one_to_many_by_message_field() -> None:
 
 @pytest.mark.parametrize(
     ("fields", "reason"),
-    [({"zone": "a b"}, "' '"), ({"zone": "x" * 240}, "at most 249"), ({}, "no field msg.zone"),
-     ({"zone": {"n": 1}}, "dict value")],
+    [
+        ({"zone": "a b"}, "' '"),
+        ({"zone": "x" * 240}, "at most 249"),
+        ({}, "no field msg.zone"),
+        ({"zone": {"n": 1}}, "dict value"),
+    ],
 )
 def test_field_filled_topic_that_is_illegal_is_a_record_error(fields: dict[str, object], reason: str) -> None:
     (tasks,) = table().match("/r9/task_status")
@@ -206,10 +217,16 @@ def test_reload_keeps_robots_whose_type_survives() -> None:
 
 
 COMPILE_ERRORS: list[tuple[MappingSpec, str | None, str]] = [
-    (MappingSpec(name="m", source="/{robot}/{sensor}", topic="fleet.{sensr}"), None,
-     "uses {sensr}, which the pattern '/{robot}/{sensor}' does not capture"),
-    (MappingSpec(name="m", source="/{robot}/imu", topic="fleet.imu", key="{robt}"), None,
-     "key template '{robt}' uses {robt}"),
+    (
+        MappingSpec(name="m", source="/{robot}/{sensor}", topic="fleet.{sensr}"),
+        None,
+        "uses {sensr}, which the pattern '/{robot}/{sensor}' does not capture",
+    ),
+    (
+        MappingSpec(name="m", source="/{robot}/imu", topic="fleet.imu", key="{robt}"),
+        None,
+        "key template '{robt}' uses {robt}",
+    ),
     (MappingSpec(name="m", source="/map", topic="site.map"), None, "captures no robot"),
     (MappingSpec(name="m", source="/map", topic="site map", key="k"), None, "' ' is not allowed"),
     (MappingSpec(name="m", source="/{r}/x", topic="t/{r}", key="k"), None, "'/' is not allowed"),
@@ -218,8 +235,11 @@ COMPILE_ERRORS: list[tuple[MappingSpec, str | None, str]] = [
     (MappingSpec(name="m", source="/{robot*}/x", topic="t"), "turtlebot4", "must capture the robot"),
     (MappingSpec(name="m", source="/{robot}/x", topic="t", ros_type="Imu"), None, "package/msg/Type"),
     (MappingSpec(name="bad name", source="/{robot}/x", topic="t"), None, "mapping name"),
-    (MappingSpec(name="m", source="/{robot}/x", topic="t", delivery="maybe"), None,  # type: ignore[arg-type]
-     "delivery 'maybe'"),
+    (
+        MappingSpec(name="m", source="/{robot}/x", topic="t", delivery="maybe"),  # type: ignore[arg-type]
+        None,
+        "delivery 'maybe'",
+    ),
 ]
 
 

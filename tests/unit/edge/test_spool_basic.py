@@ -191,8 +191,9 @@ def test_oldest_age_uses_append_time(tmp_path: Path) -> None:
 def test_fsync_policies_sync_in_the_append_path(
     tmp_path: Path, policy: FsyncPolicy, calls: int, expected: int
 ) -> None:
-    options = SpoolOptions(segment_bytes=1 << 20, max_bytes=4 << 20, fsync=policy, fsync_batch=50,
-                           fsync_interval_ms=60_000)
+    options = SpoolOptions(
+        segment_bytes=1 << 20, max_bytes=4 << 20, fsync=policy, fsync_batch=50, fsync_interval_ms=60_000
+    )
     with Spool(tmp_path, options) as spool:
         for _ in range(calls):
             spool.append_many([b"r"] * 10)
@@ -229,8 +230,13 @@ def test_use_after_close_and_misuse(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "reason"),
-    [({"policy": "sometimes"}, "policy"), ({"fsync": "never"}, "fsync"), ({"segment_bytes": 100}, "4096"),
-     ({"segment_bytes": 8192, "max_bytes": 10000}, "twice"), ({"fsync_interval_ms": 0}, "positive")],
+    [
+        ({"policy": "sometimes"}, "policy"),
+        ({"fsync": "never"}, "fsync"),
+        ({"segment_bytes": 100}, "4096"),
+        ({"segment_bytes": 8192, "max_bytes": 10000}, "twice"),
+        ({"fsync_interval_ms": 0}, "positive"),
+    ],
 )
 def test_bad_options(kwargs: dict[str, object], reason: str) -> None:
     with pytest.raises(SpoolError, match=reason):

@@ -55,7 +55,10 @@ def test_segment_header() -> None:
 def test_clean_scan_yields_every_frame_in_order() -> None:
     found = events(frames(1, 2, 3))
     assert [(f.seq, f.timestamp_ms, f.payload) for f in found if isinstance(f, Frame)] == [
-        (1, 1001, b"payload-1"), (2, 1002, b"payload-2"), (3, 1003, b"payload-3")]
+        (1, 1001, b"payload-1"),
+        (2, 1002, b"payload-2"),
+        (3, 1003, b"payload-3"),
+    ]
     assert all(isinstance(f, Frame) for f in found)
 
 

@@ -13,8 +13,10 @@ from fleetlink.edge.spool.segments import Segment
 
 
 def items(first_seq: int, n: int, size: int = 10) -> list[Item]:
-    return [(seq, 1000 + seq, encode_frame(seq, 1000 + seq, bytes([seq % 256]) * size))
-            for seq in range(first_seq, first_seq + n)]
+    return [
+        (seq, 1000 + seq, encode_frame(seq, 1000 + seq, bytes([seq % 256]) * size))
+        for seq in range(first_seq, first_seq + n)
+    ]
 
 
 def nbytes(chunk: list[Item]) -> int:
@@ -29,8 +31,11 @@ FRAME = HEADER_SIZE + 10
 def filled(max_bytes: int = 1 << 20) -> RecentFrames:
     """Seqs 1..5 then 6..8 in segment A (two writes), 100..101 in segment B."""
     recent = RecentFrames(max_bytes)
-    for segment, offset, chunk in ((SEG_A, 16, items(1, 5)), (SEG_A, 16 + 5 * FRAME, items(6, 3)),
-                                   (SEG_B, 16, items(100, 2))):
+    for segment, offset, chunk in (
+        (SEG_A, 16, items(1, 5)),
+        (SEG_A, 16 + 5 * FRAME, items(6, 3)),
+        (SEG_B, 16, items(100, 2)),
+    ):
         recent.add(segment, offset, chunk, nbytes(chunk))
     return recent
 
@@ -47,8 +52,9 @@ def filled(max_bytes: int = 1 << 20) -> RecentFrames:
         (SEG_B, 16, 100, 100, 1 << 20, [100, 101], 16 + 2 * FRAME),
     ],
 )
-def test_reads_at_the_cursor(segment: Segment, offset: int, next_seq: int, max_records: int, max_bytes: int,
-                             seqs: list[int], end: int) -> None:
+def test_reads_at_the_cursor(
+    segment: Segment, offset: int, next_seq: int, max_records: int, max_bytes: int, seqs: list[int], end: int
+) -> None:
     found = filled().read(segment, offset, next_seq, max_records=max_records, max_bytes=max_bytes)
     assert found is not None
     records, got_end = found
@@ -60,9 +66,9 @@ def test_reads_at_the_cursor(segment: Segment, offset: int, next_seq: int, max_r
 @pytest.mark.parametrize(
     ("segment", "offset", "next_seq"),
     [
-        (SEG_A, 16 + FRAME, 1),      # not where the kept frames start
-        (SEG_B, 16, 1),              # segment A's frames come first
-        (SEG_A, 16, 9),              # everything of A was read: nothing there any more
+        (SEG_A, 16 + FRAME, 1),  # not where the kept frames start
+        (SEG_B, 16, 1),  # segment A's frames come first
+        (SEG_A, 16, 9),  # everything of A was read: nothing there any more
     ],
 )
 def test_misses_when_the_frame_there_is_not_the_next_kept(

@@ -93,8 +93,12 @@ finally:
 
 def test_sigterm_runs_the_cleanup_of_a_script_that_asked_for_it(tmp_path: Path) -> None:
     marker = tmp_path / "cleanup"
-    with subprocess.Popen([sys.executable, "-c", SCRIPT, str(marker)], stdout=subprocess.PIPE, text=True,
-                          cwd=Path(__file__).resolve().parents[3]) as proc:
+    with subprocess.Popen(
+        [sys.executable, "-c", SCRIPT, str(marker)],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[3],
+    ) as proc:
         assert proc.stdout is not None
         assert proc.stdout.readline().strip() == "ready"
         proc.send_signal(signal.SIGTERM)

@@ -19,8 +19,20 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 
 
 def test_flags_become_config_values() -> None:
-    args = _parse(["-m", "client", "-e", "tcp/127.0.0.1:7447", "-e", "tcp/127.0.0.1:7448",
-                   "--cfg", "timestamping/enabled:true", "--domain-id", "3"])
+    args = _parse(
+        [
+            "-m",
+            "client",
+            "-e",
+            "tcp/127.0.0.1:7447",
+            "-e",
+            "tcp/127.0.0.1:7448",
+            "--cfg",
+            "timestamping/enabled:true",
+            "--domain-id",
+            "3",
+        ]
+    )
     conf = options_from_args(args).to_config()
     assert json.loads(conf.get_json("mode")) == "client"
     assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:7447", "tcp/127.0.0.1:7448"]

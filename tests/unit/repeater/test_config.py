@@ -37,18 +37,36 @@ def with_dead_man(value: object) -> RepeaterConfig:
     return RepeaterConfig.model_validate({"repeater": section})
 
 
-@pytest.mark.parametrize(("text", "seconds"), [
-    ("250ms", 0.25), ("1s", 1.0), (" 1.5 s ", 1.5), ("2m", 120.0), ("1h", 3600.0), (3, 3.0), (0.5, 0.5),
-])
+@pytest.mark.parametrize(
+    ("text", "seconds"),
+    [
+        ("250ms", 0.25),
+        ("1s", 1.0),
+        (" 1.5 s ", 1.5),
+        ("2m", 120.0),
+        ("1h", 3600.0),
+        (3, 3.0),
+        (0.5, 0.5),
+    ],
+)
 def test_durations(text: object, seconds: float) -> None:
     assert with_dead_man(text).repeater.dead_man == seconds
 
 
-@pytest.mark.parametrize(("text", "reason"), [
-    ("", "invalid duration"), ("1", "invalid duration"), ("1d", "invalid duration"),
-    ("-1s", "invalid duration"), ("0s", "greater than 0"), (0, "greater than 0"), (True, "a duration"),
-    ([1], "a duration"), (float("inf"), "finite"),
-])
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("", "invalid duration"),
+        ("1", "invalid duration"),
+        ("1d", "invalid duration"),
+        ("-1s", "invalid duration"),
+        ("0s", "greater than 0"),
+        (0, "greater than 0"),
+        (True, "a duration"),
+        ([1], "a duration"),
+        (float("inf"), "finite"),
+    ],
+)
 def test_bad_durations(text: object, reason: str) -> None:
     with pytest.raises(ValidationError, match=reason):
         with_dead_man(text)
@@ -83,8 +101,14 @@ def test_bad_config_exits_non_zero_naming_yaml_paths(
     path.write_text(BAD)
     assert main(["repeater", "run", "-c", str(path)]) == 1
     err = capsys.readouterr().err
-    for where in ("repeater.site (line 2)", "repeater.dead_man (line 4)", "repeater.id (line 5)",
-                  "ros.distro (line 7)", "ros.domain_id (line 8)", "zenoh.colour (line 11)"):
+    for where in (
+        "repeater.site (line 2)",
+        "repeater.dead_man (line 4)",
+        "repeater.id (line 5)",
+        "ros.distro (line 7)",
+        "ros.domain_id (line 8)",
+        "zenoh.colour (line 11)",
+    ):
         assert where in err
     assert "must be one key chunk" in err
     assert "invalid duration 'soon'" in err

@@ -24,8 +24,18 @@ TS = load_typestore("jazzy", [IROBOT])
 CODEC = get_codec(TS, LIGHTRING, "jazzy")
 MESSAGE = MessageFactory(TS, "tb4_01").lightring(((255, 0, 0),) * 6, True, 12.5)
 CDR = bytes(TS.serialize_cdr(MESSAGE, LIGHTRING))
-ENV = CommandEnvelope("c1", "tb4_01", "/tb4_01/cmd_lightring", LIGHTRING, "lightring", 0, 10_000, 1000,
-                      fingerprint(CODEC.schema), CODEC.cdr_to_avro(CDR))
+ENV = CommandEnvelope(
+    "c1",
+    "tb4_01",
+    "/tb4_01/cmd_lightring",
+    LIGHTRING,
+    "lightring",
+    0,
+    10_000,
+    1000,
+    fingerprint(CODEC.schema),
+    CODEC.cdr_to_avro(CDR),
+)
 
 
 def write(schema: dict[str, Any], datum: dict[str, Any]) -> bytes:
@@ -51,15 +61,20 @@ def test_an_evolved_writer_schema_is_resolved_to_the_ros_type() -> None:
     assert converter.to_cdr(env, json.dumps(evolved)) == CDR  # parsed writer cached
 
 
-@pytest.mark.parametrize(("change", "schema", "reason"), [
-    ({"ros_type": "irobot_create_msgs/msg/Nope"}, None, "unknown ROS type"),
-    ({"schema_fp": b"\x09" * 8}, None, "writer schema 0909090909090909 is unknown here"),
-    ({"schema_fp": b"\x09" * 8}, "{not json", "writer schema is unusable"),
-    ({"schema_fp": b"\x09" * 8},
-     json.dumps({"type": "record", "name": "Other", "fields": [{"name": "x", "type": "long"}]}),
-     "does not resolve"),
-    ({"body": b"\x02"}, None, "LightringLeds"),
-])
+@pytest.mark.parametrize(
+    ("change", "schema", "reason"),
+    [
+        ({"ros_type": "irobot_create_msgs/msg/Nope"}, None, "unknown ROS type"),
+        ({"schema_fp": b"\x09" * 8}, None, "writer schema 0909090909090909 is unknown here"),
+        ({"schema_fp": b"\x09" * 8}, "{not json", "writer schema is unusable"),
+        (
+            {"schema_fp": b"\x09" * 8},
+            json.dumps({"type": "record", "name": "Other", "fields": [{"name": "x", "type": "long"}]}),
+            "does not resolve",
+        ),
+        ({"body": b"\x02"}, None, "LightringLeds"),
+    ],
+)
 def test_what_cannot_be_converted(change: dict[str, Any], schema: str | None, reason: str) -> None:
     env = replace(ENV, **change)
     with pytest.raises(ConversionError, match=reason) as info:

@@ -22,9 +22,17 @@ from fleetlink.repeater.state import CommandStore
 from fleetlink.wire.commands import CommandEnvelope, StatusEvent
 
 ENV = CommandEnvelope(
-    command_id="c1", robot="tb4_01", ros_topic="/tb4_01/cmd_lightring",
-    ros_type="irobot_create_msgs/msg/LightringLeds", mapping="lightring", issued_at_ms=1_000_000,
-    lease_until_ms=1_010_000, period_ms=1000, schema_fp=b"\x07" * 8, body=b"\x01\x02", schema='{"s": 1}',
+    command_id="c1",
+    robot="tb4_01",
+    ros_topic="/tb4_01/cmd_lightring",
+    ros_type="irobot_create_msgs/msg/LightringLeds",
+    mapping="lightring",
+    issued_at_ms=1_000_000,
+    lease_until_ms=1_010_000,
+    period_ms=1000,
+    schema_fp=b"\x07" * 8,
+    body=b"\x01\x02",
+    schema='{"s": 1}',
 )
 EVENT = StatusEvent("c1", "tb4_01", "/tb4_01/cmd_lightring", "delivered", 1_000_500, "site-a", "publish #1")
 
@@ -35,10 +43,17 @@ def lines(*entries: dict[str, object]) -> list[bytes]:
 
 def test_replay_rebuilds_commands_marks_and_pending_statuses() -> None:
     other = replace(ENV, command_id="c2")
-    state = replay(lines(
-        command_line(ENV, 1000.5), command_line(other, 1001.0), mark_line("delivered", "c1", "tb4_01"),
-        mark_line("end", "c2", "tb4_01"), status_line(1, EVENT), status_line(2, EVENT), acked_line(1),
-    ))
+    state = replay(
+        lines(
+            command_line(ENV, 1000.5),
+            command_line(other, 1001.0),
+            mark_line("delivered", "c1", "tb4_01"),
+            mark_line("end", "c2", "tb4_01"),
+            status_line(1, EVENT),
+            status_line(2, EVENT),
+            acked_line(1),
+        )
+    )
     assert state.commands[("c1", "tb4_01")].envelope == ENV.without_schema()
     assert state.commands[("c1", "tb4_01")].received_at == 1000.5
     first = state.commands[("c1", "tb4_01")]
@@ -49,14 +64,17 @@ def test_replay_rebuilds_commands_marks_and_pending_statuses() -> None:
     assert (state.lines, state.skipped) == (7, 0)
 
 
-@pytest.mark.parametrize("bad", [
-    b'{"op": "cmd", "env": "!!!", "rx": 1}',  # not base64
-    b'{"op": "cmd", "env": "RkxD", "rx": 1}',  # not an envelope
-    b'{"op": "teleport"}',
-    b'{"op": "status", "n": 1, "ev": {"status": "lost"}}',
-    b'{"op": "acked"}',
-    b'{"op": "cmd", "env',  # torn last line
-])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        b'{"op": "cmd", "env": "!!!", "rx": 1}',  # not base64
+        b'{"op": "cmd", "env": "RkxD", "rx": 1}',  # not an envelope
+        b'{"op": "teleport"}',
+        b'{"op": "status", "n": 1, "ev": {"status": "lost"}}',
+        b'{"op": "acked"}',
+        b'{"op": "cmd", "env',  # torn last line
+    ],
+)
 def test_unreadable_lines_are_counted_and_skipped(bad: bytes) -> None:
     state = replay([*lines(command_line(ENV, 1.0)), bad])
     assert (state.lines, state.skipped) == (2, 1)

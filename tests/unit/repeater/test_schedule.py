@@ -11,8 +11,16 @@ from fleetlink.repeater.schedule import Command, Offer, Schedule
 T0 = 1_700_000_000.0
 
 
-def cmd(cid: str = "c1", robot: str = "tb4_01", topic: str = "/tb4_01/cmd_lightring", *,
-        issued: float = 0.0, lease: float = 10.0, period: float = 1.0, order: int = 0) -> Command:
+def cmd(
+    cid: str = "c1",
+    robot: str = "tb4_01",
+    topic: str = "/tb4_01/cmd_lightring",
+    *,
+    issued: float = 0.0,
+    lease: float = 10.0,
+    period: float = 1.0,
+    order: int = 0,
+) -> Command:
     return Command(cid, robot, topic, T0 + issued, T0 + issued + lease, period, order)
 
 
@@ -50,75 +58,118 @@ def run(steps: list[Step], commands: dict[str, Command], dead_man: float | None 
 
 
 CASES: dict[str, tuple[list[Step], dict[str, Command], float | None]] = {
-    "published at once, then every period, until the lease ends": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(0.5, "tick"),
-        Step(1.0, "tick", ("pub:a:repeat",)),
-        Step(1.1, "tick"),
-        Step(2.0, "tick", ("pub:a:repeat",)),
-        Step(9.99, "tick", ("pub:a:repeat",)),  # late tick: one repeat, no burst
-        Step(10.0, "tick", ("expired:a",)),
-        Step(11.0, "tick"),
-    ], {"a": cmd("a")}, None),
-    "a re-delivered command id is a duplicate, even after it ended": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(0.2, "offer:a", ("offer:duplicate",)),
-        Step(1.0, "offer:b", ("offer:applied", "superseded:a", "pub:b:first")),
-        Step(1.5, "offer:a", ("offer:duplicate",)),
-    ], {"a": cmd("a"), "b": cmd("b", issued=1.0)}, None),
-    "a newer command supersedes; the old one is no longer repeated": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(1.0, "tick", ("pub:a:repeat",)),
-        Step(1.5, "offer:b", ("offer:applied", "superseded:a", "pub:b:first")),
-        Step(2.0, "tick"),
-        Step(2.5, "tick", ("pub:b:repeat",)),
-    ], {"a": cmd("a"), "b": cmd("b", issued=1.5)}, None),
-    "an older command arriving late is superseded on arrival, never published": ([
-        Step(2.0, "offer:new", ("offer:applied", "pub:new:first")),
-        Step(2.1, "offer:old", ("offer:superseded", "superseded:old")),
-        Step(3.0, "tick", ("pub:new:repeat",)),
-    ], {"new": cmd("new", issued=2.0), "old": cmd("old", issued=1.0)}, None),
-    "same timestamp: the larger order (Kafka offset) wins in either arrival order": ([
-        Step(0.0, "offer:o8", ("offer:applied", "pub:o8:first")),
-        Step(0.1, "offer:o7", ("offer:superseded", "superseded:o7")),
-        Step(0.2, "offer:o9", ("offer:applied", "superseded:o8", "pub:o9:first")),
-    ], {f"o{n}": cmd(f"o{n}", order=n) for n in (7, 8, 9)}, None),
-    "other robots and topics are separate slots": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(0.0, "offer:b", ("offer:applied", "pub:b:first")),
-        Step(0.0, "offer:c", ("offer:applied", "pub:c:first")),
-        Step(1.0, "tick", ("pub:a:repeat", "pub:b:repeat", "pub:c:repeat")),
-    ], {"a": cmd("a"), "b": cmd("b", robot="tb4_02", topic="/tb4_02/cmd_lightring"),
-        "c": cmd("c", topic="/tb4_01/other")}, None),
-    "a command whose lease already ended is refused as expired": ([
-        Step(10.0, "offer:a", ("offer:expired", "expired:a")),
-        Step(10.5, "offer:a", ("offer:duplicate",)),
-        Step(11.0, "tick"),
-    ], {"a": cmd("a")}, None),
-    "late joiner: the active command at once, on its topic only, not after the lease": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(3.3, "join:/tb4_01/cmd_lightring", ("pub:a:late-joiner",)),
-        Step(3.4, "join:/tb4_02/cmd_lightring"),
-        Step(10.0, "tick", ("expired:a",)),
-        Step(10.1, "join:/tb4_01/cmd_lightring"),
-    ], {"a": cmd("a", period=60.0)}, None),
-    "no cap: repeats go on through a lost link, and end with the lease": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(1.0, "down"),
-        Step(2.0, "tick", ("pub:a:repeat",)),
-        Step(4.9, "tick", ("pub:a:repeat",)),
-        Step(5.0, "tick", ("expired:a",)),
-    ], {"a": cmd("a", lease=5.0, period=2.0)}, None),
-    "dead-man cap: a short cap ends a long lease; a link back in time saves it": ([
-        Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
-        Step(0.5, "offer:b", ("offer:applied", "pub:b:first")),
-        Step(1.0, "down"),
-        Step(2.9, "tick"),
-        Step(3.0, "up"),
-        Step(3.5, "down"),
-        Step(5.4, "tick"),
-        Step(5.5, "tick", ("expired:a", "expired:b")),
-    ], {"a": cmd("a", lease=60.0, period=30.0), "b": cmd("b", topic="/x", lease=60.0, period=30.0)}, 2.0),
+    "published at once, then every period, until the lease ends": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(0.5, "tick"),
+            Step(1.0, "tick", ("pub:a:repeat",)),
+            Step(1.1, "tick"),
+            Step(2.0, "tick", ("pub:a:repeat",)),
+            Step(9.99, "tick", ("pub:a:repeat",)),  # late tick: one repeat, no burst
+            Step(10.0, "tick", ("expired:a",)),
+            Step(11.0, "tick"),
+        ],
+        {"a": cmd("a")},
+        None,
+    ),
+    "a re-delivered command id is a duplicate, even after it ended": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(0.2, "offer:a", ("offer:duplicate",)),
+            Step(1.0, "offer:b", ("offer:applied", "superseded:a", "pub:b:first")),
+            Step(1.5, "offer:a", ("offer:duplicate",)),
+        ],
+        {"a": cmd("a"), "b": cmd("b", issued=1.0)},
+        None,
+    ),
+    "a newer command supersedes; the old one is no longer repeated": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(1.0, "tick", ("pub:a:repeat",)),
+            Step(1.5, "offer:b", ("offer:applied", "superseded:a", "pub:b:first")),
+            Step(2.0, "tick"),
+            Step(2.5, "tick", ("pub:b:repeat",)),
+        ],
+        {"a": cmd("a"), "b": cmd("b", issued=1.5)},
+        None,
+    ),
+    "an older command arriving late is superseded on arrival, never published": (
+        [
+            Step(2.0, "offer:new", ("offer:applied", "pub:new:first")),
+            Step(2.1, "offer:old", ("offer:superseded", "superseded:old")),
+            Step(3.0, "tick", ("pub:new:repeat",)),
+        ],
+        {"new": cmd("new", issued=2.0), "old": cmd("old", issued=1.0)},
+        None,
+    ),
+    "same timestamp: the larger order (Kafka offset) wins in either arrival order": (
+        [
+            Step(0.0, "offer:o8", ("offer:applied", "pub:o8:first")),
+            Step(0.1, "offer:o7", ("offer:superseded", "superseded:o7")),
+            Step(0.2, "offer:o9", ("offer:applied", "superseded:o8", "pub:o9:first")),
+        ],
+        {f"o{n}": cmd(f"o{n}", order=n) for n in (7, 8, 9)},
+        None,
+    ),
+    "other robots and topics are separate slots": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(0.0, "offer:b", ("offer:applied", "pub:b:first")),
+            Step(0.0, "offer:c", ("offer:applied", "pub:c:first")),
+            Step(1.0, "tick", ("pub:a:repeat", "pub:b:repeat", "pub:c:repeat")),
+        ],
+        {
+            "a": cmd("a"),
+            "b": cmd("b", robot="tb4_02", topic="/tb4_02/cmd_lightring"),
+            "c": cmd("c", topic="/tb4_01/other"),
+        },
+        None,
+    ),
+    "a command whose lease already ended is refused as expired": (
+        [
+            Step(10.0, "offer:a", ("offer:expired", "expired:a")),
+            Step(10.5, "offer:a", ("offer:duplicate",)),
+            Step(11.0, "tick"),
+        ],
+        {"a": cmd("a")},
+        None,
+    ),
+    "late joiner: the active command at once, on its topic only, not after the lease": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(3.3, "join:/tb4_01/cmd_lightring", ("pub:a:late-joiner",)),
+            Step(3.4, "join:/tb4_02/cmd_lightring"),
+            Step(10.0, "tick", ("expired:a",)),
+            Step(10.1, "join:/tb4_01/cmd_lightring"),
+        ],
+        {"a": cmd("a", period=60.0)},
+        None,
+    ),
+    "no cap: repeats go on through a lost link, and end with the lease": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(1.0, "down"),
+            Step(2.0, "tick", ("pub:a:repeat",)),
+            Step(4.9, "tick", ("pub:a:repeat",)),
+            Step(5.0, "tick", ("expired:a",)),
+        ],
+        {"a": cmd("a", lease=5.0, period=2.0)},
+        None,
+    ),
+    "dead-man cap: a short cap ends a long lease; a link back in time saves it": (
+        [
+            Step(0.0, "offer:a", ("offer:applied", "pub:a:first")),
+            Step(0.5, "offer:b", ("offer:applied", "pub:b:first")),
+            Step(1.0, "down"),
+            Step(2.9, "tick"),
+            Step(3.0, "up"),
+            Step(3.5, "down"),
+            Step(5.4, "tick"),
+            Step(5.5, "tick", ("expired:a", "expired:b")),
+        ],
+        {"a": cmd("a", lease=60.0, period=30.0), "b": cmd("b", topic="/x", lease=60.0, period=30.0)},
+        2.0,
+    ),
 }
 
 

@@ -9,11 +9,14 @@ from fleetlink.roswire.attachment import V1_SIZE, V2_SIZE, Attachment, decode, d
 from fleetlink.roswire.errors import AttachmentError
 
 GID = bytes(range(16))
-V2_VECTOR = bytes.fromhex("0100000000000000" "00002a36fe9c9717" "10" "000102030405060708090a0b0c0d0e0f")
+V2_VECTOR = bytes.fromhex("010000000000000000002a36fe9c971710000102030405060708090a0b0c0d0e0f")
 V1_VECTOR = bytes.fromhex(
-    "0f73657175656e63655f6e756d626572" "0100000000000000"
-    "10736f757263655f74696d657374616d70" "0200000000000000"
-    "0a736f757263655f676964" "10" + "00" * 16
+    "0f73657175656e63655f6e756d626572"
+    "0100000000000000"
+    "10736f757263655f74696d657374616d70"
+    "0200000000000000"
+    "0a736f757263655f676964"
+    "10" + "00" * 16
 )
 
 
@@ -22,8 +25,10 @@ V1_VECTOR = bytes.fromhex(
     [
         (Attachment(1, 1_700_000_000_000_000_000, GID, 2), V2_VECTOR),
         (Attachment(1, 2, bytes(16), 1), V1_VECTOR),
-        (Attachment(2**63 - 1, -1, b"\xff" * 16, 2),
-         b"\xff" * 7 + b"\x7f" + b"\xff" * 8 + b"\x10" + b"\xff" * 16),
+        (
+            Attachment(2**63 - 1, -1, b"\xff" * 16, 2),
+            b"\xff" * 7 + b"\x7f" + b"\xff" * 8 + b"\x10" + b"\xff" * 16,
+        ),
     ],
 )
 def test_vectors_round_trip(attachment: Attachment, raw: bytes) -> None:

@@ -16,17 +16,38 @@ def nn(zid: str, nid: int, ns: str, name: str) -> str:
     return node_token(0, zid, nid, ns, name)
 
 
-def ep(zid: str, nid: int, eid: int, kind: EntityKind, ns: str, node: str, topic: str,
-       typename: str = "std_msgs/msg/String", qos: QoS = DEFAULT) -> str:
-    return endpoint_token(domain=0, zid=zid, nid=nid, eid=eid, kind=kind, namespace=ns, node_name=node,
-                          topic=topic, typename=typename, type_hash=H, qos=qos)
+def ep(
+    zid: str,
+    nid: int,
+    eid: int,
+    kind: EntityKind,
+    ns: str,
+    node: str,
+    topic: str,
+    typename: str = "std_msgs/msg/String",
+    qos: QoS = DEFAULT,
+) -> str:
+    return endpoint_token(
+        domain=0,
+        zid=zid,
+        nid=nid,
+        eid=eid,
+        kind=kind,
+        namespace=ns,
+        node_name=node,
+        topic=topic,
+        typename=typename,
+        type_hash=H,
+        qos=qos,
+    )
 
 
 TALKER = nn("a1", 0, "/", "talker")
 TALKER_PUB = ep("a1", 0, 1, EntityKind.PUBLISHER, "/", "talker", "/chatter")
 LISTENER_SUB = ep("b2", 0, 1, EntityKind.SUBSCRIPTION, "/", "listener", "/chatter")
-IMU_PUB = ep("c3", 2, 7, EntityKind.PUBLISHER, "/tb4_01", "sim", "/tb4_01/imu", "sensor_msgs/msg/Imu",
-             SENSOR_DATA)
+IMU_PUB = ep(
+    "c3", 2, 7, EntityKind.PUBLISHER, "/tb4_01", "sim", "/tb4_01/imu", "sensor_msgs/msg/Imu", SENSOR_DATA
+)
 ADD = "example_interfaces/srv/AddTwoInts"
 SERVER = ep("a1", 0, 2, EntityKind.SERVICE_SERVER, "/", "talker", "/add", ADD)
 CLIENT = ep("b2", 0, 3, EntityKind.SERVICE_CLIENT, "/", "listener", "/add", ADD)
@@ -43,23 +64,48 @@ def summary(events: list) -> list[tuple[str, str, str]]:  # type: ignore[type-ar
 
 
 SEQUENCES: list[tuple[str, list[tuple[str, str]], list[tuple[str, str, str]]]] = [
-    ("node token then endpoint", [("put", TALKER), ("put", TALKER_PUB)],
-     [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter")]),
-    ("endpoint creates node implicitly", [("put", LISTENER_SUB)],
-     [("appeared", "NN", "/listener"), ("appeared", "MS", "/chatter")]),
+    (
+        "node token then endpoint",
+        [("put", TALKER), ("put", TALKER_PUB)],
+        [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter")],
+    ),
+    (
+        "endpoint creates node implicitly",
+        [("put", LISTENER_SUB)],
+        [("appeared", "NN", "/listener"), ("appeared", "MS", "/chatter")],
+    ),
     ("duplicate put is silent", [("put", TALKER), ("put", TALKER)], [("appeared", "NN", "/talker")]),
     ("delete unknown is silent", [("delete", TALKER_PUB)], []),
-    ("last endpoint of implicit node removes it", [("put", LISTENER_SUB), ("delete", LISTENER_SUB)],
-     [("appeared", "NN", "/listener"), ("appeared", "MS", "/chatter"),
-      ("disappeared", "MS", "/chatter"), ("disappeared", "NN", "/listener")]),
-    ("node stays while its token lives", [("put", TALKER), ("put", TALKER_PUB), ("delete", TALKER_PUB)],
-     [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter"), ("disappeared", "MP", "/chatter")]),
-    ("node stays while endpoints live", [("put", TALKER), ("put", TALKER_PUB), ("delete", TALKER)],
-     [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter")]),
-    ("node goes with its last token", [("put", TALKER), ("put", TALKER_PUB), ("delete", TALKER),
-                                       ("delete", TALKER_PUB)],
-     [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter"), ("disappeared", "MP", "/chatter"),
-      ("disappeared", "NN", "/talker")]),
+    (
+        "last endpoint of implicit node removes it",
+        [("put", LISTENER_SUB), ("delete", LISTENER_SUB)],
+        [
+            ("appeared", "NN", "/listener"),
+            ("appeared", "MS", "/chatter"),
+            ("disappeared", "MS", "/chatter"),
+            ("disappeared", "NN", "/listener"),
+        ],
+    ),
+    (
+        "node stays while its token lives",
+        [("put", TALKER), ("put", TALKER_PUB), ("delete", TALKER_PUB)],
+        [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter"), ("disappeared", "MP", "/chatter")],
+    ),
+    (
+        "node stays while endpoints live",
+        [("put", TALKER), ("put", TALKER_PUB), ("delete", TALKER)],
+        [("appeared", "NN", "/talker"), ("appeared", "MP", "/chatter")],
+    ),
+    (
+        "node goes with its last token",
+        [("put", TALKER), ("put", TALKER_PUB), ("delete", TALKER), ("delete", TALKER_PUB)],
+        [
+            ("appeared", "NN", "/talker"),
+            ("appeared", "MP", "/chatter"),
+            ("disappeared", "MP", "/chatter"),
+            ("disappeared", "NN", "/talker"),
+        ],
+    ),
 ]
 
 
@@ -130,8 +176,9 @@ def test_drop_session() -> None:
     for key in (TALKER, TALKER_PUB, SERVER, LISTENER_SUB):
         graph.put(key)
     events = graph.drop_session("a1")
-    assert sorted(summary(events)) == sorted([
-        ("disappeared", "MP", "/chatter"), ("disappeared", "SS", "/add"), ("disappeared", "NN", "/talker")])
+    assert sorted(summary(events)) == sorted(
+        [("disappeared", "MP", "/chatter"), ("disappeared", "SS", "/add"), ("disappeared", "NN", "/talker")]
+    )
     assert [n.fqn for n in graph.nodes()] == ["/listener"]
 
 

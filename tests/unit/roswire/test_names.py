@@ -42,8 +42,10 @@ def test_mangle_round_trip(plain: str, mangled: str) -> None:
         ("std_msgs/msg/String", "std_msgs::msg::dds_::String_"),
         ("geometry_msgs/msg/Twist", "geometry_msgs::msg::dds_::Twist_"),
         ("example_interfaces/srv/AddTwoInts", "example_interfaces::srv::dds_::AddTwoInts_"),
-        ("example_interfaces/action/Fibonacci_SendGoal",
-         "example_interfaces::action::dds_::Fibonacci_SendGoal_"),
+        (
+            "example_interfaces/action/Fibonacci_SendGoal",
+            "example_interfaces::action::dds_::Fibonacci_SendGoal_",
+        ),
         ("action_msgs/msg/GoalStatusArray", "action_msgs::msg::dds_::GoalStatusArray_"),
         ("irobot_create_msgs/msg/IrIntensityVector", "irobot_create_msgs::msg::dds_::IrIntensityVector_"),
     ],
@@ -56,13 +58,22 @@ def test_dds_type_name_round_trip(ros: str, dds: str) -> None:
 @pytest.mark.parametrize(
     ("dds", "ros", "key_type"),
     [
-        ("example_interfaces::srv::dds_::AddTwoInts_Request_", "example_interfaces/srv/AddTwoInts",
-         "example_interfaces::srv::dds_::AddTwoInts_"),
-        ("example_interfaces::srv::dds_::AddTwoInts_Response_", "example_interfaces/srv/AddTwoInts",
-         "example_interfaces::srv::dds_::AddTwoInts_"),
+        (
+            "example_interfaces::srv::dds_::AddTwoInts_Request_",
+            "example_interfaces/srv/AddTwoInts",
+            "example_interfaces::srv::dds_::AddTwoInts_",
+        ),
+        (
+            "example_interfaces::srv::dds_::AddTwoInts_Response_",
+            "example_interfaces/srv/AddTwoInts",
+            "example_interfaces::srv::dds_::AddTwoInts_",
+        ),
         ("my_pkg::srv::dds_::Request_Request_", "my_pkg/srv/Request", "my_pkg::srv::dds_::Request_"),
-        ("example_interfaces::srv::dds_::AddTwoInts_Event_", "example_interfaces/srv/AddTwoInts_Event",
-         "example_interfaces::srv::dds_::AddTwoInts_Event_"),
+        (
+            "example_interfaces::srv::dds_::AddTwoInts_Event_",
+            "example_interfaces/srv/AddTwoInts_Event",
+            "example_interfaces::srv::dds_::AddTwoInts_Event_",
+        ),
     ],
 )
 def test_service_request_type_cut(dds: str, ros: str, key_type: str) -> None:
@@ -81,8 +92,14 @@ def test_dds_type_name_rejects(bad: str) -> None:
 
 @pytest.mark.parametrize(
     "bad",
-    ["std_msgs::msg::String_", "std_msgs::msg::dds_::String", "std_msgs::foo::dds_::String_",
-     "std_msgs::msg::dds_::_", "a::b", ""],
+    [
+        "std_msgs::msg::String_",
+        "std_msgs::msg::dds_::String",
+        "std_msgs::foo::dds_::String_",
+        "std_msgs::msg::dds_::_",
+        "a::b",
+        "",
+    ],
 )
 def test_ros_type_name_rejects(bad: str) -> None:
     with pytest.raises(InvalidNameError):
@@ -92,9 +109,19 @@ def test_ros_type_name_rejects(bad: str) -> None:
 @pytest.mark.parametrize(
     ("name", "ok"),
     [
-        ("/chatter", True), ("/robot1/cmd_vel", True), ("/_private/x_1", True),
-        ("chatter", False), ("/", False), ("/a//b", False), ("/a/", False), ("/1abc", False),
-        ("/a-b", False), ("/a b", False), ("/a/%b", False), ("/a/{node}", False), ("", False),
+        ("/chatter", True),
+        ("/robot1/cmd_vel", True),
+        ("/_private/x_1", True),
+        ("chatter", False),
+        ("/", False),
+        ("/a//b", False),
+        ("/a/", False),
+        ("/1abc", False),
+        ("/a-b", False),
+        ("/a b", False),
+        ("/a/%b", False),
+        ("/a/{node}", False),
+        ("", False),
     ],
 )
 def test_validate_topic(name: str, ok: bool) -> None:
@@ -106,8 +133,10 @@ def test_validate_topic(name: str, ok: bool) -> None:
         assert info.value.name == name
 
 
-@pytest.mark.parametrize(("ns", "ok"), [("/", True), ("/tb4_01", True), ("/a/b", True),
-                                        ("a", False), ("/a/", False), ("//", False)])
+@pytest.mark.parametrize(
+    ("ns", "ok"),
+    [("/", True), ("/tb4_01", True), ("/a/b", True), ("a", False), ("/a/", False), ("//", False)],
+)
 def test_validate_namespace(ns: str, ok: bool) -> None:
     if ok:
         assert validate_namespace(ns) == ns
@@ -144,14 +173,34 @@ def test_first_segment(ns: str, seg: str | None) -> None:
 @pytest.mark.parametrize(
     ("domain", "topic", "typename", "type_hash", "key"),
     [
-        (0, "/chatter", "std_msgs/msg/String", STRING_HASH,
-         f"0/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}"),
-        (0, "/robot1/cmd_vel", "geometry_msgs/msg/Twist", TWIST_HASH,
-         f"0/robot1/cmd_vel/geometry_msgs::msg::dds_::Twist_/{TWIST_HASH}"),
-        (2, "/add_two_ints", "example_interfaces/srv/AddTwoInts", ADD_TWO_INTS_HASH,
-         f"2/add_two_ints/example_interfaces::srv::dds_::AddTwoInts_/{ADD_TWO_INTS_HASH}"),
-        (0, "/chatter", "std_msgs/msg/String", "TypeHashNotSupported",
-         "0/chatter/std_msgs::msg::dds_::String_/TypeHashNotSupported"),
+        (
+            0,
+            "/chatter",
+            "std_msgs/msg/String",
+            STRING_HASH,
+            f"0/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}",
+        ),
+        (
+            0,
+            "/robot1/cmd_vel",
+            "geometry_msgs/msg/Twist",
+            TWIST_HASH,
+            f"0/robot1/cmd_vel/geometry_msgs::msg::dds_::Twist_/{TWIST_HASH}",
+        ),
+        (
+            2,
+            "/add_two_ints",
+            "example_interfaces/srv/AddTwoInts",
+            ADD_TWO_INTS_HASH,
+            f"2/add_two_ints/example_interfaces::srv::dds_::AddTwoInts_/{ADD_TWO_INTS_HASH}",
+        ),
+        (
+            0,
+            "/chatter",
+            "std_msgs/msg/String",
+            "TypeHashNotSupported",
+            "0/chatter/std_msgs::msg::dds_::String_/TypeHashNotSupported",
+        ),
     ],
 )
 def test_data_key_vectors(domain: int, topic: str, typename: str, type_hash: str, key: str) -> None:
@@ -194,9 +243,15 @@ def test_parse_data_key_rejects(key: str, reason: str) -> None:
 
 @pytest.mark.parametrize(
     ("text", "ok"),
-    [(STRING_HASH, True), ("TypeHashNotSupported", True), ("RIHS02_00ff", True),
-     ("RIHS01_" + STRING_HASH[7:].upper(), False), ("RIHS01_" + "0" * 63, False),
-     ("typehashnotsupported", False), ("", False)],
+    [
+        (STRING_HASH, True),
+        ("TypeHashNotSupported", True),
+        ("RIHS02_00ff", True),
+        ("RIHS01_" + STRING_HASH[7:].upper(), False),
+        ("RIHS01_" + "0" * 63, False),
+        ("typehashnotsupported", False),
+        ("", False),
+    ],
 )
 def test_is_valid_type_hash(text: str, ok: bool) -> None:
     assert is_valid_type_hash(text) is ok

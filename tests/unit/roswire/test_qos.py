@@ -29,11 +29,17 @@ CASES: list[tuple[str, QoS, str]] = [
     ("keep all", QoS(history=History.KEEP_ALL, depth=1000), "::2,1000:,:,:,,"),
     ("deadline 1.5 s", QoS(deadline=Duration(1, 500_000_000)), "::,10:1,500000000:,:,,"),
     ("lifespan 0 s", QoS(lifespan=Duration(0, 0)), "::,10:,:0,0:,,"),
-    ("manual by topic, lease 2 s", QoS(liveliness=Liveliness.MANUAL_BY_TOPIC, lease=Duration(2, 0)),
-     "::,10:,:,:3,2,0"),
+    (
+        "manual by topic, lease 2 s",
+        QoS(liveliness=Liveliness.MANUAL_BY_TOPIC, lease=Duration(2, 0)),
+        "::,10:,:,:3,2,0",
+    ),
     ("lease seconds only differ", QoS(lease=Duration(5, INFINITE.nsec)), "::,10:,:,:,5,"),
-    ("best effort transient local", QoS(Reliability.BEST_EFFORT, Durability.TRANSIENT_LOCAL, depth=3),
-     "2:1:,3:,:,:,,"),
+    (
+        "best effort transient local",
+        QoS(Reliability.BEST_EFFORT, Durability.TRANSIENT_LOCAL, depth=3),
+        "2:1:,3:,:,:,,",
+    ),
 ]
 
 

@@ -15,12 +15,32 @@ from fleetlink.roswire.tokens import EntityKind, endpoint_token, node_token
 IMU_HASH = "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
 KEYS = [
     node_token(0, "ab", 0, "/tb4_01", "create3"),
-    endpoint_token(domain=0, zid="ab", nid=0, eid=1, kind=EntityKind.PUBLISHER, namespace="/tb4_01",
-                   node_name="create3", topic="/tb4_01/imu", typename="sensor_msgs/msg/Imu",
-                   type_hash=IMU_HASH, qos=SENSOR_DATA),
-    endpoint_token(domain=0, zid="cd", nid=0, eid=2, kind=EntityKind.SERVICE_SERVER, namespace="/",
-                   node_name="srv", topic="/add", typename="example_interfaces/srv/AddTwoInts",
-                   type_hash="TypeHashNotSupported", qos=SENSOR_DATA),
+    endpoint_token(
+        domain=0,
+        zid="ab",
+        nid=0,
+        eid=1,
+        kind=EntityKind.PUBLISHER,
+        namespace="/tb4_01",
+        node_name="create3",
+        topic="/tb4_01/imu",
+        typename="sensor_msgs/msg/Imu",
+        type_hash=IMU_HASH,
+        qos=SENSOR_DATA,
+    ),
+    endpoint_token(
+        domain=0,
+        zid="cd",
+        nid=0,
+        eid=2,
+        kind=EntityKind.SERVICE_SERVER,
+        namespace="/",
+        node_name="srv",
+        topic="/add",
+        typename="example_interfaces/srv/AddTwoInts",
+        type_hash="TypeHashNotSupported",
+        qos=SENSOR_DATA,
+    ),
 ]
 
 
@@ -49,8 +69,15 @@ def world() -> tuple[Graph, RobotRegistry]:
 
 def test_report_json_and_text(world: tuple[Graph, RobotRegistry]) -> None:
     graph, registry = world
-    report = graph_report(domain_id=3, robots=registry.robots(), nodes=graph.nodes(), topics=graph.topics(),
-                          services=graph.services(), rates={"/tb4_01/imu": 9.996}, malformed_tokens=2)
+    report = graph_report(
+        domain_id=3,
+        robots=registry.robots(),
+        nodes=graph.nodes(),
+        topics=graph.topics(),
+        services=graph.services(),
+        rates={"/tb4_01/imu": 9.996},
+        malformed_tokens=2,
+    )
     assert json.loads(json.dumps(report)) == report
     assert report["robots"] == [{"name": "tb4_01", "type": "turtlebot4", "entities": 2, "explicit": False}]
     (imu,) = report["topics"]
@@ -69,8 +96,9 @@ def test_report_json_and_text(world: tuple[Graph, RobotRegistry]) -> None:
 
 def test_report_without_rates_has_no_rate_field(world: tuple[Graph, RobotRegistry]) -> None:
     graph, _ = world
-    report = graph_report(domain_id=0, robots=[], nodes=graph.nodes(), topics=graph.topics(),
-                          services={}, rates=None)
+    report = graph_report(
+        domain_id=0, robots=[], nodes=graph.nodes(), topics=graph.topics(), services={}, rates=None
+    )
     assert "rate_hz" not in report["topics"][0]
     assert "Hz" not in render_text(report)
     assert "malformed" not in render_text(report)

@@ -18,9 +18,19 @@ def node(zid: str, ns: str, name: str = "sim") -> str:
 
 
 def pub(zid: str, ns: str, topic: str, eid: int = 1) -> str:
-    return endpoint_token(domain=0, zid=zid, nid=0, eid=eid, kind=EntityKind.PUBLISHER, namespace=ns,
-                          node_name="sim", topic=topic, typename="sensor_msgs/msg/Imu",
-                          type_hash="TypeHashNotSupported", qos=DEFAULT)
+    return endpoint_token(
+        domain=0,
+        zid=zid,
+        nid=0,
+        eid=eid,
+        kind=EntityKind.PUBLISHER,
+        namespace=ns,
+        node_name="sim",
+        topic=topic,
+        typename="sensor_msgs/msg/Imu",
+        type_hash="TypeHashNotSupported",
+        qos=DEFAULT,
+    )
 
 
 class Harness:
@@ -40,9 +50,15 @@ class Harness:
 
 @pytest.mark.parametrize(
     ("ns", "expected"),
-    [("/tb4_07", ("tb4_07", "turtlebot4")), ("/tb4_07/sensors", ("tb4_07", "turtlebot4")),
-     ("/husky1", ("husky1", "husky")), ("/husky12", None), ("/", None), ("/other", None),
-     ("/x/tb4_07", None)],
+    [
+        ("/tb4_07", ("tb4_07", "turtlebot4")),
+        ("/tb4_07/sensors", ("tb4_07", "turtlebot4")),
+        ("/husky1", ("husky1", "husky")),
+        ("/husky12", None),
+        ("/", None),
+        ("/other", None),
+        ("/x/tb4_07", None),
+    ],
 )
 def test_classify(ns: str, expected: tuple[str, str] | None) -> None:
     assert RobotRegistry(TYPES).classify(ns) == expected
@@ -119,15 +135,18 @@ def test_register_twice_and_deregister() -> None:
     assert registry.deregister("tb4_01", 3.0) == []
 
 
-@pytest.mark.parametrize(("robot_type", "name"), [("unknown", "tb4_01"), ("turtlebot4", "a/b"),
-                                                  ("turtlebot4", ""), ("turtlebot4", "1x")])
+@pytest.mark.parametrize(
+    ("robot_type", "name"),
+    [("unknown", "tb4_01"), ("turtlebot4", "a/b"), ("turtlebot4", ""), ("turtlebot4", "1x")],
+)
 def test_register_rejects(robot_type: str, name: str) -> None:
     with pytest.raises(RobotError):
         RobotRegistry(TYPES).register(robot_type, name, 0.0)
 
 
-@pytest.mark.parametrize(("text", "parsed"), [("turtlebot4/tb4_07", ("turtlebot4", "tb4_07")),
-                                              (" husky/h1\n", ("husky", "h1"))])
+@pytest.mark.parametrize(
+    ("text", "parsed"), [("turtlebot4/tb4_07", ("turtlebot4", "tb4_07")), (" husky/h1\n", ("husky", "h1"))]
+)
 def test_parse_registration(text: str, parsed: tuple[str, str]) -> None:
     assert parse_registration(text) == parsed
 

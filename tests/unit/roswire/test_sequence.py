@@ -9,16 +9,37 @@ from fleetlink.roswire.sequence import SeqStatus, SequenceTracker
 A, B = b"a" * 16, b"b" * 16
 
 CASES: list[tuple[str, list[tuple[bytes, int]], list[tuple[SeqStatus, int]], tuple[int, int, int]]] = [
-    ("in order", [(A, 1), (A, 2), (A, 3)],
-     [(SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0), (SeqStatus.NEXT, 0)], (0, 0, 0)),
+    (
+        "in order",
+        [(A, 1), (A, 2), (A, 3)],
+        [(SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0), (SeqStatus.NEXT, 0)],
+        (0, 0, 0),
+    ),
     ("gap of two", [(A, 1), (A, 4)], [(SeqStatus.FIRST, 0), (SeqStatus.GAP, 2)], (1, 2, 0)),
-    ("late joiner starts anywhere", [(A, 57), (A, 58)],
-     [(SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0)], (0, 0, 0)),
-    ("duplicate and reorder", [(A, 1), (A, 2), (A, 2), (A, 1), (A, 3)],
-     [(SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0), (SeqStatus.DUPLICATE, 0), (SeqStatus.DUPLICATE, 0),
-      (SeqStatus.NEXT, 0)], (0, 0, 2)),
-    ("publishers tracked apart", [(A, 1), (B, 7), (A, 2), (B, 9)],
-     [(SeqStatus.FIRST, 0), (SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0), (SeqStatus.GAP, 1)], (1, 1, 0)),
+    (
+        "late joiner starts anywhere",
+        [(A, 57), (A, 58)],
+        [(SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0)],
+        (0, 0, 0),
+    ),
+    (
+        "duplicate and reorder",
+        [(A, 1), (A, 2), (A, 2), (A, 1), (A, 3)],
+        [
+            (SeqStatus.FIRST, 0),
+            (SeqStatus.NEXT, 0),
+            (SeqStatus.DUPLICATE, 0),
+            (SeqStatus.DUPLICATE, 0),
+            (SeqStatus.NEXT, 0),
+        ],
+        (0, 0, 2),
+    ),
+    (
+        "publishers tracked apart",
+        [(A, 1), (B, 7), (A, 2), (B, 9)],
+        [(SeqStatus.FIRST, 0), (SeqStatus.FIRST, 0), (SeqStatus.NEXT, 0), (SeqStatus.GAP, 1)],
+        (1, 1, 0),
+    ),
 ]
 
 

@@ -89,9 +89,13 @@ def test_battery_drains_one_percent_per_minute() -> None:
 
 @pytest.mark.parametrize(
     ("colours", "override", "name"),
-    [(((255, 0, 0),) * 6, True, "red"), (((0, 0, 0),) * 6, True, "off"),
-     (((1, 2, 3),) * 6, True, "#010203"), (((255, 0, 0),) * 6, False, "green"),
-     (((255, 0, 0),) * 3 + ((0, 0, 255),) * 3, True, "red,red,red,blue,blue,blue")],
+    [
+        (((255, 0, 0),) * 6, True, "red"),
+        (((0, 0, 0),) * 6, True, "off"),
+        (((1, 2, 3),) * 6, True, "#010203"),
+        (((255, 0, 0),) * 6, False, "green"),
+        (((255, 0, 0),) * 3 + ((0, 0, 255),) * 3, True, "red,red,red,blue,blue,blue"),
+    ],
 )
 def test_lightring(colours: tuple[tuple[int, int, int], ...], override: bool, name: str) -> None:
     model = RobotModel("r", 0.0)
@@ -112,9 +116,14 @@ def test_messages_round_trip_through_cdr(ts: Typestore) -> None:
     model.inject_fault()
     r = model.step(1700000000.25)
     f = MessageFactory(ts, "tb4_01")
-    for typename, msg in [(IR_VECTOR, f.ir_intensity(r)), (HAZARDS, f.hazard_detection(r)),
-                          (KIDNAP, f.kidnap_status(r)), (ODOMETRY, f.odom(r)), (IMU, f.imu(r)),
-                          (BATTERY, f.battery_state(r))]:
+    for typename, msg in [
+        (IR_VECTOR, f.ir_intensity(r)),
+        (HAZARDS, f.hazard_detection(r)),
+        (KIDNAP, f.kidnap_status(r)),
+        (ODOMETRY, f.odom(r)),
+        (IMU, f.imu(r)),
+        (BATTERY, f.battery_state(r)),
+    ]:
         raw = bytes(ts.serialize_cdr(msg, typename))
         back: Any = ts.deserialize_cdr(raw, typename)
         assert back.header.stamp.sec == 1700000000

@@ -22,12 +22,17 @@ ADD_HASH = "RIHS01_e118de6bf5eeb66a2491b5bda11202e7b68f198d6f67922cf30364858239c
 
 # Real token keys from rmw_zenoh's design document (domain 2), full hashes.
 LISTENER_NN = f"@ros2_lv/2/{ZID}/0/0/NN/%/%/listener"
-LISTENER_MS = (f"@ros2_lv/2/{ZID}/0/10/MS/%/%/listener/%chatter/std_msgs::msg::dds_::String_/"
-               f"{STRING_HASH}/::,10:,:,:,,")
-TALKER_MP = ("@ros2_lv/2/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/"
-             f"std_msgs::msg::dds_::String_/{STRING_HASH}/::,7:,:,:,,")
-SERVER_SS = ("@ros2_lv/2/f9980ee0495eaafb3e38f0d19e2eae12/0/10/SS/%/%/add_two_ints_server/%add_two_ints/"
-             f"example_interfaces::srv::dds_::AddTwoInts_/{ADD_HASH}/::,10:,:,:,,")
+LISTENER_MS = (
+    f"@ros2_lv/2/{ZID}/0/10/MS/%/%/listener/%chatter/std_msgs::msg::dds_::String_/{STRING_HASH}/::,10:,:,:,,"
+)
+TALKER_MP = (
+    "@ros2_lv/2/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/"
+    f"std_msgs::msg::dds_::String_/{STRING_HASH}/::,7:,:,:,,"
+)
+SERVER_SS = (
+    "@ros2_lv/2/f9980ee0495eaafb3e38f0d19e2eae12/0/10/SS/%/%/add_two_ints_server/%add_two_ints/"
+    f"example_interfaces::srv::dds_::AddTwoInts_/{ADD_HASH}/::,10:,:,:,,"
+)
 
 
 def test_node_token_vector() -> None:
@@ -40,26 +45,88 @@ def test_node_token_vector() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "key"),
     [
-        ({"domain": 2, "zid": ZID, "nid": 0, "eid": 10, "kind": EntityKind.SUBSCRIPTION, "namespace": "/",
-          "node_name": "listener", "topic": "/chatter", "typename": "std_msgs/msg/String",
-          "type_hash": STRING_HASH, "qos": DEFAULT}, LISTENER_MS),
-        ({"domain": 2, "zid": "8b20917502ee955ac4476e0266340d5c", "nid": 0, "eid": 10,
-          "kind": EntityKind.PUBLISHER, "namespace": "/", "node_name": "talker", "topic": "/chatter",
-          "typename": "std_msgs/msg/String", "type_hash": STRING_HASH, "qos": QoS(depth=7)}, TALKER_MP),
-        ({"domain": 2, "zid": "f9980ee0495eaafb3e38f0d19e2eae12", "nid": 0, "eid": 10,
-          "kind": EntityKind.SERVICE_SERVER, "namespace": "/", "node_name": "add_two_ints_server",
-          "topic": "/add_two_ints", "typename": "example_interfaces/srv/AddTwoInts",
-          "type_hash": ADD_HASH, "qos": DEFAULT}, SERVER_SS),
-        ({"domain": 0, "zid": "ab", "nid": 1, "eid": 4, "kind": EntityKind.PUBLISHER, "namespace": "/tb4_01",
-          "node_name": "sim", "topic": "/tb4_01/imu", "typename": "sensor_msgs/msg/Imu",
-          "type_hash": "TypeHashNotSupported", "qos": SENSOR_DATA},
-         "@ros2_lv/0/ab/1/4/MP/%/%tb4_01/sim/%tb4_01%imu/sensor_msgs::msg::dds_::Imu_/TypeHashNotSupported/"
-         "2::,5:,:,:,,"),
-        ({"domain": 0, "zid": "ab", "nid": 1, "eid": 5, "kind": EntityKind.PUBLISHER, "namespace": "/",
-          "node_name": "tf", "topic": "/tf_static", "typename": "tf2_msgs/msg/TFMessage",
-          "type_hash": "TypeHashNotSupported", "qos": TRANSIENT_LOCAL},
-         "@ros2_lv/0/ab/1/5/MP/%/%/tf/%tf_static/tf2_msgs::msg::dds_::TFMessage_/TypeHashNotSupported/"
-         ":1:,1:,:,:,,"),
+        (
+            {
+                "domain": 2,
+                "zid": ZID,
+                "nid": 0,
+                "eid": 10,
+                "kind": EntityKind.SUBSCRIPTION,
+                "namespace": "/",
+                "node_name": "listener",
+                "topic": "/chatter",
+                "typename": "std_msgs/msg/String",
+                "type_hash": STRING_HASH,
+                "qos": DEFAULT,
+            },
+            LISTENER_MS,
+        ),
+        (
+            {
+                "domain": 2,
+                "zid": "8b20917502ee955ac4476e0266340d5c",
+                "nid": 0,
+                "eid": 10,
+                "kind": EntityKind.PUBLISHER,
+                "namespace": "/",
+                "node_name": "talker",
+                "topic": "/chatter",
+                "typename": "std_msgs/msg/String",
+                "type_hash": STRING_HASH,
+                "qos": QoS(depth=7),
+            },
+            TALKER_MP,
+        ),
+        (
+            {
+                "domain": 2,
+                "zid": "f9980ee0495eaafb3e38f0d19e2eae12",
+                "nid": 0,
+                "eid": 10,
+                "kind": EntityKind.SERVICE_SERVER,
+                "namespace": "/",
+                "node_name": "add_two_ints_server",
+                "topic": "/add_two_ints",
+                "typename": "example_interfaces/srv/AddTwoInts",
+                "type_hash": ADD_HASH,
+                "qos": DEFAULT,
+            },
+            SERVER_SS,
+        ),
+        (
+            {
+                "domain": 0,
+                "zid": "ab",
+                "nid": 1,
+                "eid": 4,
+                "kind": EntityKind.PUBLISHER,
+                "namespace": "/tb4_01",
+                "node_name": "sim",
+                "topic": "/tb4_01/imu",
+                "typename": "sensor_msgs/msg/Imu",
+                "type_hash": "TypeHashNotSupported",
+                "qos": SENSOR_DATA,
+            },
+            "@ros2_lv/0/ab/1/4/MP/%/%tb4_01/sim/%tb4_01%imu/sensor_msgs::msg::dds_::Imu_/TypeHashNotSupported/"
+            "2::,5:,:,:,,",
+        ),
+        (
+            {
+                "domain": 0,
+                "zid": "ab",
+                "nid": 1,
+                "eid": 5,
+                "kind": EntityKind.PUBLISHER,
+                "namespace": "/",
+                "node_name": "tf",
+                "topic": "/tf_static",
+                "typename": "tf2_msgs/msg/TFMessage",
+                "type_hash": "TypeHashNotSupported",
+                "qos": TRANSIENT_LOCAL,
+            },
+            "@ros2_lv/0/ab/1/5/MP/%/%/tf/%tf_static/tf2_msgs::msg::dds_::TFMessage_/TypeHashNotSupported/"
+            ":1:,1:,:,:,,",
+        ),
     ],
 )
 def test_endpoint_token_vectors(kwargs: dict[str, object], key: str) -> None:
@@ -68,11 +135,21 @@ def test_endpoint_token_vectors(kwargs: dict[str, object], key: str) -> None:
     assert isinstance(parsed, EndpointInfo)
     assert parsed.key == key
     assert (parsed.domain, parsed.zid, parsed.nid, parsed.eid, parsed.kind) == (
-        kwargs["domain"], kwargs["zid"], kwargs["nid"], kwargs["eid"], kwargs["kind"])
+        kwargs["domain"],
+        kwargs["zid"],
+        kwargs["nid"],
+        kwargs["eid"],
+        kwargs["kind"],
+    )
     got = (parsed.namespace, parsed.node_name, parsed.topic, parsed.ros_type, parsed.type_hash, parsed.qos)
     assert got == (
-        kwargs["namespace"], kwargs["node_name"], kwargs["topic"], kwargs["typename"], kwargs["type_hash"],
-        kwargs["qos"])
+        kwargs["namespace"],
+        kwargs["node_name"],
+        kwargs["topic"],
+        kwargs["typename"],
+        kwargs["type_hash"],
+        kwargs["qos"],
+    )
 
 
 def test_parse_node_token() -> None:
@@ -93,8 +170,18 @@ def test_endpoint_gid_is_hash_of_key() -> None:
 
 
 def test_endpoint_token_rejects_node_kind_and_bad_names() -> None:
-    common = {"domain": 0, "zid": "ab", "nid": 1, "eid": 2, "namespace": "/", "node_name": "n",
-              "topic": "/t", "typename": "std_msgs/msg/String", "type_hash": STRING_HASH, "qos": DEFAULT}
+    common = {
+        "domain": 0,
+        "zid": "ab",
+        "nid": 1,
+        "eid": 2,
+        "namespace": "/",
+        "node_name": "n",
+        "topic": "/t",
+        "typename": "std_msgs/msg/String",
+        "type_hash": STRING_HASH,
+        "qos": DEFAULT,
+    }
     with pytest.raises(TokenError):
         endpoint_token(kind=EntityKind.NODE, **common)  # type: ignore[arg-type]
     with pytest.raises(InvalidNameError):

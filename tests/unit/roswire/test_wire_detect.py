@@ -14,17 +14,35 @@ V2 = encode(1, 2, bytes(16), 2)
 
 
 def endpoint(type_hash: str) -> EndpointInfo:
-    ep = parse_token(endpoint_token(domain=0, zid="ab", nid=0, eid=1, kind=EntityKind.PUBLISHER,
-                                    namespace="/", node_name="n", topic="/t", typename="std_msgs/msg/String",
-                                    type_hash=type_hash, qos=DEFAULT))
+    ep = parse_token(
+        endpoint_token(
+            domain=0,
+            zid="ab",
+            nid=0,
+            eid=1,
+            kind=EntityKind.PUBLISHER,
+            namespace="/",
+            node_name="n",
+            topic="/t",
+            typename="std_msgs/msg/String",
+            type_hash=type_hash,
+            qos=DEFAULT,
+        )
+    )
     assert isinstance(ep, EndpointInfo)
     return ep
 
 
 @pytest.mark.parametrize(
     ("attachments", "version", "mixed"),
-    [([], None, False), ([V2, V2], 2, False), ([V1], 1, False), ([V1, V1, V2], 1, True),
-     ([V1, V2], 2, True), ([None, b"junk"], None, False)],
+    [
+        ([], None, False),
+        ([V2, V2], 2, False),
+        ([V1], 1, False),
+        ([V1, V1, V2], 1, True),
+        ([V1, V2], 2, True),
+        ([None, b"junk"], None, False),
+    ],
 )
 def test_attachment_verdict(attachments: list[bytes | None], version: int | None, mixed: bool) -> None:
     tally = WireTally()
@@ -44,8 +62,11 @@ def test_counts_by_kind() -> None:
 
 @pytest.mark.parametrize(
     ("hashes", "style"),
-    [([], None), (["TypeHashNotSupported"], "humble"),
-     (["RIHS01_" + "0" * 64, "TypeHashNotSupported", "RIHS01_" + "1" * 64], "rihs01")],
+    [
+        ([], None),
+        (["TypeHashNotSupported"], "humble"),
+        (["RIHS01_" + "0" * 64, "TypeHashNotSupported", "RIHS01_" + "1" * 64], "rihs01"),
+    ],
 )
 def test_hash_style(hashes: list[str], style: str | None) -> None:
     tally = WireTally()

@@ -75,8 +75,11 @@ def test_password_sources_never_printed(tmp_path: Path, monkeypatch: pytest.Monk
 def test_missing_password_env_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("NOPE_PW", raising=False)
     settings = KafkaSettings.model_validate(
-        {"bootstrap_servers": "b", "security_protocol": "SASL_PLAINTEXT",
-         "sasl": {"username": "u", "password_env": "NOPE_PW"}}
+        {
+            "bootstrap_servers": "b",
+            "security_protocol": "SASL_PLAINTEXT",
+            "sasl": {"username": "u", "password_env": "NOPE_PW"},
+        }
     )
     with pytest.raises(UnsafeKafkaSettingError, match="NOPE_PW is not set"):
         settings.producer_config()

@@ -37,6 +37,7 @@ def test_a_blocked_key_does_not_hold_up_another() -> None:
     other_done = threading.Event()
     with ThreadPoolExecutor(max_workers=2) as pool:
         serial = KeyedSerialExecutor(pool)
+
         def blocked() -> None:
             release.wait(10)
 

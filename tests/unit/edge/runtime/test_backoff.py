@@ -21,8 +21,8 @@ class FixedRandom(random.Random):
 @pytest.mark.parametrize(
     ("jitter", "expected"),
     [
-        (0.0, [0.1, 0.2, 0.4, 0.8, 1.0, 1.0]),   # lowest draw: half of each base
-        (1.0, [0.2, 0.4, 0.8, 1.6, 2.0, 2.0]),   # highest draw: the base itself, capped at max
+        (0.0, [0.1, 0.2, 0.4, 0.8, 1.0, 1.0]),  # lowest draw: half of each base
+        (1.0, [0.2, 0.4, 0.8, 1.6, 2.0, 2.0]),  # highest draw: the base itself, capped at max
         (0.5, [0.15, 0.3, 0.6, 1.2, 1.5, 1.5]),
     ],
 )

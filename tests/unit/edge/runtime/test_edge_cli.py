@@ -36,12 +36,22 @@ def test_edge_without_subcommand_prints_usage(capsys: pytest.CaptureFixture[str]
 @pytest.mark.parametrize(
     ("options", "expected"),
     [
-        (ZenohOptions(), {"mode": "peer", "connect/endpoints": ["tcp/127.0.0.1:7447"],
-                          "listen/endpoints": ["tcp/127.0.0.1:0"]}),
-        (ZenohOptions(mode="router", listen=("tcp/0.0.0.0:7447",)),
-         {"mode": "router", "connect/endpoints": [], "listen/endpoints": ["tcp/0.0.0.0:7447"]}),
-        (ZenohOptions(mode="client", connect=("tcp/10.0.0.1:7447",)),
-         {"mode": "client", "connect/endpoints": ["tcp/10.0.0.1:7447"]}),
+        (
+            ZenohOptions(),
+            {
+                "mode": "peer",
+                "connect/endpoints": ["tcp/127.0.0.1:7447"],
+                "listen/endpoints": ["tcp/127.0.0.1:0"],
+            },
+        ),
+        (
+            ZenohOptions(mode="router", listen=("tcp/0.0.0.0:7447",)),
+            {"mode": "router", "connect/endpoints": [], "listen/endpoints": ["tcp/0.0.0.0:7447"]},
+        ),
+        (
+            ZenohOptions(mode="client", connect=("tcp/10.0.0.1:7447",)),
+            {"mode": "client", "connect/endpoints": ["tcp/10.0.0.1:7447"]},
+        ),
     ],
 )
 def test_session_defaults(options: ZenohOptions, expected: dict[str, object]) -> None:
@@ -57,8 +67,10 @@ def config(tmp_path: Path, **extra: object) -> EdgeConfig:
 
 
 def test_constructor_touches_nothing(tmp_path: Path) -> None:
-    agent = EdgeAgent(config(tmp_path, zenoh={"mode": "client", "connect": ["tcp/127.0.0.1:1"]}),
-                      ZenohOptions(connect=("tcp/127.0.0.1:2",)))
+    agent = EdgeAgent(
+        config(tmp_path, zenoh={"mode": "client", "connect": ["tcp/127.0.0.1:1"]}),
+        ZenohOptions(connect=("tcp/127.0.0.1:2",)),
+    )
     assert agent.zenoh_options.connect == ("tcp/127.0.0.1:2",)  # the command line wins
     assert agent.zenoh_options.mode == "client"
     assert not (tmp_path / "spool").exists()

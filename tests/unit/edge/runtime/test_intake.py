@@ -78,8 +78,8 @@ def test_invalid_bounds() -> None:
     ("max_items", "max_bytes", "queued", "sizes", "taken"),
     [
         (10, 100, 0, [10, 10, 10], 3),
-        (3, 100, 1, [1, 1, 1, 1], 2),        # room for two more items
-        (10, 25, 0, [10, 10, 10, 1], 2),     # the third does not fit: it and the rest are dropped
+        (3, 100, 1, [1, 1, 1, 1], 2),  # room for two more items
+        (10, 25, 0, [10, 10, 10, 1], 2),  # the third does not fit: it and the rest are dropped
         (10, 100, 0, [], 0),
         (10, 100, 10, [1], 0),
     ],
@@ -94,9 +94,15 @@ def test_offer_many_queues_in_order_while_it_fits(
     assert intake.offer_many(pairs) == taken
     stats = intake.stats()
     assert (stats.offered, stats.dropped, stats.dropped_bytes) == (
-        queued + len(sizes), len(sizes) - taken, sum(sizes[taken:]))
+        queued + len(sizes),
+        len(sizes) - taken,
+        sum(sizes[taken:]),
+    )
     assert (stats.queued, stats.queued_bytes, stats.high_water) == (
-        queued + taken, sum(sizes[:taken]), queued + taken)
+        queued + taken,
+        sum(sizes[:taken]),
+        queued + taken,
+    )
     assert intake.take(100, timeout=0) == [f"q{i}" for i in range(queued)] + [f"s{i}" for i in range(taken)]
 
 
@@ -117,8 +123,9 @@ def test_offer_many_waits_for_room_that_a_taker_makes() -> None:
     intake: Intake[str] = Intake(max_items=4, max_bytes=1000)
     assert intake.offer_many([(f"a{i}", 1) for i in range(4)]) == 4
     queued: list[int] = []
-    offerer = threading.Thread(target=lambda: queued.append(
-        intake.offer_many([("b0", 1), ("b1", 1)], wait_s=30)))
+    offerer = threading.Thread(
+        target=lambda: queued.append(intake.offer_many([("b0", 1), ("b1", 1)], wait_s=30))
+    )
     offerer.start()
     wait_until(lambda: intake._waiting == 1, 5)  # the offerer waits for room
     assert intake.take(2, timeout=0) == ["a0", "a1"]

@@ -31,19 +31,32 @@ def codecs() -> TypeStoreCodecs:
 
 
 def string_sample(topic: str, text: str, seq: int) -> RosSample:
-    return RosSample(topic=topic, typename=STRING, type_hash="RIHS01_" + "0" * 64,
-                     payload=cdr.encode_string(text), seq=seq, source_ts_ns=seq * 1_000_000, gid=None,
-                     key="k", received_ns=0)
+    return RosSample(
+        topic=topic,
+        typename=STRING,
+        type_hash="RIHS01_" + "0" * 64,
+        payload=cdr.encode_string(text),
+        seq=seq,
+        source_ts_ns=seq * 1_000_000,
+        gid=None,
+        key="k",
+        received_ns=0,
+    )
 
 
 def maker() -> RecordMaker:
-    table = MappingTable([], [
-        MappingSpec(name="chat", source="/{robot}/chat", topic="fleet.chat"),
-        MappingSpec(name="fast", source="/{robot}/fast", topic="fleet.fast", delivery="best_effort"),
-        MappingSpec(name="slow", source="/{robot}/slow", topic="fleet.slow", linger_ns=1_500_000_000),
-        MappingSpec(name="slower", source="/{robot}/slower", topic="fleet.slower", linger_ns=3_000_000_000),
-        MappingSpec(name="now", source="/{robot}/now", topic="fleet.now", linger_ns=0),
-    ])
+    table = MappingTable(
+        [],
+        [
+            MappingSpec(name="chat", source="/{robot}/chat", topic="fleet.chat"),
+            MappingSpec(name="fast", source="/{robot}/fast", topic="fleet.fast", delivery="best_effort"),
+            MappingSpec(name="slow", source="/{robot}/slow", topic="fleet.slow", linger_ns=1_500_000_000),
+            MappingSpec(
+                name="slower", source="/{robot}/slower", topic="fleet.slower", linger_ns=3_000_000_000
+            ),
+            MappingSpec(name="now", source="/{robot}/now", topic="fleet.now", linger_ns=0),
+        ],
+    )
     return RecordMaker(site="s", edge_id="e", match=table.match, types=codecs(), dead_letter_topic="dlq")
 
 
@@ -75,10 +88,15 @@ def test_order_and_delivery_classes() -> None:
     intake: Intake[Item] = Intake()
     durable, memory = MemoryBuffer(stream="durable", first_seq=1), MemoryBuffer(first_seq=1)
     woken: list[str] = []
-    processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": memory},
-                          on_appended=lambda delivery, _linger: woken.append(delivery))
-    event = Outgoing.of("at_least_once", Record(kafka_topic="fleetlink.robots", key=b"r9", value=b"ev",
-                                                raw_value=True))
+    processor = Processor(
+        intake,
+        maker(),
+        {"at_least_once": durable, "best_effort": memory},
+        on_appended=lambda delivery, _linger: woken.append(delivery),
+    )
+    event = Outgoing.of(
+        "at_least_once", Record(kafka_topic="fleetlink.robots", key=b"r9", value=b"ev", raw_value=True)
+    )
     items: list[Item] = [
         string_sample("/r1/chat", "a", 1),
         string_sample("/r2/fast", "b", 1),
@@ -91,29 +109,46 @@ def test_order_and_delivery_classes() -> None:
         intake.offer(item)
     with processor:
         wait_until(lambda: processor.stats.appended == 5, 5)
-    assert topics_in(durable) == [("fleet.chat", b"r1"), ("fleet.chat", b"r1"), ("fleetlink.robots", b"ev"),
-                                  ("dlq", b"bad")]
+    assert topics_in(durable) == [
+        ("fleet.chat", b"r1"),
+        ("fleet.chat", b"r1"),
+        ("fleetlink.robots", b"ev"),
+        ("dlq", b"bad"),
+    ]
     assert topics_in(memory) == [("fleet.fast", b"r2")]
     stats = processor.counters()
-    assert stats["processor"] == {"samples": 4, "records": 5, "appended": 5, "spool_dropped": 0,
-                                  "spool_refused": 0, "errors": 0}
+    assert stats["processor"] == {
+        "samples": 4,
+        "records": 5,
+        "appended": 5,
+        "spool_dropped": 0,
+        "spool_refused": 0,
+        "errors": 0,
+    }
     assert set(woken) == {"at_least_once", "best_effort"}
 
 
-@pytest.mark.parametrize(("topics", "expected"), [
-    (["/r1/slow"], 1.5),
-    (["/r1/slower", "/r1/slow", "/r1/slower"], 1.5),
-    (["/r1/slow", "/r1/chat"], 0.02),  # a record with no linger of its own: the edge's default
-    (["/r1/chat"], 0.02),
-    (["/r1/now", "/r1/chat"], 0.0),  # a mapping may also be in more of a hurry than the default
-])
+@pytest.mark.parametrize(
+    ("topics", "expected"),
+    [
+        (["/r1/slow"], 1.5),
+        (["/r1/slower", "/r1/slow", "/r1/slower"], 1.5),
+        (["/r1/slow", "/r1/chat"], 0.02),  # a record with no linger of its own: the edge's default
+        (["/r1/chat"], 0.02),
+        (["/r1/now", "/r1/chat"], 0.0),  # a mapping may also be in more of a hurry than the default
+    ],
+)
 def test_each_append_says_how_long_its_records_may_wait(topics: list[str], expected: float) -> None:
     intake: Intake[Item] = Intake()
     durable = MemoryBuffer(stream="durable", first_seq=1)
     lingers: list[tuple[str, float]] = []
-    processor = Processor(intake, maker(), {"at_least_once": durable, "best_effort": MemoryBuffer()},
-                          on_appended=lambda delivery, linger: lingers.append((delivery, linger)),
-                          default_linger_s=0.02)
+    processor = Processor(
+        intake,
+        maker(),
+        {"at_least_once": durable, "best_effort": MemoryBuffer()},
+        on_appended=lambda delivery, linger: lingers.append((delivery, linger)),
+        default_linger_s=0.02,
+    )
     intake.offer_many([(string_sample(topic, "x", n + 1), 1) for n, topic in enumerate(topics)])
     with processor:
         wait_until(lambda: processor.stats.appended == len(topics), 5)

@@ -49,25 +49,44 @@ def imu_payloads() -> tuple[bytes, ...]:
     return tuple(out)
 
 
-def sample(topic: str, payload: bytes, *, typename: str = IMU, seq: int | None = 1,
-           stamp_ns: int | None = STAMP_NS) -> RosSample:
-    return RosSample(topic=topic, typename=typename, type_hash=IMU_HASH, payload=payload, seq=seq,
-                     source_ts_ns=stamp_ns, gid=b"\x01" * 16, key=f"0{topic}/dds/{IMU_HASH}",
-                     received_ns=STAMP_NS + 5_000_000)
+def sample(
+    topic: str, payload: bytes, *, typename: str = IMU, seq: int | None = 1, stamp_ns: int | None = STAMP_NS
+) -> RosSample:
+    return RosSample(
+        topic=topic,
+        typename=typename,
+        type_hash=IMU_HASH,
+        payload=payload,
+        seq=seq,
+        source_ts_ns=stamp_ns,
+        gid=b"\x01" * 16,
+        key=f"0{topic}/dds/{IMU_HASH}",
+        received_ns=STAMP_NS + 5_000_000,
+    )
 
 
 Made = tuple[RecordMaker, MappingTable, dict[bytes, str]]
 
 
-def maker_for(mappings: Sequence[MappingSpec] = (), robot_types: Sequence[RobotTypeSpec] = (),
-              robots: Sequence[str] = (), **kwargs: Any) -> Made:
+def maker_for(
+    mappings: Sequence[MappingSpec] = (),
+    robot_types: Sequence[RobotTypeSpec] = (),
+    robots: Sequence[str] = (),
+    **kwargs: Any,
+) -> Made:
     table = MappingTable(robot_types, mappings)
     for robot in robots:
         table.add_robot(robot)
     seen: dict[bytes, str] = {}
-    maker = RecordMaker(site="warehouse-a", edge_id="edge-1", match=table.match, types=codecs(),
-                        dead_letter_topic="fleetlink.dead-letter",
-                        on_schema=seen.__setitem__, **kwargs)
+    maker = RecordMaker(
+        site="warehouse-a",
+        edge_id="edge-1",
+        match=table.match,
+        types=codecs(),
+        dead_letter_topic="fleetlink.dead-letter",
+        on_schema=seen.__setitem__,
+        **kwargs,
+    )
     return maker, table, seen
 
 
@@ -83,9 +102,9 @@ def headers(record: Record) -> dict[str, str]:
     return {k: v.decode() for k, v in record.headers}
 
 
-HUSKY = RobotTypeSpec("husky", "/husky_*", (
-    MappingSpec(name="imu", source="/{robot}/imu/data", topic="fleet.imu"),
-))
+HUSKY = RobotTypeSpec(
+    "husky", "/husky_*", (MappingSpec(name="imu", source="/{robot}/imu/data", topic="fleet.imu"),)
+)
 
 
 def test_fast_path_record_shape() -> None:
@@ -103,15 +122,24 @@ def test_fast_path_record_shape() -> None:
     assert record.value == b"\xc3\x01" + fingerprint(codec.schema) + codec.cdr_to_avro(payload)
     assert record.timestamp_ms == STAMP_NS // 1_000_000
     assert headers(record) == {
-        "fleetlink.source_topic": "/husky_1/imu/data", "fleetlink.ros_type": IMU,
-        "fleetlink.type_hash": IMU_HASH, "fleetlink.site": "warehouse-a", "fleetlink.edge": "edge-1",
+        "fleetlink.source_topic": "/husky_1/imu/data",
+        "fleetlink.ros_type": IMU,
+        "fleetlink.type_hash": IMU_HASH,
+        "fleetlink.site": "warehouse-a",
+        "fleetlink.edge": "edge-1",
         "fleetlink.robot": "husky_1",
-        "fleetlink.seq": "7", "fleetlink.mapping": "imu",
+        "fleetlink.seq": "7",
+        "fleetlink.mapping": "imu",
     }
     assert seen[fingerprint(codec.schema)] is not None
     assert read_value(record, seen) == codec.decode(payload)
-    assert maker.counters["imu"].as_dict() == {"received": 1, "emitted": 1, "dropped": 0,
-                                               "dead_lettered": 0, "type_mismatch": 0}
+    assert maker.counters["imu"].as_dict() == {
+        "received": 1,
+        "emitted": 1,
+        "dropped": 0,
+        "dead_lettered": 0,
+        "type_mismatch": 0,
+    }
 
 
 @pytest.mark.parametrize(
@@ -122,8 +150,9 @@ def test_fast_path_record_shape() -> None:
         (0, 0, "0", (STAMP_NS + 5_000_000) // 1_000_000),
     ],
 )
-def test_seq_header_and_timestamp_fallback(seq: int | None, stamp_ns: int | None, expect_seq: str | None,
-                                           expect_ms: int) -> None:
+def test_seq_header_and_timestamp_fallback(
+    seq: int | None, stamp_ns: int | None, expect_seq: str | None, expect_ms: int
+) -> None:
     maker, _, _ = maker_for(robot_types=[HUSKY], robots=["husky_1"])
     made = sample("/husky_1/imu/data", imu_payloads()[0], seq=seq, stamp_ns=stamp_ns)
     record = maker.make(made, 0)[0].record
@@ -132,19 +161,30 @@ def test_seq_header_and_timestamp_fallback(seq: int | None, stamp_ns: int | None
 
 
 def test_many_to_one_and_many_to_many() -> None:
-    robot_type = RobotTypeSpec("husky", "/husky_*", (
-        MappingSpec(name="imu", source="/{robot}/imu/data", topic="fleet.imu"),
-    ))
-    site = [MappingSpec(name="raw", source="/{robot}/{sensor}/data", topic="fleet.raw.{sensor}",
-                        key="{robot}-{sensor}", delivery="best_effort")]
+    robot_type = RobotTypeSpec(
+        "husky", "/husky_*", (MappingSpec(name="imu", source="/{robot}/imu/data", topic="fleet.imu"),)
+    )
+    site = [
+        MappingSpec(
+            name="raw",
+            source="/{robot}/{sensor}/data",
+            topic="fleet.raw.{sensor}",
+            key="{robot}-{sensor}",
+            delivery="best_effort",
+        )
+    ]
     maker, _, _ = maker_for(site, [robot_type], robots=["husky_1", "husky_2"])
     payload = imu_payloads()[0]
-    made = [(o.delivery, o.record.kafka_topic, o.record.key)
-            for robot in ("husky_1", "husky_2", "other_3")
-            for o in maker.make(sample(f"/{robot}/imu/data", payload), 0)]
+    made = [
+        (o.delivery, o.record.kafka_topic, o.record.key)
+        for robot in ("husky_1", "husky_2", "other_3")
+        for o in maker.make(sample(f"/{robot}/imu/data", payload), 0)
+    ]
     assert made == [
-        ("best_effort", "fleet.raw.imu", b"husky_1-imu"), ("at_least_once", "fleet.imu", b"husky_1"),
-        ("best_effort", "fleet.raw.imu", b"husky_2-imu"), ("at_least_once", "fleet.imu", b"husky_2"),
+        ("best_effort", "fleet.raw.imu", b"husky_1-imu"),
+        ("at_least_once", "fleet.imu", b"husky_1"),
+        ("best_effort", "fleet.raw.imu", b"husky_2-imu"),
+        ("at_least_once", "fleet.imu", b"husky_2"),
         ("best_effort", "fleet.raw.imu", b"other_3-imu"),
     ]
 
@@ -188,7 +228,7 @@ def test_key_from_message_field() -> None:
 @pytest.mark.parametrize(
     ("payload", "reason_part"),
     [
-        (b"\x00\x01\x00\x00\x01", "Imu"),            # truncated
+        (b"\x00\x01\x00\x00\x01", "Imu"),  # truncated
         (b"\x00\x07\x00\x00" + b"\x00" * 300, "encapsulation"),  # unknown encapsulation
     ],
 )
@@ -217,15 +257,22 @@ def test_undecodable_cdr_is_dead_lettered_and_the_next_flows(payload: bytes, rea
 def test_unknown_type_is_dead_lettered_once_then_counted() -> None:
     maker, _, _ = maker_for([MappingSpec(name="all", source="/{robot}/{topic}", topic="fleet.{topic}")])
     first = maker.make(sample("/r1/x", b"\x00\x01\x00\x00abcd", typename="nobody_msgs/msg/Nothing"), 0)
-    again = [maker.make(sample("/r1/x", b"\x00\x01\x00\x00abcd", typename="nobody_msgs/msg/Nothing"), 0)
-             for _ in range(3)]
+    again = [
+        maker.make(sample("/r1/x", b"\x00\x01\x00\x00abcd", typename="nobody_msgs/msg/Nothing"), 0)
+        for _ in range(3)
+    ]
     assert len(first) == 1
     assert headers(first[0].record)["fleetlink.dlq.stage"] == "decode"
     assert "nobody_msgs/msg/Nothing" in headers(first[0].record)["fleetlink.dlq.reason"]
     assert again == [[], [], []]
     assert maker.unknown_type_samples == 4
-    assert maker.counters["all"].as_dict() == {"received": 4, "emitted": 0, "dropped": 3,
-                                               "dead_lettered": 1, "type_mismatch": 0}
+    assert maker.counters["all"].as_dict() == {
+        "received": 4,
+        "emitted": 0,
+        "dropped": 3,
+        "dead_lettered": 1,
+        "type_mismatch": 0,
+    }
 
 
 def test_declared_type_mismatch_is_counted_not_mapped() -> None:
@@ -237,24 +284,40 @@ def test_declared_type_mismatch_is_counted_not_mapped() -> None:
 @pytest.mark.parametrize(
     ("error", "raw", "key"),
     [
-        (PayloadError("0/r1/imu/x/y", IMU, b"garbage!", "sample has no rmw_zenoh attachment"),
-         b"garbage!", "0/r1/imu/x/y"),
+        (
+            PayloadError("0/r1/imu/x/y", IMU, b"garbage!", "sample has no rmw_zenoh attachment"),
+            b"garbage!",
+            "0/r1/imu/x/y",
+        ),
         (AttachmentError(b"\x01\x02", "length 2 is neither 33 (v2) nor 77 (v1)"), b"\x01\x02", "/r1/imu"),
-        (AttachmentError(b"\x01\x02", "length 2 is neither 33 (v2) nor 77 (v1)", key="0/r1/imu/x/y",
-                         payload=b"the sample"), b"the sample", "0/r1/imu/x/y"),
+        (
+            AttachmentError(
+                b"\x01\x02",
+                "length 2 is neither 33 (v2) nor 77 (v1)",
+                key="0/r1/imu/x/y",
+                payload=b"the sample",
+            ),
+            b"the sample",
+            "0/r1/imu/x/y",
+        ),
         (KeyParseError("0/r1/imu/bad", "needs at least 4 chunks"), b"", "0/r1/imu/bad"),
     ],
 )
 def test_rejected_samples_become_dead_letters(error: RoswireError, raw: bytes, key: str) -> None:
-    maker, _, _ = maker_for([MappingSpec(name="imu", source="/{robot}/imu", topic="fleet.imu",
-                                         delivery="best_effort")])
+    maker, _, _ = maker_for(
+        [MappingSpec(name="imu", source="/{robot}/imu", topic="fleet.imu", delivery="best_effort")]
+    )
     out = maker.rejected_sample("/r1/imu", error, STAMP_NS)
     assert len(out) == 1
     assert out[0].delivery == "best_effort"
     record = out[0].record
     h = headers(record)
     assert (record.kafka_topic, record.key, record.value, record.raw_value) == (
-        "fleetlink.dead-letter", b"r1", raw, True)
+        "fleetlink.dead-letter",
+        b"r1",
+        raw,
+        True,
+    )
     assert h["fleetlink.dlq.stage"] == "receive"
     assert h["fleetlink.ros_key"] == key
     assert h["fleetlink.dlq.reason"] == str(error)
@@ -271,10 +334,15 @@ def test_rejected_sample_of_unmapped_topic_goes_durable_without_key() -> None:
 
 
 def test_filter_and_throttle_keep_the_fast_encoder() -> None:
-    spec = MappingSpec(name="imu", source="/{robot}/imu/data", topic="fleet.imu", stages=(
-        FilterSpec(type="filter", expr="linear_acceleration.z > -1000"),
-        ThrottleSpec(type="throttle", hz=10, keep="first"),
-    ))
+    spec = MappingSpec(
+        name="imu",
+        source="/{robot}/imu/data",
+        topic="fleet.imu",
+        stages=(
+            FilterSpec(type="filter", expr="linear_acceleration.z > -1000"),
+            ThrottleSpec(type="throttle", hz=10, keep="first"),
+        ),
+    )
     maker, _, seen = maker_for([spec])
     payloads = imu_payloads()[:5]
     out: list[Outgoing] = []
@@ -285,15 +353,23 @@ def test_filter_and_throttle_keep_the_fast_encoder() -> None:
     assert out[0].record.value == b"\xc3\x01" + fingerprint(codec.schema) + codec.cdr_to_avro(payloads[0])
     assert headers(out[0].record)["fleetlink.seq"] == "1"
     assert set(seen) == {fingerprint(codec.schema)}
-    assert maker.counters["imu"].as_dict() == {"received": 5, "emitted": 1, "dropped": 4,
-                                               "dead_lettered": 0, "type_mismatch": 0}
+    assert maker.counters["imu"].as_dict() == {
+        "received": 5,
+        "emitted": 1,
+        "dropped": 4,
+        "dead_lettered": 0,
+        "type_mismatch": 0,
+    }
     assert maker.stage_counters()["imu"]["throttle"]["dropped"] == 4
 
 
 def test_project_uses_a_derived_schema() -> None:
-    spec = MappingSpec(name="acc", source="/{robot}/imu/data", topic="fleet.acc", stages=(
-        ProjectSpec(type="project", fields=["linear_acceleration.z", "header.stamp"], flatten=True),
-    ))
+    spec = MappingSpec(
+        name="acc",
+        source="/{robot}/imu/data",
+        topic="fleet.acc",
+        stages=(ProjectSpec(type="project", fields=["linear_acceleration.z", "header.stamp"], flatten=True),),
+    )
     maker, _, seen = maker_for([spec])
     payload = imu_payloads()[2]
     record = maker.make(sample("/r1/imu/data", payload), 0)[0].record
@@ -302,16 +378,30 @@ def test_project_uses_a_derived_schema() -> None:
     assert fp != fingerprint(codec.schema)
     assert fingerprint(seen[fp]) == fp
     full = codec.decode(payload)
-    assert read_value(record, seen) == {"linear_acceleration_z": full["linear_acceleration"]["z"],
-                                        "header_stamp": full["header"]["stamp"]}
+    assert read_value(record, seen) == {
+        "linear_acceleration_z": full["linear_acceleration"]["z"],
+        "header_stamp": full["header"]["stamp"],
+    }
     assert "fleetlink.seq" not in headers(record)  # a new value made by a stage
 
 
 def test_aggregate_windows_leave_on_tick() -> None:
-    spec = MappingSpec(name="agg", source="/{robot}/imu/data", topic="fleet.imu_1s", stages=(
-        AggregateSpec.model_validate({"type": "aggregate", "window": "1s", "idle_timeout": "500ms",
-                                      "fields": ["linear_acceleration.x"], "ops": ["count", "max"]}),
-    ))
+    spec = MappingSpec(
+        name="agg",
+        source="/{robot}/imu/data",
+        topic="fleet.imu_1s",
+        stages=(
+            AggregateSpec.model_validate(
+                {
+                    "type": "aggregate",
+                    "window": "1s",
+                    "idle_timeout": "500ms",
+                    "fields": ["linear_acceleration.x"],
+                    "ops": ["count", "max"],
+                }
+            ),
+        ),
+    )
     maker, _, seen = maker_for([spec])
     for i, payload in enumerate(imu_payloads()[:10]):
         assert maker.make(sample("/r1/imu/data", payload, stamp_ns=5_000_000_000 + i * 10_000_000), 0) == []
@@ -327,9 +417,12 @@ def test_aggregate_windows_leave_on_tick() -> None:
 
 
 def test_stage_that_does_not_fit_the_type_is_reported_once() -> None:
-    spec = MappingSpec(name="bad", source="/{robot}/imu/data", topic="fleet.bad", stages=(
-        ProjectSpec(type="project", fields=["no_such_field"]),
-    ))
+    spec = MappingSpec(
+        name="bad",
+        source="/{robot}/imu/data",
+        topic="fleet.bad",
+        stages=(ProjectSpec(type="project", fields=["no_such_field"]),),
+    )
     maker, _, _ = maker_for([spec])
     first = maker.make(sample("/r1/imu/data", imu_payloads()[0]), 0)
     second = maker.make(sample("/r1/imu/data", imu_payloads()[1]), 0)
@@ -340,8 +433,9 @@ def test_stage_that_does_not_fit_the_type_is_reported_once() -> None:
 
 
 def test_oversized_value_becomes_a_dead_letter_with_a_reference() -> None:
-    maker, _, _ = maker_for(robot_types=[HUSKY], robots=["husky_1"], max_value_bytes=100,
-                            max_dead_letter_bytes=50)
+    maker, _, _ = maker_for(
+        robot_types=[HUSKY], robots=["husky_1"], max_value_bytes=100, max_dead_letter_bytes=50
+    )
     payload = imu_payloads()[0]
     out = maker.make(sample("/husky_1/imu/data", payload), 0)
     record = out[0].record

@@ -18,7 +18,8 @@ def test_survives_a_restart(tmp_path: Path) -> None:
     book.add(a.fingerprint, a.json)
     book.add(b.fingerprint, b.json)
     assert sorted(p.name for p in (tmp_path / "schemas").iterdir()) == sorted(
-        [f"{a.fingerprint.hex()}.json", f"{b.fingerprint.hex()}.json"])
+        [f"{a.fingerprint.hex()}.json", f"{b.fingerprint.hex()}.json"]
+    )
     again = SchemaBook(tmp_path / "schemas").load()
     found, missing = again.lookup([a.fingerprint, b.fingerprint, b"\x00" * 8])
     assert found == {a.fingerprint: a.json, b.fingerprint: b.json}

@@ -28,8 +28,16 @@ from tests.helpers import wait_until
 
 SCHEMA_A = identity_of({"type": "record", "name": "A", "fields": [{"name": "x", "type": "long"}]})
 SCHEMA_B = identity_of({"type": "record", "name": "B", "fields": [{"name": "y", "type": "long"}]})
-FAST = SenderOptions(batch_max_records=10, batch_max_bytes=1 << 20, linger_s=0.0, ack_timeout_s=1.0,
-                     max_in_flight=4, backoff_min_s=0.001, backoff_max_s=0.005, codec="zlib")
+FAST = SenderOptions(
+    batch_max_records=10,
+    batch_max_bytes=1 << 20,
+    linger_s=0.0,
+    ack_timeout_s=1.0,
+    max_in_flight=4,
+    backoff_min_s=0.001,
+    backoff_max_s=0.005,
+    codec="zlib",
+)
 
 Answer = tuple[bytes | None, str | None] | None
 Policy = Callable[[Batch, int], Answer]
@@ -76,8 +84,12 @@ def payload(i: int, schema: bytes = SCHEMA_A.fingerprint) -> bytes:
 
 
 @contextmanager
-def running(uplink: ScriptedUplink, buffer: MemoryBuffer, options: SenderOptions = FAST,
-            book: SchemaBook | None = None) -> Iterator[WanSender]:
+def running(
+    uplink: ScriptedUplink,
+    buffer: MemoryBuffer,
+    options: SenderOptions = FAST,
+    book: SchemaBook | None = None,
+) -> Iterator[WanSender]:
     if book is None:
         book = SchemaBook()
         book.add(SCHEMA_A.fingerprint, SCHEMA_A.json)
@@ -104,7 +116,10 @@ def test_everything_is_delivered_in_batches_with_their_schemas() -> None:
     assert [len(b.records) for b in uplink.batches] == [10, 10, 6]
     assert uplink.delivered_seqs() == list(range(1, 27))
     assert [set(b.schemas) for b in uplink.batches] == [
-        {SCHEMA_A.fingerprint}, {SCHEMA_A.fingerprint}, {SCHEMA_A.fingerprint, SCHEMA_B.fingerprint}]
+        {SCHEMA_A.fingerprint},
+        {SCHEMA_A.fingerprint},
+        {SCHEMA_A.fingerprint, SCHEMA_B.fingerprint},
+    ]
     assert uplink.batches[0].schemas[SCHEMA_A.fingerprint] == SCHEMA_A.json
     assert {(b.site, b.edge_id, b.stream) for b in uplink.batches} == {("s1", "e1", "memory")}
     stats = sender.stats
@@ -130,8 +145,9 @@ def test_failed_batches_are_resent_until_acknowledged(
             return ok(batch)
         reply, error = failure
         if reply == "error-ack":
-            return encode_ack(Ack("e1", batch.stream, batch.first_seq, batch.last_seq, "error",
-                                  detail="Kafka is down")), None
+            return encode_ack(
+                Ack("e1", batch.stream, batch.first_seq, batch.last_seq, "error", detail="Kafka is down")
+            ), None
         if reply == "wrong-range":
             return encode_ack(Ack("e1", batch.stream, batch.first_seq, batch.last_seq + 1, "ok")), None
         return (reply if isinstance(reply, bytes) else None), error
@@ -227,8 +243,9 @@ def test_pump_sends_full_batches_from_the_calling_thread_and_leaves_the_rest() -
         return ok(batch)
 
     uplink = ScriptedUplink(policy)
-    options = SenderOptions(batch_max_records=10, linger_s=30.0, max_in_flight=4, backoff_min_s=0.001,
-                            backoff_max_s=0.01)
+    options = SenderOptions(
+        batch_max_records=10, linger_s=30.0, max_in_flight=4, backoff_min_s=0.001, backoff_max_s=0.01
+    )
     sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=options)
     sender.pump()  # the sender's own thread is not even running: the caller sends
     assert [len(b.records) for b in uplink.batches] == [10, 10]
@@ -258,8 +275,14 @@ def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
 def test_stop_drains_what_can_be_sent() -> None:
     buffer = MemoryBuffer(first_seq=1)
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
-    sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1",
-                       options=SenderOptions(linger_s=10.0, batch_max_records=100)).start()
+    sender = WanSender(
+        buffer,
+        uplink,
+        SchemaBook(),
+        site="s1",
+        edge_id="e1",
+        options=SenderOptions(linger_s=10.0, batch_max_records=100),
+    ).start()
     buffer.append(payload(0))
     sender.wake()
     wait_until(drained(buffer), 5)
@@ -271,8 +294,16 @@ def test_stop_drains_what_can_be_sent() -> None:
 
 
 def need_schemas(batch: Batch, missing: frozenset[bytes]) -> Answer:
-    return encode_ack(Ack(batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, "need_schemas",
-                          missing_schemas=tuple(sorted(missing)))), None
+    return encode_ack(
+        Ack(
+            batch.edge_id,
+            batch.stream,
+            batch.first_seq,
+            batch.last_seq,
+            "need_schemas",
+            missing_schemas=tuple(sorted(missing)),
+        )
+    ), None
 
 
 def send_and_drain(sender: WanSender, buffer: MemoryBuffer, payloads: list[bytes]) -> None:
@@ -307,8 +338,14 @@ def test_an_uplink_without_a_left_out_schema_gets_the_batch_again_at_once_with_i
         return ok(batch)
 
     uplink = ScriptedUplink(policy)
-    slow_retry = SenderOptions(batch_max_records=10, linger_s=0.0, max_in_flight=4, backoff_min_s=30.0,
-                               backoff_max_s=30.0, codec="zlib")
+    slow_retry = SenderOptions(
+        batch_max_records=10,
+        linger_s=0.0,
+        max_in_flight=4,
+        backoff_min_s=30.0,
+        backoff_max_s=30.0,
+        codec="zlib",
+    )
     with running(uplink, buffer, slow_retry) as sender:
         send_and_drain(sender, buffer, [payload(1)])
         learned.clear()  # the uplink restarted
@@ -330,8 +367,16 @@ def test_a_request_for_a_schema_the_batch_carried_is_a_failure_retried_with_back
 
     def policy(batch: Batch, attempt: int) -> Answer:
         if attempt == 0:
-            return encode_ack(Ack(batch.edge_id, batch.stream, batch.first_seq, batch.last_seq,
-                                  "need_schemas", missing_schemas=(SCHEMA_A.fingerprint,))), None
+            return encode_ack(
+                Ack(
+                    batch.edge_id,
+                    batch.stream,
+                    batch.first_seq,
+                    batch.last_seq,
+                    "need_schemas",
+                    missing_schemas=(SCHEMA_A.fingerprint,),
+                )
+            ), None
         return ok(batch)
 
     uplink = ScriptedUplink(policy)

@@ -9,16 +9,19 @@ from fleetlink.uplink.commands.offsets import OffsetTracker
 TP = ("cmd", 0)
 
 
-@pytest.mark.parametrize(("steps", "expected"), [
-    ([("begin", 0)], {}),  # nothing settled yet
-    ([("begin", 0), ("done", 0)], {TP: 1}),
-    ([("begin", 0), ("begin", 1), ("begin", 2), ("done", 2), ("done", 1)], {}),  # 0 still open
-    ([("begin", 0), ("begin", 1), ("begin", 2), ("done", 0), ("done", 2)], {TP: 1}),
-    ([("begin", 5), ("begin", 6), ("done", 6), ("done", 5)], {TP: 7}),
-    ([("begin", 0), ("done", 0), ("commit", 1)], {}),  # already committed
-    ([("begin", 0), ("done", 0), ("commit", 1), ("begin", 1), ("done", 1)], {TP: 2}),
-    ([("begin", 3), ("done", 9)], {TP: 3}),  # an unknown offset settles nothing: 3 is read again
-])
+@pytest.mark.parametrize(
+    ("steps", "expected"),
+    [
+        ([("begin", 0)], {}),  # nothing settled yet
+        ([("begin", 0), ("done", 0)], {TP: 1}),
+        ([("begin", 0), ("begin", 1), ("begin", 2), ("done", 2), ("done", 1)], {}),  # 0 still open
+        ([("begin", 0), ("begin", 1), ("begin", 2), ("done", 0), ("done", 2)], {TP: 1}),
+        ([("begin", 5), ("begin", 6), ("done", 6), ("done", 5)], {TP: 7}),
+        ([("begin", 0), ("done", 0), ("commit", 1)], {}),  # already committed
+        ([("begin", 0), ("done", 0), ("commit", 1), ("begin", 1), ("done", 1)], {TP: 2}),
+        ([("begin", 3), ("done", 9)], {TP: 3}),  # an unknown offset settles nothing: 3 is read again
+    ],
+)
 def test_committable(steps: list[tuple[str, int]], expected: dict[tuple[str, int], int]) -> None:
     tracker = OffsetTracker()
     for op, offset in steps:
