@@ -12,8 +12,8 @@ import yaml
 
 from fleetlink.cli import build_parser
 from fleetlink.cli.validate import validate_file
+from tests.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
 DEPLOY = ROOT / "deploy"
 
 

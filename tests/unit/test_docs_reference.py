@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from fleetlink.cli.docgen import render
+from tests.paths import DOCS
 
-REFERENCE = Path(__file__).resolve().parents[2] / "docs" / "reference" / "config.md"
+REFERENCE = DOCS / "reference" / "config.md"
 
 
 def test_config_reference_is_current() -> None:

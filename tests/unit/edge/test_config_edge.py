@@ -10,8 +10,8 @@ import pytest
 from fleetlink.common.configfile import load_config
 from fleetlink.common.errors import ConfigError
 from fleetlink.edge.config import EdgeConfig, default_edge_id
+from tests.paths import DEPLOY
 
-DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
 EXAMPLES = sorted(DEPLOY.glob("edge*.yaml"))
 
 BASE = """\

@@ -12,8 +12,7 @@ from pydantic import ValidationError
 from fleetlink.cli import main
 from fleetlink.cli.validate import validate_file
 from fleetlink.repeater.config import RepeaterConfig
-
-DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
+from tests.paths import DEPLOY
 
 
 @pytest.fixture

@@ -21,8 +21,9 @@ from fleetlink.common.zenoh_configs import (
     render_text,
     uncovered_raw_keys,
 )
+from tests.paths import DEPLOY as DEPLOY_ROOT
 
-DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
+DEPLOY = DEPLOY_ROOT / "zenoh"
 TEMPLATES = sorted(DEPLOY.glob("*.json5"))
 
 # Values for every built-in placeholder; a template may ignore some of them.

@@ -10,8 +10,7 @@ import pytest
 
 from fleetlink.cli import main
 from fleetlink.cli.validate import guess_kind, validate_file
-
-DEPLOY = Path(__file__).resolve().parents[3] / "deploy"
+from tests.paths import DEPLOY
 
 
 @pytest.fixture

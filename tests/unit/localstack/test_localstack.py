@@ -12,6 +12,7 @@ import pytest
 from fleetlink.localstack import java
 from fleetlink.localstack.errors import StackError
 from fleetlink.localstack.kafka import KafkaSettings, server_properties
+from tests.paths import ROOT
 
 
 def _props(text: str) -> dict[str, str]:
@@ -97,7 +98,7 @@ def test_sigterm_runs_the_cleanup_of_a_script_that_asked_for_it(tmp_path: Path) 
         [sys.executable, "-c", SCRIPT, str(marker)],
         stdout=subprocess.PIPE,
         text=True,
-        cwd=Path(__file__).resolve().parents[3],
+        cwd=ROOT,
     ) as proc:
         assert proc.stdout is not None
         assert proc.stdout.readline().strip() == "ready"

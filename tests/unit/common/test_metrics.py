@@ -4,7 +4,6 @@ cumulative-to-increment helpers and the health model (no sockets)."""
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
@@ -25,8 +24,9 @@ from fleetlink.common.metrics import (
     split_listen,
 )
 from fleetlink.common.metrics.api import FamilyMetrics, Metrics
+from tests.paths import DOCS as DOCS_ROOT
 
-DOCS = Path(__file__).resolve().parents[3] / "docs" / "metrics.md"
+DOCS = DOCS_ROOT / "metrics.md"
 
 
 def samples(metrics: PrometheusMetrics) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
