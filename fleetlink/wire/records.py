@@ -104,6 +104,16 @@ class PayloadTemplate:
         self._tail = _tail(kafka_topic, key, headers)
         self._flags = FLAG_NULL_KEY if key is None else 0
 
+    @property
+    def tail(self) -> bytes:
+        """Topic, key and headers as encoded after each payload's value (and source seq)."""
+        return self._tail
+
+    @property
+    def flags(self) -> int:
+        """The record flags every payload of the template carries (besides ``FLAG_SOURCE_SEQ``)."""
+        return self._flags
+
     def payload(self, value: bytes, timestamp_ms: int, source_seq: int | None = None) -> bytes:
         if source_seq is None:
             return _PAYLOAD_HEAD.pack(self._flags, timestamp_ms, len(value)) + value + self._tail
