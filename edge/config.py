@@ -8,22 +8,21 @@ sizes are bytes or text (``64MiB``, ``1GiB``). See deploy/edge.example.yaml.
 
 from __future__ import annotations
 
-import re
 import socket
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Literal
 
 from pydantic import (
     BaseModel,
     ByteSize,
     ConfigDict,
     Field,
-    StringConstraints,
     ValidationInfo,
     field_validator,
     model_validator,
 )
 
+from fleetlink.common.names import KafkaTopic, KeyChunk, NamespaceGlob, RosTopic, RosType, Site, host_id
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.edge.errors import EdgeError, MappingError
 from fleetlink.edge.mapping import (
@@ -33,29 +32,23 @@ from fleetlink.edge.mapping import (
     RobotTypeSpec,
     Template,
     TopicPattern,
-    check_ros_type,
 )
-from fleetlink.edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
-from fleetlink.edge.mapping.templates import kafka_topic_problem
+from fleetlink.edge.mapping.spec import check_captures, check_topic_literal
 from fleetlink.edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
 from fleetlink.edge.stages import AggregateSpec, DurationNs, StageSpec
-from fleetlink.wire import Codec, WireError, check_key_name
+from fleetlink.wire import Codec
 
 _NS = 1_000_000_000
-Name = Annotated[str, StringConstraints(pattern=f"^{NAME_PATTERN.pattern}$", max_length=128)]
-_GLOB = re.compile(r"/?[A-Za-z0-9_/*?\[\]!-]+")
-_ROS_TOPIC = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
 
 
-def _why(exc: EdgeError | WireError) -> str:
+def _why(exc: EdgeError) -> str:
     """The reason without the 'mapping X:' prefix (the YAML path already says where)."""
     return str(exc).split(": ", 1)[1] if str(exc).startswith("mapping ") else str(exc)
 
 
 def default_edge_id() -> str:
     """The host name, cut to a valid key-expression chunk."""
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", socket.gethostname()).strip("-.") or "edge"
-    return name[:64]
+    return host_id(socket.gethostname(), "edge")
 
 
 class _Section(BaseModel):
@@ -76,11 +69,11 @@ class MappingConfig(_Section):
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True)
 
-    name: Name
+    name: KeyChunk
     from_: str = Field(alias="from")
     to: str
     key: str | None = Field(default=None, validate_default=True)
-    type: str | None = None
+    type: RosType | None = None
     delivery: Delivery = "at_least_once"
     stages: list[StageSpec] = []
     linger: DurationNs | None = None
@@ -121,16 +114,6 @@ class MappingConfig(_Section):
                 )
             return None
         return _check_template(value, info, "key template", topic=False)
-
-    @field_validator("type")
-    @classmethod
-    def _type(cls, value: str | None) -> str | None:
-        if value is not None:
-            try:
-                check_ros_type(value)
-            except MappingError as exc:
-                raise ValueError(_why(exc)) from None
-        return value
 
     def spec(self) -> MappingSpec:
         return MappingSpec(
@@ -182,32 +165,18 @@ class RobotMappingConfig(MappingConfig):
 
 
 class RobotTypeConfig(_Section):
-    match: str
+    match: NamespaceGlob
     """Glob over robot namespaces, e.g. ``/tb4_*``."""
     mappings: list[RobotMappingConfig] = []
 
-    @field_validator("match")
-    @classmethod
-    def _glob(cls, value: str) -> str:
-        if _GLOB.fullmatch(value) is None:
-            raise ValueError(f"{value!r} is not a namespace glob such as '/tb4_*'")
-        return value
-
 
 class RegistrationSection(_Section):
-    topic: str = "/fleetlink/register"
+    topic: RosTopic = "/fleetlink/register"
     """ROS topic on which robots may register explicitly."""
     discover: bool = True
     """Register robots found in the ROS graph whose namespace matches a robot type."""
     grace_period: DurationNs = 5 * _NS
     """How long a robot may be gone (liveliness lost) before it is deregistered."""
-
-    @field_validator("topic")
-    @classmethod
-    def _topic(cls, value: str) -> str:
-        if _ROS_TOPIC.fullmatch(value) is None:
-            raise ValueError(f"{value!r} is not an absolute ROS topic name")
-        return value
 
 
 class SpoolSection(_Section):
@@ -280,18 +249,10 @@ class WanSection(_Section):
 class TopicsSection(_Section):
     """Kafka topics the edge writes to besides the mappings' own."""
 
-    dead_letter: str = "fleetlink.dead-letter"
+    dead_letter: KafkaTopic = "fleetlink.dead-letter"
     """Records that could not be received, decoded, mapped or encoded (raw bytes + reason)."""
-    registrations: str = "fleetlink.robots"
+    registrations: KafkaTopic = "fleetlink.robots"
     """Robot registration events, keyed by robot (create it with cleanup.policy=compact)."""
-
-    @field_validator("dead_letter", "registrations")
-    @classmethod
-    def _legal(cls, value: str) -> str:
-        problem = kafka_topic_problem(value)
-        if problem is not None:
-            raise ValueError(problem)
-        return value
 
 
 class AdminSection(_Section):
@@ -310,11 +271,11 @@ class AdminSection(_Section):
 class EdgeConfig(_Section):
     """Everything one edge process needs; one YAML file."""
 
-    site: str
-    edge_id: str = Field(default_factory=default_edge_id)
+    site: Site
+    edge_id: KeyChunk = Field(default_factory=default_edge_id)
     ros: RosSection = RosSection()
     zenoh: ZenohSection = ZenohSection()
-    robot_types: dict[Name, RobotTypeConfig] = {}
+    robot_types: dict[KeyChunk, RobotTypeConfig] = {}
     mappings: list[MappingConfig] = []
     """Site-level mappings, not tied to a robot type (patterns may still capture ``{robot}``)."""
     registration: RegistrationSection = RegistrationSection()
@@ -323,16 +284,6 @@ class EdgeConfig(_Section):
     wan: WanSection = WanSection()
     topics: TopicsSection = TopicsSection()
     admin: AdminSection | None = None
-
-    @field_validator("site", "edge_id")
-    @classmethod
-    def _key_chunk(cls, value: str, info: ValidationInfo) -> str:
-        try:
-            if "/" in value:
-                raise WireError(f"{value!r} must be a single key chunk (no '/')")
-            return check_key_name(value, str(info.field_name))
-        except WireError as exc:
-            raise ValueError(str(exc)) from None
 
     @model_validator(mode="after")
     def _unique_names(self) -> EdgeConfig:
