@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Literal
 
 from pydantic import (
-    BaseModel,
     ByteSize,
     ConfigDict,
     Field,
@@ -22,6 +21,7 @@ from pydantic import (
     model_validator,
 )
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.names import KafkaTopic, KeyChunk, NamespaceGlob, RosTopic, RosType, Site, host_id
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.edge.errors import EdgeError, MappingError
@@ -51,11 +51,7 @@ def default_edge_id() -> str:
     return host_id(socket.gethostname(), "edge")
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class RosSection(_Section):
+class RosSection(Section):
     domain_id: int = Field(default=0, ge=0, le=232)
     distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "jazzy"
     """Decides type hashes and the rmw_zenoh wire details."""
@@ -64,10 +60,10 @@ class RosSection(_Section):
     attachment: Literal["auto", "v1", "v2"] = "auto"
 
 
-class MappingConfig(_Section):
+class MappingConfig(Section):
     """One mapping: ROS topic pattern ``from`` -> Kafka topic template ``to``."""
 
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    model_config = ConfigDict(populate_by_name=True)
 
     name: KeyChunk
     from_: str = Field(alias="from")
@@ -164,13 +160,13 @@ class RobotMappingConfig(MappingConfig):
         return value
 
 
-class RobotTypeConfig(_Section):
+class RobotTypeConfig(Section):
     match: NamespaceGlob
     """Glob over robot namespaces, e.g. ``/tb4_*``."""
     mappings: list[RobotMappingConfig] = []
 
 
-class RegistrationSection(_Section):
+class RegistrationSection(Section):
     topic: RosTopic = "/fleetlink/register"
     """ROS topic on which robots may register explicitly."""
     discover: bool = True
@@ -179,7 +175,7 @@ class RegistrationSection(_Section):
     """How long a robot may be gone (liveliness lost) before it is deregistered."""
 
 
-class SpoolSection(_Section):
+class SpoolSection(Section):
     dir: Path
     max_bytes: ByteSize = ByteSize(1 << 30)
     segment_bytes: ByteSize = ByteSize(16 << 20)
@@ -209,7 +205,7 @@ class SpoolSection(_Section):
         )
 
 
-class MemorySection(_Section):
+class MemorySection(Section):
     """The in-memory buffer of ``best_effort`` mappings."""
 
     max_bytes: ByteSize = ByteSize(64 << 20)
@@ -219,7 +215,7 @@ class MemorySection(_Section):
         return MemoryBuffer(max_bytes=int(self.max_bytes), max_records=self.max_records)
 
 
-class WanSection(_Section):
+class WanSection(Section):
     # Defaults measured with bench/bench_e2e.py (docs/benchmarks.md): batches of 500 records cost
     # the edge 14% and the uplink 12% more CPU per record than batches of up to 2,000 (each batch
     # is a Zenoh query with its reply callbacks on both sides); 1 MiB, about 1,500 IMU records, is
@@ -246,7 +242,7 @@ class WanSection(_Section):
         return self
 
 
-class TopicsSection(_Section):
+class TopicsSection(Section):
     """Kafka topics the edge writes to besides the mappings' own."""
 
     dead_letter: KafkaTopic = "fleetlink.dead-letter"
@@ -255,7 +251,7 @@ class TopicsSection(_Section):
     """Robot registration events, keyed by robot (create it with cleanup.policy=compact)."""
 
 
-class AdminSection(_Section):
+class AdminSection(Section):
     listen: str = "127.0.0.1:8480"
     """host:port of the admin HTTP API."""
 
@@ -268,7 +264,7 @@ class AdminSection(_Section):
         return value
 
 
-class EdgeConfig(_Section):
+class EdgeConfig(Section):
     """Everything one edge process needs; one YAML file."""
 
     site: Site

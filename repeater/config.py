@@ -18,8 +18,9 @@ from __future__ import annotations
 import socket
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.durations import PositiveSeconds
 from fleetlink.common.names import KeyChunk, Site, host_id
 from fleetlink.common.zenoh_options import ZenohSection
@@ -31,9 +32,7 @@ def default_repeater_id() -> str:
     return host_id(socket.gethostname(), "repeater")
 
 
-class RepeaterSection(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class RepeaterSection(Section):
     site: Site = Field(examples=["warehouse-a"])
     state_dir: Path
     id: KeyChunk = Field(default_factory=default_repeater_id)
@@ -48,9 +47,7 @@ class RepeaterSection(BaseModel):
     """Active commands at most (one per robot and ROS topic); more are rejected."""
 
 
-class RosSection(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class RosSection(Section):
     domain_id: int = Field(default=0, ge=0, le=232)
     distro: Distro = "jazzy"
     """Decides type hashes (and so the data keys robots subscribe on)."""
@@ -58,9 +55,7 @@ class RosSection(BaseModel):
     """Folders of custom ``.msg`` packages the commands use (e.g. irobot_create_msgs)."""
 
 
-class RepeaterConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class RepeaterConfig(Section):
     repeater: RepeaterSection
     ros: RosSection = RosSection()
     zenoh: ZenohSection = ZenohSection()

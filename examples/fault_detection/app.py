@@ -190,8 +190,8 @@ def build_app(settings: FaultDetectionSettings, on_command: CommandCallback | No
         consumer_group=settings.group,
         auto_offset_reset=settings.offset_reset,
         state_dir=settings.state_dir,
-        consumer_poll_timeout=settings.poll_timeout_s,
-        commit_interval=settings.commit_interval_s,
+        consumer_poll_timeout=settings.poll_timeout,
+        commit_interval=settings.commit_interval,
         on_consumer_error=on_consumer_error,
         on_processing_error=on_processing_error,
         loglevel=None,
@@ -213,7 +213,9 @@ def build_app(settings: FaultDetectionSettings, on_command: CommandCallback | No
     ]
     events = frames[0].concat(frames[1]).concat(frames[2])
     windows = (
-        events.sliding_window(duration_ms=settings.window_ms, grace_ms=settings.grace_ms, on_late=on_late)
+        events.sliding_window(
+            duration_ms=round(settings.window * 1000), grace_ms=round(settings.grace * 1000), on_late=on_late
+        )
         .agg(events=Count(), failures=Sum("failure"), newest=Max("ts"))
         .current()
     )

@@ -122,8 +122,8 @@ def settings_from_args(args: argparse.Namespace) -> FaultDetectionSettings:
     return FaultDetectionSettings(
         bootstrap=args.bootstrap,
         registry_url=args.registry,
-        window_ms=args.window,
-        grace_ms=args.grace,
+        window=args.window / 1000,
+        grace=args.grace / 1000,
         group=args.group,
         state_dir=args.state_dir,
         offset_reset="earliest" if args.from_beginning else "latest",

@@ -189,7 +189,7 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
         settings = FaultDetectionSettings(
             bootstrap=args.bootstrap,
             registry_url=args.registry,
-            window_ms=args.window,
+            window=args.window / 1000,
             group=f"latency-{run_id}",
             state_dir=Path(state_dir),
             offset_reset="earliest",

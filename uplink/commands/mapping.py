@@ -33,8 +33,9 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.durations import PositiveSeconds
 from fleetlink.common.names import KafkaTopic, KeyChunk, RosType, key_path_problem
 from fleetlink.roswire.errors import InvalidNameError
@@ -134,8 +135,8 @@ def resolve(ref: Ref, *, key: str | None, robot: str | None, record: Mapping[str
 # -- config model ---------------------------------------------------------------------------
 
 
-class RepeatSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class RepeatSection(Section):
+    model_config = ConfigDict(frozen=True)
 
     period: PositiveSeconds = 1.0
     """How often the repeater publishes the command while its lease holds."""
@@ -143,8 +144,8 @@ class RepeatSettings(BaseModel):
     """How long the command is valid, from its Kafka record's timestamp."""
 
 
-class CommandQoS(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class CommandQoS(Section):
+    model_config = ConfigDict(frozen=True)
 
     reliability: Literal["reliable", "best_effort"] = "reliable"
     durability: Literal["volatile", "transient_local"] = "volatile"
@@ -158,10 +159,10 @@ class CommandQoS(BaseModel):
         ).to_keyexpr()
 
 
-class CommandMapping(BaseModel):
+class CommandMapping(Section):
     """One Kafka topic -> one ROS topic per addressed robot."""
 
-    model_config = ConfigDict(extra="forbid", populate_by_name=True, frozen=True)
+    model_config = ConfigDict(populate_by_name=True, frozen=True)
 
     name: KeyChunk
     from_: KafkaTopic = Field(alias="from")
@@ -169,7 +170,7 @@ class CommandMapping(BaseModel):
     type: RosType
     robot: str | None = None
     broadcast: bool = False
-    repeat: RepeatSettings = RepeatSettings()
+    repeat: RepeatSection = RepeatSection()
     qos: CommandQoS | None = None
 
     @field_validator("to")
