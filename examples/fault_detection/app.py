@@ -22,12 +22,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from quixstreams import Application, State
-from quixstreams.dataframe.windows.aggregations import Count, Max, Sum
-from quixstreams.models import Row, SchemaRegistryClientConfig
-from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
-from quixstreams.models.serializers.exceptions import SerializationError
-
+from fleetlink.common.extras import missing_extra
 from fleetlink.examples.fault_detection.errors import BadRecordError, FaultDetectionError, SettingsError
 from fleetlink.examples.fault_detection.rules import (
     INITIAL_MEMORY,
@@ -41,6 +36,15 @@ from fleetlink.examples.fault_detection.rules import (
     window_verdict,
 )
 from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, check_copartitioned
+
+try:
+    from quixstreams import Application, State
+    from quixstreams.dataframe.windows.aggregations import Count, Max, Sum
+    from quixstreams.models import Row, SchemaRegistryClientConfig
+    from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
+    from quixstreams.models.serializers.exceptions import SerializationError
+except ModuleNotFoundError as exc:  # the demo's stream app is an extra, not part of an edge install
+    raise missing_extra(exc, "demo") from None
 
 __all__ = ["COMMAND_ID_HEADER", "LIGHTRING_TYPE", "build_app", "lightring_schema", "run"]
 
