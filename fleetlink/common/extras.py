@@ -11,7 +11,7 @@ from fleetlink.common.errors import FleetlinkError
 
 EXTRAS: dict[str, str] = {
     "console": "the web console",
-    "demo": "the demo and its fault-detection stream app",
+    "demo": "the demo's fault-detection stream app",
 }
 """The extras, and what each one adds."""
 

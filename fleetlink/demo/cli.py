@@ -44,7 +44,7 @@ def missing_parts() -> str | None:
         import fleetlink.console.app
         import fleetlink.examples.fault_detection.app  # noqa: F401 - imported to see that it can be
     except MissingExtraError as exc:
-        return str(exc)
+        return f"the demo needs its extra, pip install 'fleetlink[demo]' ({exc.package} is not installed)"
     return None
 
 
