@@ -59,5 +59,7 @@ def _emit(node: Node, out: bytearray) -> None:
 
 
 def _emit_array(node: Array, out: bytearray) -> None:
-    out += b"\x04" + bytes((1 if node.fixed else 0,)) + _U32.pack(node.size) + _U32.pack(min_cdr_size(node.elem))
+    out += (
+        b"\x04" + bytes((1 if node.fixed else 0,)) + _U32.pack(node.size) + _U32.pack(min_cdr_size(node.elem))
+    )
     _emit(node.elem, out)

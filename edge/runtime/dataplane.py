@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import zenoh
-from fleetlink._native import MISMATCH, DataPlane
 
+from fleetlink._native import MISMATCH, DataPlane
 from fleetlink.edge.mapping import Delivery
 from fleetlink.edge.runtime.errors import RuntimeSetupError
 from fleetlink.edge.runtime.fastpath import FastPlan

@@ -61,12 +61,19 @@ def test_every_recorded_message(bag: object) -> None:
 
 @pytest.mark.parametrize(
     "typename",
-    ["sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState", "diagnostic_msgs/msg/DiagnosticArray",
-     "t_msgs/msg/Outer", "sensor_msgs/msg/PointCloud2"],
+    [
+        "sensor_msgs/msg/Imu",
+        "sensor_msgs/msg/JointState",
+        "diagnostic_msgs/msg/DiagnosticArray",
+        "t_msgs/msg/Outer",
+        "sensor_msgs/msg/PointCloud2",
+    ],
 )
 @settings(max_examples=60, deadline=None)
 @given(data=st.data(), seed=st.integers(0, 2**32 - 1))
-def test_damaged_input_is_refused_or_converted_the_same(typename: str, data: st.DataObject, seed: int) -> None:
+def test_damaged_input_is_refused_or_converted_the_same(
+    typename: str, data: st.DataObject, seed: int
+) -> None:
     obj = data.draw(message(TS, typename))
     cdr = bytearray(TS.serialize_cdr(obj, typename))
     rng = random.Random(seed)
