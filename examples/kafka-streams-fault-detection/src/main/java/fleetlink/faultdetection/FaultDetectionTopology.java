@@ -12,6 +12,7 @@ import org.apache.kafka.streams.kstream.Materialized;
 import org.apache.kafka.streams.kstream.Named;
 import org.apache.kafka.streams.kstream.Produced;
 import org.apache.kafka.streams.kstream.SlidingWindows;
+import org.apache.kafka.streams.state.KeyValueBytesStoreSupplier;
 import org.apache.kafka.streams.state.Stores;
 import org.apache.kafka.streams.state.WindowStore;
 
@@ -36,6 +37,12 @@ public final class FaultDetectionTopology {
     private FaultDetectionTopology() {}
 
     public static Topology build(Settings settings, ValueSerdes serdes, CommandListener listener) {
+        return build(settings, serdes, listener, Stores.persistentKeyValueStore(MEMORY_STORE));
+    }
+
+    /** With another store for the robots' memories (tests use an in-memory one, with {@code dsl.store.suppliers.class} to match). */
+    public static Topology build(
+            Settings settings, ValueSerdes serdes, CommandListener listener, KeyValueBytesStoreSupplier memoryStore) {
         RuleConfig rules = settings.rules();
         Topics topics = settings.topics();
         StreamsBuilder builder = new StreamsBuilder();
@@ -54,7 +61,7 @@ public final class FaultDetectionTopology {
                         Named.as("classify-kidnap-status"));
 
         builder.addStateStore(Stores.keyValueStoreBuilder(
-                Stores.persistentKeyValueStore(MEMORY_STORE), Serdes.String(), StateSerdes.memory()));
+                memoryStore, Serdes.String(), StateSerdes.memory()));
 
         ir.merge(hazards, Named.as("merge-hazards"))
                 .merge(kidnap, Named.as("merge-kidnap"))
