@@ -58,9 +58,7 @@ def parse_state_change(line: str) -> StateChange | None:
     match = _STATE_CHANGE.search(line)
     if match is None:
         return None
-    return StateChange(
-        match["robot"], match["before"], match["after"], int(match["end"]), match["id"]
-    )
+    return StateChange(match["robot"], match["before"], match["after"], int(match["end"]), match["id"])
 
 
 def _sources() -> list[Path]:
@@ -93,7 +91,9 @@ def build(*, timeout_s: float = 1800.0, tests: bool = True) -> float:
         argv.append("-DskipTests")
     began = time.monotonic()
     try:
-        proc = subprocess.run(argv, cwd=PROJECT, capture_output=True, text=True, timeout=timeout_s, check=False)
+        proc = subprocess.run(
+            argv, cwd=PROJECT, capture_output=True, text=True, timeout=timeout_s, check=False
+        )
     except subprocess.TimeoutExpired as exc:
         raise JavaAppError(f"`mvn package` in {PROJECT} took longer than {timeout_s:.0f} s") from exc
     if proc.returncode != 0 or not JAR.exists():
@@ -114,7 +114,7 @@ def command(
     from_beginning: bool = False,
     extra: tuple[str, ...] = (),
 ) -> list[str]:
-    """The argv that runs the built jar (``registry_native_url``: the Apicurio native API, …/apis/registry/v3)."""
+    """The argv that runs the jar; ``registry_native_url``: Apicurio's native API, …/apis/registry/v3."""
     argv = [
         java,
         "-Xms64m",

@@ -12,8 +12,8 @@ from typing import Any
 from fleetlink.localstack.artifacts import cache_root, fetch_all
 from fleetlink.localstack.process import alive
 from fleetlink.localstack.registry import registry_url_lines
-from fleetlink.schemas.registry_urls import apicurio_native_url
 from fleetlink.localstack.stack import LocalStack, StackInfo, stop_recorded
+from fleetlink.schemas.registry_urls import apicurio_native_url
 
 DEFAULT_DIR = Path("var/stack")
 

@@ -285,13 +285,10 @@ class Demo:
         def decided(line: str) -> None:
             change = kafka_streams.parse_state_change(line)
             if change is not None:
-                self.say(
-                    f"fault detection: {change.robot} is now {change.after} (every event in its window agreed)"
-                )
+                robot, state = change.robot, change.after
+                self.say(f"fault detection: {robot} is now {state} (every event in its window agreed)")
 
-        self._start_process(
-            "fault-detection", argv, lambda: kafka_streams.READY_LINE in _read(log)
-        )
+        self._start_process("fault-detection", argv, lambda: kafka_streams.READY_LINE in _read(log))
         follower = LogFollower(log, decided).start()
         self._exit.callback(follower.stop)
         self.say(f"fault-detection app: Kafka Streams (Java), sliding window {self.o.window} per robot")

@@ -60,14 +60,22 @@ def test_every_plugin_and_dependency_is_pinned_to_a_release() -> None:
     ]
     assert len(nodes) > 10
     for node in nodes:
-        coordinates = (node.findtext("m:groupId", namespaces=NS), node.findtext("m:artifactId", namespaces=NS))
+        coordinates = (
+            node.findtext("m:groupId", namespaces=NS),
+            node.findtext("m:artifactId", namespaces=NS),
+        )
         version = _version(node, properties)
         if version is None:
             assert coordinates in managed, f"{coordinates} has no version"
             continue
         assert re.fullmatch(r"\d+(\.\d+)+", version), f"{coordinates}: {version} is not a pinned release"
     # the lifecycle plugins `package` runs are pinned too (else Maven picks its built-in versions)
-    for plugin in ("maven-resources-plugin", "maven-compiler-plugin", "maven-surefire-plugin", "maven-jar-plugin"):
+    for plugin in (
+        "maven-resources-plugin",
+        "maven-compiler-plugin",
+        "maven-surefire-plugin",
+        "maven-jar-plugin",
+    ):
         assert ("org.apache.maven.plugins", plugin) in managed
     assert root.find("m:repositories", NS) is None, "Maven Central only"
     assert root.find("m:pluginRepositories", NS) is None, "Maven Central only"
@@ -107,6 +115,6 @@ def test_the_command_line_passes_the_native_registry_url(tmp_path: Path) -> None
 
 
 def test_a_missing_maven_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(kafka_streams.shutil, "which", lambda _name: None)
+    monkeypatch.setattr("shutil.which", lambda _name: None)
     with pytest.raises(kafka_streams.JavaAppError, match="Maven"):
         kafka_streams.build()

@@ -118,6 +118,5 @@ def test_both_registry_urls_are_labelled_with_what_they_are_for(tmp_path: Path) 
     assert native.startswith(f"{settings.native_url}   Apicurio native API: ")
     assert "Java" in native
     # another registry has one API only
-    assert registry_url_lines("http://confluent:8081") == [
-        "http://confluent:8081   Confluent-compatible API: fleetlink, confluent-kafka, Quix Streams, fleetlink kafka"
-    ]
+    [only] = registry_url_lines("http://confluent:8081")
+    assert only.startswith("http://confluent:8081   Confluent-compatible API: ")
