@@ -2,7 +2,7 @@
 
 Where its Maven project is, how to build it (``mvn -q -B package``), the command line that runs
 the jar, and what its log lines mean. The demo (``fleetlink demo --app java``) and the tests use
-this; the app itself is a plain Kafka Streams application (see docs/kafka-streams.md).
+this; the app itself is a plain Kafka Streams application (docs/guides/stream-developer-java.md).
 """
 
 from __future__ import annotations
