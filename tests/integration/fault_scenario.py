@@ -186,11 +186,22 @@ COORDINATOR_PENDING = {
 }
 
 
-def wait_all_committed(bootstrap: str, group: str, topic_names: list[str], timeout: float) -> None:
-    """Wait until ``group`` has committed the end offset of every partition of ``topic_names``."""
+def wait_all_committed(
+    bootstrap: str,
+    group: str,
+    topic_names: list[str],
+    timeout: float,
+    stopped: Callable[[], bool] = lambda: False,
+) -> None:
+    """Wait until ``group`` has committed the end offset of every partition of ``topic_names``.
+
+    ``stopped``: the app has ended (a process that exited): fail at once instead of waiting on.
+    """
     consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": group, "enable.auto.commit": False})
 
     def check() -> bool:
+        if stopped():
+            raise AssertionError(f"the app of group {group} stopped before committing {topic_names}")
         metadata = consumer.list_topics(timeout=5)
         tps = [TopicPartition(t, p) for t in topic_names for p in metadata.topics[t].partitions]
         try:

@@ -84,10 +84,18 @@ def test_the_java_app_decides_as_the_reference_model_and_stops_on_sigterm(
             message="the Java app running",
         )
         assert proc.poll() is None, "".join(lines)
-        wait_all_committed(kafka_bootstrap, group, list(sensor_topics(topics).values()), timeout=60)
+        wait_all_committed(
+            kafka_bootstrap,
+            group,
+            list(sensor_topics(topics).values()),
+            timeout=60,
+            stopped=lambda: proc.poll() is not None,
+        )
         assert proc.poll() is None, "".join(lines)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) == 0, "".join(lines)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}\n--- the Java app's output:\n{''.join(lines)}") from exc
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -124,6 +132,8 @@ def test_the_java_app_decides_as_the_reference_model_and_stops_on_sigterm(
         ("tb4_02", "failed", "running", green_at),
     ]
     assert "skipping undecodable record topic=" + topics.ir_intensity in told
+    assert "not the Confluent wire format: magic byte 0x6e is not 0x00" in told
+    assert "Skipping record due to deserialization error" not in told  # Kafka Streams' own line, per record
 
     # the command schema is registered whole, as fleetlink's are: a Confluent reader needs no references
     subject = f"{topics.commands}-value"

@@ -97,8 +97,10 @@ public final class Main {
                 stopped.countDown();
             }
         });
+        AtomicBoolean signalled = new AtomicBoolean(false);
         Runtime.getRuntime().addShutdownHook(new Thread(() -> {
             // SIGTERM / SIGINT: finish the record in hand, commit, close; then exit 0, not the JVM's 143
+            signalled.set(true);
             boolean closed = streams.close(Duration.ofSeconds(CLOSE_TIMEOUT_S));
             System.out.flush();
             Runtime.getRuntime().halt(closed ? exitCode.get() : 1);
@@ -109,7 +111,10 @@ public final class Main {
         } catch (InterruptedException e) {
             Thread.currentThread().interrupt();
         }
+        if (!signalled.get()) {
+            exitCode.compareAndSet(0, 1); // stopped on its own, not asked to: something went wrong
+        }
         streams.close(Duration.ofSeconds(CLOSE_TIMEOUT_S));
-        return exitCode.get() == 0 ? 1 : exitCode.get(); // stopped on its own: something went wrong
+        return exitCode.get();
     }
 }

@@ -22,12 +22,25 @@ public final class SkipUndecodable implements DeserializationExceptionHandler {
     public Response handleError(ErrorHandlerContext context, ConsumerRecord<byte[], byte[]> record, Exception exception) {
         long count = SKIPPED.incrementAndGet();
         String where = "topic=" + record.topic() + " partition=" + record.partition() + " offset=" + record.offset();
+        String reason = reason(record.value(), exception);
         if (count == 1) {
-            LOG.warn("skipping undecodable record {} (further ones counted, logged every {})", where, EVERY, exception);
+            LOG.warn("skipping undecodable record {}: {} (further ones counted, logged every {})", where, reason, EVERY,
+                    exception);
         } else if (count % EVERY == 0) {
-            LOG.warn("{} undecodable records skipped so far; latest: {} error={}", count, where, exception.toString());
+            LOG.warn("{} undecodable records skipped so far; latest: {}: {}", count, where, reason);
         }
         return Response.resume();
+    }
+
+    /** Why a value did not decode, in fleetlink's terms where the serde's own words are vague. */
+    static String reason(byte[] value, Exception exception) {
+        if (value != null && value.length < 5) {
+            return value.length + " bytes are too short for the Confluent header (magic byte + 4-byte schema id)";
+        }
+        if (value != null && value[0] != 0) {
+            return String.format("not the Confluent wire format: magic byte 0x%02x is not 0x00", value[0] & 0xff);
+        }
+        return String.valueOf(exception);
     }
 
     @Override
