@@ -1,8 +1,10 @@
 """Load one YAML file into one typed config model, with errors that name the YAML path.
 
-Every fleetlink process has one pydantic model (``extra="forbid"``) for its config.
-``load_config`` reads the file, validates it and, on failure, raises a ``ConfigError``
-listing every problem as ``path.to[0].field (line N): message``. No socket is opened.
+Every fleetlink process has one config model, and every model of every section derives from
+``Section``: unknown keys are refused, durations are text (``fleetlink.common.durations``) and
+names have one type each (``fleetlink.common.names``). ``load_config`` reads the file,
+validates it and, on failure, raises a ``ConfigError`` listing every problem as
+``path.to[0].field (line N): message``. No socket is opened.
 """
 
 from __future__ import annotations
@@ -12,11 +14,20 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from fleetlink.common.errors import ConfigError
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+class Section(BaseModel):
+    """The base of every config model and section: a key it does not declare is an error (a
+    misspelt key would otherwise leave its default in force without a word). A subclass's own
+    ``model_config`` adds to this one."""
+
+    model_config = ConfigDict(extra="forbid")
+
 
 PathPart = str | int
 
