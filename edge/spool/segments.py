@@ -97,7 +97,7 @@ def _torn_records(data: bytes, offset: int, before: int) -> int | None:
     if magic != FRAME_MAGIC or seq <= before or before < 0:
         return None
     if not flags & FLAG_GROUP:
-        return seq - before
+        return int(seq - before)
     if len(data) - offset < HEADER_SIZE + 4:
         return None
     count = int.from_bytes(data[offset + HEADER_SIZE : offset + HEADER_SIZE + 4], "little")
