@@ -28,6 +28,10 @@ class Metrics(Protocol):
     def on_dead_letter(self, mapping: str, stage: str | None = None, n: int = 1) -> None: ...
     def on_gap(self, topic: str, n: int = 1) -> None: ...
 
+    # the intake (edge)
+    def on_intake_dropped(self, n: int = 1) -> None: ...
+    def set_intake(self, *, queued: int, lag_s: float, rss_bytes: int, bound_bytes: int) -> None: ...
+
     # buffers and the WAN (edge)
     def on_spooled(self, n: int, nbytes: int, stream: str = "spool") -> None: ...
     def on_spool_dropped(self, stream: str, reason: str, n: int = 1) -> None: ...
@@ -96,6 +100,16 @@ class FamilyMetrics:
 
     def on_gap(self, topic: str, n: int = 1) -> None:
         self._count("fleetlink_sequence_gaps", topic, n=n)
+
+    # the intake ---------------------------------------------------------------------------
+    def on_intake_dropped(self, n: int = 1) -> None:
+        self._count("fleetlink_intake_dropped_samples", n=n)
+
+    def set_intake(self, *, queued: int, lag_s: float, rss_bytes: int, bound_bytes: int) -> None:
+        self._set(family("fleetlink_intake_queued_samples"), (), queued)
+        self._set(family("fleetlink_intake_lag_seconds"), (), lag_s)
+        self._set(family("fleetlink_memory_resident_bytes"), (), rss_bytes)
+        self._set(family("fleetlink_memory_bound_bytes"), (), bound_bytes)
 
     # buffers and the WAN -----------------------------------------------------------------
     def on_spooled(self, n: int, nbytes: int, stream: str = "spool") -> None:

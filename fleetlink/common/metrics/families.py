@@ -80,6 +80,18 @@ FAMILIES: tuple[Family, ...] = (
         "Samples one stage dropped (reason: dropped, late, error)",
     ),
     _c("fleetlink_sequence_gaps", ("topic",), "ROS messages missing from a publisher's sequence numbers"),
+    # -- the intake (edge): between receiving a sample and spooling its records --------------
+    _c(
+        "fleetlink_intake_dropped_samples", (), "Samples the full intake could not take (counted, never held)"
+    ),
+    _g("fleetlink_intake_queued_samples", (), "Samples received and not yet turned into records"),
+    _g(
+        "fleetlink_intake_lag_seconds",
+        (),
+        "How long the oldest sample taken last had waited since it arrived",
+    ),
+    _g("fleetlink_memory_resident_bytes", (), "The process's resident memory"),
+    _g("fleetlink_memory_bound_bytes", (), "The most the edge's configuration lets it hold (docs/edge.md)"),
     # -- buffers and the WAN (edge) --------------------------------------------------------
     _c("fleetlink_spool_appended_records", ("stream",), "Records appended to a buffer"),
     _c("fleetlink_spool_appended_bytes", ("stream",), "Bytes appended to a buffer"),
