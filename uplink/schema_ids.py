@@ -58,22 +58,26 @@ class SchemaIds:
         self._lock = threading.Lock()
 
     def learn(self, site: str, schemas: Mapping[bytes, str]) -> list[bytes]:
-        """Remember the schema texts a batch from ``site`` carried (by fingerprint), each checked
-        once; returns the fingerprints whose text does not match them (none learnt for those)."""
+        """Remember the schema texts a batch from ``site`` carried (by fingerprint); a text not
+        seen before from that site is checked against its fingerprint first. Returns the
+        fingerprints whose text does not match (none of those is learnt). The first matching text
+        of a fingerprint stays (another matching one differs only in docs or defaults)."""
         texts = self._texts
-        if all((site, fp) in texts for fp in schemas):
+        if all(texts.get((site, fp)) == text for fp, text in schemas.items()):
             return []
         wrong: list[bytes] = []
         for fp, text in schemas.items():
-            if (site, fp) in texts:
+            known = texts.get((site, fp))
+            if known == text:
                 continue
             if not _matches(fp, text):
                 wrong.append(fp)
                 continue
-            with self._lock:
-                if len(texts) >= self._max_texts:
-                    del texts[next(iter(texts))]
-                texts[site, fp] = text
+            if known is None:
+                with self._lock:
+                    if len(texts) >= self._max_texts:
+                        del texts[next(iter(texts))]
+                    texts[site, fp] = text
         return wrong
 
     def unknown(self, site: str, fingerprints: Iterable[bytes]) -> tuple[bytes, ...]:

@@ -95,6 +95,8 @@ def create_app(
         client = request.client.host if request.client is not None else "?"
         wait = logins.retry_after(client)
         if wait > 0:
+            if metrics is not None:
+                metrics.on_admin_refused("locked_out")
             raise TooManyAttemptsError(wait)
         header = request.headers.get("authorization")
         if authorized(token, header):
@@ -102,6 +104,8 @@ def create_app(
             return
         if header is not None:  # a wrong token, not a request that forgot it
             logins.failure(client)
+            if metrics is not None:
+                metrics.on_admin_refused("wrong_token")
         raise UnauthorizedError("missing or wrong admin token (Authorization: Bearer <token>)")
 
     router = APIRouter(dependencies=[Depends(require_token)], responses=_ERRORS)

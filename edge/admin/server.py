@@ -116,7 +116,9 @@ class EdgeAdmin:
                     extension.mount(app)  # e.g. the web console under /console/
                 self.http = HttpServer(app, self.listen, name="edge-admin").start()
             if session is not None:
-                self.zenoh = ZenohAdmin(session, service, edge_id=self.base.edge_id, token=self.token).start()
+                self.zenoh = ZenohAdmin(
+                    session, service, edge_id=self.base.edge_id, token=self.token, metrics=self.metrics
+                ).start()
                 for extension in self.extensions:
                     extension.start(session)  # e.g. fleetlink/<site>/console/status
         except BaseException:

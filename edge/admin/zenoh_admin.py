@@ -18,6 +18,7 @@ import zenoh
 from pydantic import SecretStr
 
 from fleetlink.common.login_limiter import LoginLimiter
+from fleetlink.common.metrics import Metrics, NullMetrics
 from fleetlink.common.pooled_queryable import PooledQueryable
 from fleetlink.edge.admin.auth import authorized
 from fleetlink.edge.admin.listing import declared
@@ -34,8 +35,15 @@ _CLIENT = "zenoh"
 
 class ZenohAdmin:
     def __init__(
-        self, session: zenoh.Session, service: AdminService, *, edge_id: str, token: SecretStr | None = None
+        self,
+        session: zenoh.Session,
+        service: AdminService,
+        *,
+        edge_id: str,
+        token: SecretStr | None = None,
+        metrics: Metrics | None = None,
     ) -> None:
+        self.metrics: Metrics = metrics if metrics is not None else NullMetrics()
         self.session = session
         self.service = service
         self.edge_id = edge_id
@@ -95,16 +103,19 @@ class ZenohAdmin:
         if self.token is None:
             if any(t.op in CHANGES for t in found):
                 self.refused_changes += 1
+                self.metrics.on_admin_refused("read_only")
                 return 403, "changes over Zenoh need an admin token (FLEETLINK_ADMIN_TOKEN on the edge)"
             return None
         wait = self.logins.retry_after(_CLIENT)
         if wait > 0:
+            self.metrics.on_admin_refused("locked_out")
             return 429, f"too many wrong tokens: try again in {wait:.0f} s"
         if authorized(self.token, attachment):
             self.logins.success(_CLIENT)
             return None
         if attachment is not None:
             self.logins.failure(_CLIENT)
+            self.metrics.on_admin_refused("wrong_token")
         return 401, "missing or wrong admin token (attachment 'Bearer <token>')"
 
     def _names(self, resource: str) -> list[str]:

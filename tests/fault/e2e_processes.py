@@ -56,7 +56,8 @@ class Process:
         self.log = log
         self.proc: subprocess.Popen[bytes] | None = None
 
-    def start(self) -> Process:
+    def start(self, env: dict[str, str] | None = None) -> Process:
+        """Start it (``env``: the whole environment, else this process's)."""
         with self.log.open("ab") as out:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "fleetlink", "-v", *self.argv],
@@ -64,6 +65,7 @@ class Process:
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
+                env=env,
             )
         return self
 

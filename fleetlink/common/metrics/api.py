@@ -46,6 +46,7 @@ class Metrics(Protocol):
     ) -> None: ...
     def set_wan(self, *, in_flight: int, link_up: bool) -> None: ...
     def set_robots(self, n: int) -> None: ...
+    def on_admin_refused(self, reason: str) -> None: ...
 
     # uplink
     def on_ingested(self, site: str, status: str, records: int, dead_lettered: int = 0) -> None: ...
@@ -147,6 +148,9 @@ class FamilyMetrics:
 
     def set_robots(self, n: int) -> None:
         self._set(family("fleetlink_robots_registered"), (), n)
+
+    def on_admin_refused(self, reason: str) -> None:
+        self._count("fleetlink_admin_refused", reason)
 
     # uplink --------------------------------------------------------------------------------------
     def on_ingested(self, site: str, status: str, records: int, dead_lettered: int = 0) -> None:

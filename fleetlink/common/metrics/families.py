@@ -107,6 +107,11 @@ FAMILIES: tuple[Family, ...] = (
     _g("fleetlink_wan_link_up", (), "1 when the uplink answered recently, else 0"),
     _h("fleetlink_wan_ack_latency_seconds", "From sending a batch to its acknowledgement"),
     _g("fleetlink_robots_registered", (), "Robots registered at this edge"),
+    _c(
+        "fleetlink_admin_refused",
+        ("reason",),
+        "Admin requests refused (reason: wrong_token, locked_out, read_only)",
+    ),
     # -- uplink ----------------------------------------------------------------------------------
     _c(
         "fleetlink_ingest_batches",

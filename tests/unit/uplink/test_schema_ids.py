@@ -70,3 +70,11 @@ def test_the_oldest_texts_are_forgotten_past_the_limit() -> None:
     ids.learn("s", {FP_A: TEXT_A})
     ids.learn("s", {FP_B: TEXT_B, FP_C: TEXT_C})
     assert ids.unknown("s", [FP_A, FP_B, FP_C]) == (FP_A,)
+
+
+def test_a_wrong_text_for_a_known_fingerprint_is_refused_too() -> None:
+    ids = SchemaIds(Registry())
+    assert ids.learn("s", {FP_A: TEXT_A}) == []
+    assert ids.learn("s", {FP_A: TEXT_B}) == [FP_A]
+    assert ids.learn("s", {FP_A: schema("A", doc="other doc")}) == []  # matches: the first one stays
+    assert ids.id_for("s", "t", FP_A) == 1
