@@ -20,6 +20,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.demo.cli",
     "fleetlink.cli.validate",
     "fleetlink.cli.stack",
+    "fleetlink.cli.kafka",
     "fleetlink.cli.ros",
     "fleetlink.cli.schemas",
     "fleetlink.cli.certs",

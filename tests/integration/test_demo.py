@@ -1,14 +1,30 @@
-"""The warehouse demo end to end (issue 8): fault → one red command, heal → one green, nothing else."""
+"""The warehouse demo end to end (issue 8): fault → one red command, heal → one green, nothing else.
+
+The same loop, judged the same way, with either fault-detection app: the Quix Streams one
+(Python, in the demo's process) and the Kafka Streams one (Java, built with Maven, its own process).
+"""
 
 from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Literal
+
+import pytest
 
 from fleetlink.demo.runner import Demo, DemoOptions
 
 
-def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize("app", ["python", "java"])
+def test_demo_closes_the_loop(
+    app: Literal["python", "java"],
+    kafka_bootstrap: str,
+    schema_registry_url: str,
+    tmp_path: Path,
+    request: pytest.FixtureRequest,
+) -> None:
+    if app == "java":
+        request.getfixturevalue("kafka_streams_jar")  # built here with Maven, so the demo need not
     out = io.StringIO()
     demo = Demo(
         DemoOptions(
@@ -18,6 +34,7 @@ def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tm
             registry_url=schema_registry_url,
             out=out,
             step_timeout_s=60,
+            app=app,
         )
     )
     summary = demo.run()
@@ -37,3 +54,11 @@ def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tm
     assert 0 < summary["heal_to_green_led_s"] < 30
     assert (tmp_path / "demo" / "summary.json").exists()
     assert "stopped" in told.splitlines()[-1]
+    # both registry URLs are told, each with what it is for
+    native = schema_registry_url.replace("/apis/ccompat/v7", "/apis/registry/v3")
+    assert f"registry {schema_registry_url}   Confluent-compatible API" in told
+    assert f"registry {native}   Apicurio native API" in told
+    if app == "java":
+        assert "fault-detection app: Kafka Streams (Java)" in told
+        assert f"fault detection: {faulted} is now failed" in told
+        assert f"fault detection: {faulted} is now running" in told
