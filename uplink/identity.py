@@ -52,7 +52,8 @@ def identity_problem(source: Source, batch: Batch) -> str | None:
 def header_problem(source: Source, records: Iterable[Record]) -> str | None:
     """Why a record's sender headers name someone else (None: every one names ``source``).
 
-    One pass over the records' headers, about 0.3 us a record; no header is copied.
+    One pass over the records' headers (the batch's checks cost about 0.25 us a record in all);
+    no header is copied.
     """
     allowed = frozenset(((SITE_HEADER, source.site.encode()), (EDGE_HEADER, source.edge_id.encode())))
     names = IDENTITY_HEADERS

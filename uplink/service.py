@@ -335,8 +335,8 @@ class Uplink:
 
 def site_of(key: str) -> str:
     """The site of an ingest key ``fleetlink/<site>/ingest/<edge_id>`` (``?`` if it is not one)."""
-    parts = key.split("/")
-    return parts[1] if len(parts) == 4 and parts[0] == "fleetlink" and parts[2] == "ingest" else "?"
+    source = source_of(key)
+    return source.site if source is not None else "?"
 
 
 def _policy(cfg: UplinkConfig) -> TopicPolicy:
