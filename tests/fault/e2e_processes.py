@@ -82,7 +82,8 @@ class Process:
         self.log = log
         self.proc: subprocess.Popen[bytes] | None = None
 
-    def start(self) -> Process:
+    def start(self, env: dict[str, str] | None = None) -> Process:
+        """Start it (``env``: the whole environment, else this process's)."""
         with self.log.open("ab") as out:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "fleetlink", "-v", *self.argv],
@@ -90,6 +91,7 @@ class Process:
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
+                env=env,
             )
         return self
 
@@ -186,12 +188,15 @@ class Bed:
         return self.edge
 
     def start_uplink(self) -> Process:
+        """Start the uplink and wait until it serves batches (it first reads the registrations
+        topic to its end: an edge started earlier would see its first batches go unanswered)."""
         n = sum(p.name == "uplink" for p in self.processes)
-        self.uplink = Process(
+        uplink = self.uplink = Process(
             "uplink", ["uplink", "run", "-c", str(self.uplink_yaml)], self.tmp / f"uplink-{n}.log"
         ).start()
-        self.processes.append(self.uplink)
-        return self.uplink
+        self.processes.append(uplink)
+        self.wait(lambda: uplink.log_lines("uplink running") > 0, 30, "the uplink serves batches")
+        return uplink
 
     def stats(self) -> dict[str, Any]:
         try:

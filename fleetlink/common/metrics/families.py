@@ -119,6 +119,11 @@ FAMILIES: tuple[Family, ...] = (
     _g("fleetlink_wan_link_up", (), "1 when the uplink answered recently, else 0"),
     _h("fleetlink_wan_ack_latency_seconds", "From sending a batch to its acknowledgement"),
     _g("fleetlink_robots_registered", (), "Robots registered at this edge"),
+    _c(
+        "fleetlink_admin_refused",
+        ("reason",),
+        "Admin requests refused (reason: wrong_token, locked_out, read_only)",
+    ),
     # -- uplink ----------------------------------------------------------------------------------
     _c(
         "fleetlink_ingest_batches",
@@ -127,6 +132,16 @@ FAMILIES: tuple[Family, ...] = (
     ),
     _c("fleetlink_ingest_records", ("site",), "Records received from edges"),
     _c("fleetlink_ingest_dead_lettered", ("site",), "Records the uplink sent to the dead-letter topic"),
+    _c(
+        "fleetlink_ingest_refused_batches",
+        ("site", "reason"),
+        "Batches refused whole, nothing produced (reason: identity, headers, schema)",
+    ),
+    _c(
+        "fleetlink_ingest_refused_records",
+        ("site", "reason"),
+        "Records written to the refused topic instead of theirs (reason: topic, registration)",
+    ),
     _c("fleetlink_kafka_delivered", ("topic", "result"), "Kafka delivery reports (result: ok, error)"),
     _h("fleetlink_kafka_delivery_latency_seconds", "From produce() to Kafka's delivery report"),
     # -- repeater --------------------------------------------------------------------------------
@@ -134,6 +149,12 @@ FAMILIES: tuple[Family, ...] = (
         "fleetlink_commands",
         ("command", "outcome"),
         "Commands handled (outcome: published, repeated, expired, refused)",
+    ),
+    _c(
+        "fleetlink_commands_forged",
+        ("reason",),
+        "Command envelopes refused unread: not signed by a trusted key for this site (reason: "
+        "unsigned, unknown_key, bad_signature, other_site)",
     ),
     # -- every process ---------------------------------------------------------------------------
     _g("fleetlink_health", ("state",), "1 for the process's current health state (ok, degraded, failed)"),
