@@ -135,6 +135,11 @@ class KafkaSection(Section):
             conf["ssl.endpoint.identification.algorithm"] = self.ssl.endpoint_identification
         return conf
 
+    def max_record_bytes(self) -> int:
+        """The largest record the producer takes (``message.max.bytes``, an override included):
+        told to every edge in its acknowledgements, so larger records never cross the WAN."""
+        return int(self.producer_overrides.get("message.max.bytes", self.message_max_bytes))
+
     def producer_config(self) -> dict[str, str | int | float | bool]:
         conf = self.common_config()
         conf.update(

@@ -8,6 +8,7 @@ disk here: an unanswered batch stays in the edge's spool and comes again.
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import threading
@@ -101,6 +102,8 @@ class Uplink:
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
         self._dlq_max = max(1_000, config.kafka.message_max_bytes - 64 * 1024)
+        self._max_record_bytes = config.kafka.max_record_bytes()
+        """Told to the edges in every acknowledgement: they keep larger records off the WAN."""
         self.refusals = Refusals(
             self.metrics, refused_topic=config.topics.refused, max_value_bytes=self._dlq_max
         )
@@ -326,6 +329,7 @@ class Uplink:
         self._slots.release()
         try:
             if ack is not None:
+                ack = dataclasses.replace(ack, max_record_bytes=self._max_record_bytes)
                 query.reply(query.key_expr, encode_ack(ack))
             else:
                 query.reply_err(error.encode())

@@ -18,6 +18,7 @@ KAFKA_VERSION = "4.2.1"
 LOG4J_VERSION = "2.25.3"
 APICURIO_VERSION = "3.3.3"  # needs Java 21+
 APICURIO_JAVA17_VERSION = "3.0.9"  # the newest 3.x line that still runs on Java 17
+S3PROXY_VERSION = "4.1.0"  # S3 API over a local folder; Java 17 class files
 
 _KAFKA_POM = """<project xmlns="http://maven.apache.org/POM/4.0.0">
   <modelVersion>4.0.0</modelVersion>
@@ -124,6 +125,29 @@ def _apicurio_jar(home: Path) -> Path:
     if not runners:
         raise StackError(f"no runnable jar under {home / 'dist'}; delete {home} and fetch again")
     return runners[0]
+
+
+def fetch_s3proxy(root: Path | None = None, version: str = S3PROXY_VERSION) -> Path:
+    """Fetch s3proxy's runnable jar (``org.gaul:s3proxy``, classifier jar-with-dependencies)."""
+    home = (root or cache_root()) / f"s3proxy-{version}"
+    jar = home / f"s3proxy-{version}-jar-with-dependencies.jar"
+    done = home / ".complete"
+    if done.exists() and jar.exists():
+        return jar
+    home.mkdir(parents=True, exist_ok=True)
+    _run_mvn(
+        [
+            "dependency:copy",
+            f"-Dartifact=org.gaul:s3proxy:{version}:jar:jar-with-dependencies",
+            f"-DoutputDirectory={home}",
+        ],
+        home,
+        f"s3proxy {version}",
+    )
+    if not jar.exists():
+        raise StackError(f"Maven reported success but {jar.name} is not in {home}")
+    done.touch()
+    return jar
 
 
 def fetch_all(root: Path | None = None, apicurio_version: str = APICURIO_VERSION) -> Artifacts:

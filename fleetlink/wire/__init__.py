@@ -43,12 +43,14 @@ Ack (uplink -> edge, uncompressed)::
     "FLA" | version u8 | edge_id str16 | stream str16 | first_seq u64 | last_seq u64 | status u8
     (0 ok, 1 error, 2 need_schemas) | detail str16 | n_failures u32
     | { seq u64 | dead_lettered u8 | reason str16 } * n_failures
-    | [n_missing u16 | { fingerprint 8 bytes } * n_missing, with status 2]
+    | [n_missing u16 | { fingerprint 8 bytes } * n_missing, with status 2] | max_record_bytes u32
 
 ``ok``: every record of the batch is in Kafka, or in the dead-letter topic (listed in failures,
 all with ``dead_lettered``); the edge may drop the whole range from its spool. ``error``: the
 batch was not (entirely) made safe; the edge sends it again later. ``need_schemas``: nothing
-was produced; send the batch again with the text of the listed schemas.
+was produced; send the batch again with the text of the listed schemas. ``max_record_bytes``
+is the largest Kafka record the uplink produces (0: not said): the edge learns it from every
+answer and keeps larger records off the WAN (``fleetlink.wire.limits``).
 
 Decoding anything malformed raises ``WireError`` with the reason and the offset.
 """

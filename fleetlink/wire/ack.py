@@ -30,6 +30,9 @@ class Ack:
 
     ``need_schemas``: nothing of the batch was produced; the uplink knows no schema text for
     ``missing_schemas``, which the batch left out (``Batch.elided``): send it again with them.
+
+    ``max_record_bytes``: the largest Kafka record the answering uplink produces (its producer's
+    ``message.max.bytes``; 0: not said). The edge applies it before the WAN (docs/images.md).
     """
 
     edge_id: str
@@ -40,6 +43,7 @@ class Ack:
     failures: tuple[RecordFailure, ...] = ()
     detail: str = ""
     missing_schemas: tuple[bytes, ...] = ()
+    max_record_bytes: int = 0
 
     def __post_init__(self) -> None:
         if self.status not in _STATUS_CODES:
@@ -54,6 +58,8 @@ class Ack:
             raise WireError(f"ack range {self.first_seq}..{self.last_seq} is not within 0..2^64-1")
         if self.status == "ok" and not all(f.dead_lettered for f in self.failures):
             raise WireError("an 'ok' ack may list only dead-lettered failures")
+        if not 0 <= self.max_record_bytes < 2**32:
+            raise WireError(f"max_record_bytes {self.max_record_bytes} is not within 0..2^32-1")
 
 
 def encode_ack(ack: Ack) -> bytes:
@@ -70,6 +76,7 @@ def encode_ack(ack: Ack) -> bytes:
         parts += (_FAILURE_HEAD.pack(failure.seq, int(failure.dead_lettered)), str16(failure.reason))
     if ack.status == "need_schemas":
         parts += (U16.pack(len(ack.missing_schemas)), *ack.missing_schemas)
+    parts.append(U32.pack(ack.max_record_bytes))
     return b"".join(parts)
 
 
@@ -97,6 +104,7 @@ def decode_ack(data: bytes) -> Ack:
     if name == "need_schemas":
         (n_missing,) = r.unpack(U16, "missing schema count")
         missing = tuple(r.take(8, "missing schema fingerprint") for _ in range(n_missing))
+    (max_record_bytes,) = r.unpack(U32, "max record bytes")
     r.done("the ack")
     return Ack(
         edge_id=edge_id,
@@ -107,4 +115,5 @@ def decode_ack(data: bytes) -> Ack:
         failures=tuple(failures),
         detail=detail,
         missing_schemas=missing,
+        max_record_bytes=max_record_bytes,
     )

@@ -268,6 +268,7 @@ def test_encoder_refuses_what_the_decoder_would_refuse() -> None:
 
 ACKS: list[Ack] = [
     Ack(edge_id="edge-1", stream="durable", first_seq=1, last_seq=500, status="ok"),
+    Ack(edge_id="edge-1", stream="durable", first_seq=1, last_seq=5, status="ok", max_record_bytes=1_000_000),
     Ack(
         edge_id="edge-1",
         stream="durable",
@@ -357,6 +358,11 @@ def test_ack_invariants() -> None:
         Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="ok", missing_schemas=(FP,))
     with pytest.raises(WireError, match="8 bytes"):
         Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="need_schemas", missing_schemas=(b"x",))
+    with pytest.raises(WireError, match="max_record_bytes"):
+        Ack(edge_id="e", stream="d", first_seq=1, last_seq=2, status="ok", max_record_bytes=-1)
+    said = encode_ack(ACKS[1])
+    assert said[-4:] == (1_000_000).to_bytes(4, "little")  # the limit ends the ack
+    assert decode_ack(said).max_record_bytes == 1_000_000
     good = encode_ack(ACKS[0])
     with pytest.raises(WireError, match="not a fleetlink ack"):
         decode_ack(b"XXX" + good[3:])
