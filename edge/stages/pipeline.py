@@ -13,12 +13,14 @@ from typing import Any
 
 from fleetlink.edge.stages.aggregate import AggregateStage
 from fleetlink.edge.stages.base import Sample, Stage, StageCounters
+from fleetlink.edge.stages.compress_image import CompressImageStage
 from fleetlink.edge.stages.errors import StageConfigError
 from fleetlink.edge.stages.filter import FilterStage
 from fleetlink.edge.stages.on_change import OnChangeStage
 from fleetlink.edge.stages.project import ProjectStage
 from fleetlink.edge.stages.spec import (
     AggregateSpec,
+    CompressImageSpec,
     FilterSpec,
     OnChangeSpec,
     ProjectSpec,
@@ -49,6 +51,8 @@ def build_stage(spec: StageSpec) -> Stage:
             idle_timeout_ns=spec.idle_timeout,
             name=name,
         )
+    if isinstance(spec, CompressImageSpec):
+        return CompressImageStage(spec.format, quality=spec.quality, level=spec.level, name=name)
     raise StageConfigError(f"unknown stage spec {spec!r}")  # pragma: no cover - the union is closed
 
 

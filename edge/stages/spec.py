@@ -113,8 +113,19 @@ class AggregateSpec(_Spec):
         return self
 
 
+class CompressImageSpec(_Spec):
+    """sensor_msgs/Image -> sensor_msgs/CompressedImage (docs/images.md)."""
+
+    type: Literal["compress_image"]
+    format: Literal["jpeg", "png"] = "jpeg"
+    quality: Annotated[int, Field(ge=1, le=100)] = 80
+    """JPEG quality (1-100; libjpeg's scale: 75-90 for camera images)."""
+    level: Annotated[int, Field(ge=0, le=9)] = 1
+    """PNG zlib level (0-9; 1 is fast and nearly as small as 6 on camera images)."""
+
+
 StageSpec = Annotated[
-    FilterSpec | ThrottleSpec | OnChangeSpec | ProjectSpec | AggregateSpec,
+    FilterSpec | ThrottleSpec | OnChangeSpec | ProjectSpec | AggregateSpec | CompressImageSpec,
     Field(discriminator="type"),
 ]
 """One entry of a mapping's ``stages:`` list."""

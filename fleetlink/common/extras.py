@@ -1,7 +1,8 @@
 """Optional parts of fleetlink and the pip extras that bring their packages.
 
 ``pip install fleetlink`` is what an edge device needs. The web console (``console``: its page
-templates) and the demo (``demo``: its stream-processing app) are extras; importing one of
+templates), the demo (``demo``: its stream-processing app) and image compression (``images``:
+Pillow, for the ``compress_image`` stage) are extras; importing one of
 their modules without its packages raises ``MissingExtraError`` saying what to install.
 """
 
@@ -12,6 +13,7 @@ from fleetlink.common.errors import FleetlinkError
 EXTRAS: dict[str, str] = {
     "console": "the web console",
     "demo": "the demo's fault-detection stream app",
+    "images": "the compress_image stage (Pillow)",
 }
 """The extras, and what each one adds."""
 

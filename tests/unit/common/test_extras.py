@@ -82,9 +82,10 @@ def test_the_demo_says_what_it_lacks_before_starting_anything(
 def test_an_edge_install_carries_no_console_or_demo_packages() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     core = " ".join(project["dependencies"])
-    for package in ("quixstreams", "jinja2", "pytest"):
+    for package in ("quixstreams", "jinja2", "pytest", "pillow"):
         assert package not in core
     extras = project["optional-dependencies"]
     assert any(d.startswith("jinja2") for d in extras["console"])
     assert any(d.startswith("quixstreams") for d in extras["demo"])
-    assert "fleetlink[console,demo]" in extras["dev"]
+    assert any(d.startswith("pillow") for d in extras["images"])
+    assert "fleetlink[console,demo,images]" in extras["dev"]
