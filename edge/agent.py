@@ -26,6 +26,7 @@ from typing import Any
 
 import zenoh
 
+from fleetlink.common.objects import ObjectStore, ObjectStoreError
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.edge.config import EdgeConfig
 from fleetlink.edge.errors import MappingError
@@ -33,6 +34,8 @@ from fleetlink.edge.mapping import Delivery, MappingSpec, MappingTable
 from fleetlink.edge.runtime.dataplane import NativeSource, python_config_json
 from fleetlink.edge.runtime.errors import RuntimeSetupError
 from fleetlink.edge.runtime.intake import Intake
+from fleetlink.edge.runtime.limits import RecordLimit
+from fleetlink.edge.runtime.offloader import Offloader
 from fleetlink.edge.runtime.outgoing import Outgoing
 from fleetlink.edge.runtime.processor import Emit, Item, Processor
 from fleetlink.edge.runtime.records import RecordMaker
@@ -110,6 +113,10 @@ class EdgeAgent:
         self._subscriptions: SubscriptionManager | None = None
         self._source: NativeSource | None = None
         self._registrar: Registrar | None = None
+        self._store: ObjectStore | None = None
+        self._offloader: Offloader | None = None
+        self.record_limit: RecordLimit | None = None
+        """The largest Kafka record the uplink produces, as learned from its answers."""
         self.robot_errors = 0
         self._gc_before = gc.get_threshold()
 
@@ -160,7 +167,11 @@ class EdgeAgent:
             group_bytes=group_bytes,
         )
         buffers: dict[Delivery, RecordBuffer] = {"at_least_once": self._spool, "best_effort": self._memory}
-        limit = (
+        configured = config.wan.max_record_bytes
+        self.record_limit = limit = RecordLimit(
+            None if configured is None else int(configured), spool_dir
+        ).load()
+        frame_limit = (
             min(
                 int(config.spool.segment_bytes) - SEGMENT_HEADER_SIZE - HEADER_SIZE,
                 int(config.memory.max_bytes),
@@ -173,24 +184,34 @@ class EdgeAgent:
             match=self.table.match,
             types=codecs,
             dead_letter_topic=config.topics.dead_letter,
-            max_value_bytes=max(limit, 1024),
+            max_value_bytes=max(frame_limit, 1024),
             on_schema=book.add,
+            max_record_bytes=limit.value,
+            oversize=config.wan.oversize,
+            object_prefix=config.objects.prefix if config.objects is not None else "",
         )
         session_config = edge_session_config(self.zenoh_options)
         self._source = source = NativeSource(
             python_config_json(session_config),
             max_items=config.intake.max_samples,
             max_bytes=int(config.intake.max_bytes),
-            max_value_bytes=self._maker.max_value_bytes,
+            max_value_bytes=self._maker.fast_value_limit,
             group_records=group_records,
             group_bytes=group_bytes,
         )
+        limit.on_change(self._apply_record_limit)
         self._session = session = open_session(session_config)
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)
         self._senders = {
             delivery: WanSender(
-                buffer, transport, book, site=config.site, edge_id=config.edge_id, options=options
+                buffer,
+                transport,
+                book,
+                site=config.site,
+                edge_id=config.edge_id,
+                options=options,
+                on_limit=limit.learn,
             )
             for delivery, buffer in buffers.items()
         }
@@ -204,6 +225,8 @@ class EdgeAgent:
             table_version=lambda: self.table.version,
             default_linger_s=options.linger_s,
         )
+        if config.objects is not None:
+            self._start_offloader(self._processor)
         attachment: AttachmentVersion = 1 if config.ros.attachment == "v1" else 2
         self._node = RosNode(
             "fleetlink_edge",
@@ -235,6 +258,44 @@ class EdgeAgent:
         self._subscriptions.start()
         self._registrar.start()
 
+    def _start_offloader(self, processor: Processor) -> None:
+        """The object store of claim checks: refused credentials or a missing bucket stop the
+        start (naming ``objects``); a store that does not answer yet only warns (uploads wait)."""
+        section = self.config.objects
+        if section is None:
+            return
+        try:
+            store = ObjectStore(section)
+        except ObjectStoreError as exc:
+            raise RuntimeSetupError(f"objects: {exc}") from None
+        self._store = store
+        try:
+            if section.create_bucket:
+                store.ensure_bucket()
+            else:
+                store.check()
+        except ObjectStoreError as exc:
+            if not exc.retriable:
+                raise RuntimeSetupError(f"objects: {exc}") from None
+            log.warning("objects: the object store does not answer yet (%s); uploads wait for it", exc)
+        self._offloader = Offloader(
+            self._store,
+            processor.post,
+            workers=section.workers,
+            max_pending_bytes=int(section.max_pending_bytes),
+            backoff_max_s=section.retry_backoff_max,
+        ).start()
+        processor.uploader = self._offloader
+
+    def _apply_record_limit(self, max_record_bytes: int) -> None:
+        """The uplink's limit changed (or is first known): the record maker and the data plane
+        keep larger records off the WAN from now on."""
+        maker = self._maker
+        if maker is not None:
+            maker.set_record_limit(max_record_bytes)
+            if self._source is not None:
+                self._source.max_value_bytes = maker.fast_value_limit
+
     @staticmethod
     def _robot_type(name: str, match: str) -> RobotType:
         try:
@@ -258,6 +319,8 @@ class EdgeAgent:
             self._registrar.stop()
         if self._subscriptions is not None:
             self._subscriptions.stop()
+        if self._offloader is not None:  # its last results go to the processor, still taking them
+            self._offloader.stop(timeout_s)
         self.intake.close()
         if self._processor is not None:
             self._processor.stop()
@@ -277,6 +340,7 @@ class EdgeAgent:
         for buffer in (self._spool, self._memory):
             if buffer is not None:
                 buffer.close()
+        self._close_objects()
         self._registrar = None
         self._subscriptions = None
         self._processor = None
@@ -285,6 +349,12 @@ class EdgeAgent:
         self._session = None
         self._spool = None
         self._memory = None
+
+    def _close_objects(self) -> None:
+        if self._store is not None:
+            self._store.close()
+        self._store = None
+        self._offloader = None
 
     def __enter__(self) -> EdgeAgent:
         return self.start()
@@ -389,6 +459,14 @@ class EdgeAgent:
                 entry["sender"] = sender.snapshot()
             streams[buffer.stream] = entry
         out["streams"] = streams
+        if self.record_limit is not None:
+            out["record_limit"] = {
+                "max_record_bytes": self.record_limit.value,
+                "learned": self.record_limit.learned,
+                "configured": self.record_limit.configured,
+            }
+        if self._offloader is not None:
+            out["objects"] = self._offloader.snapshot()
         if self._book is not None:
             out["schemas"] = {
                 "known": len(self._book),

@@ -23,7 +23,9 @@ from pydantic import (
 
 from fleetlink.common.configfile import Section
 from fleetlink.common.names import KafkaTopic, KeyChunk, NamespaceGlob, RosTopic, RosType, Site, host_id
+from fleetlink.common.objects import ObjectStoreSection
 from fleetlink.common.zenoh_options import ZenohSection
+from fleetlink.edge.claim_check import ClaimCheckSpec
 from fleetlink.edge.errors import EdgeError, MappingError
 from fleetlink.edge.mapping import (
     Delivery,
@@ -76,6 +78,9 @@ class MappingConfig(Section):
     """How long this mapping's records may wait at the edge for others to share their WAN batch.
     Default: ``wan.linger``; with an ``aggregate`` stage, the stage's hop (its window when
     tumbling), at most 5s: window records are few, and each batch costs a query and an answer."""
+    claim_check: ClaimCheckSpec | None = None
+    """Large payloads go to the edge's object store (``objects``), the record carries a reference
+    (docs/images.md)."""
 
     @field_validator("linger")
     @classmethod
@@ -121,6 +126,7 @@ class MappingConfig(Section):
             delivery=self.delivery,
             stages=tuple(self.stages),
             linger_ns=aggregate_linger(self.stages) if self.linger is None else self.linger,
+            claim_check=self.claim_check,
         )
 
 
@@ -249,6 +255,14 @@ class WanSection(Section):
     retry_backoff_min: DurationNs = 200_000_000
     retry_backoff_max: DurationNs = 30 * _NS
     codec: Codec = "zstd"
+    max_record_bytes: ByteSize | None = None
+    """The largest Kafka record the uplink produces. Default: what the uplink says in its
+    acknowledgements (kept in the spool folder; 1,000,000 until one came). Set, it is used until
+    the uplink says less."""
+    oversize: Literal["dead_letter", "drop"] = "dead_letter"
+    """A record above that limit never crosses the WAN: ``dead_letter`` sends a dead letter in
+    its place (size and SHA-256, no value), ``drop`` only counts it. A mapping with a
+    ``claim_check`` sends the payload to the object store first."""
 
     @model_validator(mode="after")
     def _backoff(self) -> WanSection:
@@ -298,6 +312,8 @@ class EdgeConfig(Section):
     wan: WanSection = WanSection()
     topics: TopicsSection = TopicsSection()
     admin: AdminSection | None = None
+    objects: ObjectStoreSection | None = None
+    """The S3-compatible object store of claim-checked payloads (docs/images.md)."""
 
     def memory_bound(self) -> int:
         """The edge's resident memory at most, in bytes, whatever the backlog: the base process
@@ -318,6 +334,20 @@ class EdgeConfig(Section):
             for t, rt in self.robot_types.items()
             for i, m in enumerate(rt.mappings)
         ]
+        if self.objects is None:
+            claimed = [(m.name, f"mappings[{i}]") for i, m in enumerate(self.mappings) if m.claim_check]
+            claimed += [
+                (m.name, f"robot_types.{t}.mappings[{i}]")
+                for t, rt in self.robot_types.items()
+                for i, m in enumerate(rt.mappings)
+                if m.claim_check
+            ]
+            if claimed:
+                name, where = claimed[0]
+                raise ValueError(
+                    f"{where}.claim_check: mapping {name!r} claim-checks its payloads, but the edge "
+                    "has no object store: add an 'objects' section"
+                )
         for name, where in places:
             if name in seen:
                 raise ValueError(

@@ -45,6 +45,9 @@ class MappingSpec:
     linger_ns: int | None = None
     """How long the mapping's records may wait at the edge for company in a WAN batch
     (``None``: the edge's ``wan.linger``)."""
+    claim_check: Any = None
+    """``edge.claim_check.ClaimCheckSpec`` when large payloads go to the object store, carried
+    through untouched like the stages."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -57,6 +57,8 @@ class BoundMapping:
     linger_s: float | None = None
     """How long this mapping's records may wait for company in a WAN batch (``None``: the
     stream's default)."""
+    claim_check: Any = None
+    """The mapping's ``ClaimCheckSpec``, when its large payloads go to the object store."""
 
     @property
     def needs_message_fields(self) -> bool:
@@ -164,6 +166,7 @@ def _bind(entry: _Entry, topic: str, captures: dict[str, str]) -> BoundMapping:
         key=key_t.literal_text if key_t.is_literal else None,
         topic_error=error,
         linger_s=None if compiled.spec.linger_ns is None else compiled.spec.linger_ns / 1e9,
+        claim_check=compiled.spec.claim_check,
     )
 
 

@@ -12,6 +12,7 @@ through the ``Intake`` too.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field, fields
 from typing import Protocol
 
 from fleetlink.common.ratelimit import LogLimiter
+from fleetlink.edge.claim_check import Claimed, ClaimJob
 from fleetlink.edge.errors import SpoolError, SpoolFullError
 from fleetlink.edge.mapping import Delivery
 from fleetlink.edge.runtime.intake import Intake
@@ -49,7 +51,17 @@ class Emit:
     records: tuple[Outgoing, ...]
 
 
-Item = RosSample | Rejected | Emit
+Item = RosSample | Rejected | Emit | Claimed
+"""``Claimed``: a claim job the uploader finished (its object stored, or not)."""
+
+
+class Uploader(Protocol):
+    """Where claim jobs go (``fleetlink.edge.runtime.offloader.Offloader``)."""
+
+    def submit(self, job: ClaimJob) -> Claimed | None:
+        """Take ``job``; a ``Claimed`` when it is finished at once (nothing to upload and nothing
+        ahead of it, or refused), else None: it comes back later through ``Processor.post``."""
+        ...
 
 
 @dataclass(slots=True)
@@ -109,9 +121,12 @@ class Processor:
         tick_interval_s: float = 0.1,
         chunk: int = 512,
         clock_ns: Callable[[], int] = time.time_ns,
+        uploader: Uploader | None = None,
     ) -> None:
         self.intake = intake
         self.maker = maker
+        self.uploader = uploader
+        """Where claim-checked payloads go; without one they are dead-lettered."""
         self.buffers = buffers
         self._on_appended = on_appended or _nothing
         self.source = source
@@ -164,6 +179,8 @@ class Processor:
                 "stages": self.maker.stage_counters(),
                 "unknown_type_samples": self.maker.unknown_type_samples,
                 "rejected_samples": self.maker.rejected,
+                "oversized": self.maker.oversized,
+                "claims": dataclasses.asdict(self.maker.claim_stats),
             }
 
     # -- the loop --------------------------------------------------------------------------------
@@ -193,6 +210,8 @@ class Processor:
                     if now - last_tick >= tick_ns:
                         last_tick = now
                         out.extend(self.maker.tick(now))
+                    if self.maker.claims:
+                        out.extend(self._hand_over(self.maker.drain_claims()))
                 self._append(out, taken)
             except Exception as exc:  # noqa: BLE001 - one bad chunk must not stop the edge; logged, counted
                 self.stats.errors += 1
@@ -218,8 +237,25 @@ class Processor:
                 extend(make(item, now_ns))
             elif isinstance(item, Rejected):
                 out.extend(self.maker.rejected_sample(item.topic, item.error, item.received_ns))
+            elif isinstance(item, Claimed):
+                out.extend(self.maker.finish_claim(item))
             else:
                 out.extend(item.records)
+            if self.maker.claims:  # in order: a claim job's record may come back at once
+                out.extend(self._hand_over(self.maker.drain_claims()))
+        return out
+
+    def _hand_over(self, jobs: Sequence[ClaimJob]) -> list[Outgoing]:
+        """Give claim jobs to the uploader; the records of those finished at once."""
+        out: list[Outgoing] = []
+        for job in jobs:
+            done = (
+                self.uploader.submit(job)
+                if self.uploader is not None
+                else Claimed(job, error="the edge has no object store")
+            )
+            if done is not None:
+                out.extend(self.maker.finish_claim(done))
         return out
 
     def _append(self, out: list[Outgoing], taken: Taken) -> None:

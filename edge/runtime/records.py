@@ -11,15 +11,32 @@ Anything that goes wrong with one sample (a payload the subscriber refused, a ty
 type store, CDR that does not decode, a topic template that renders an illegal name, a value
 that does not fit its schema, a record too large) becomes a **dead-letter record**: the raw
 bytes as value and the reason, stage and ROS key in headers. The next sample flows.
+
+A record above the uplink's Kafka limit (``max_record_bytes``, learned from its answers) never
+crosses the WAN: it becomes a dead letter without its value, or is dropped and counted
+(``oversize``). A mapping with a ``claim_check`` hands each record to the uploader as a
+``ClaimJob`` (``drain_claims``): a large payload goes to the object store and ``finish_claim``
+makes the record with its reference once it is stored (docs/images.md).
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal, Protocol
 
+from fleetlink.edge.claim_check import (
+    ClaimCheckError,
+    Claimed,
+    ClaimJob,
+    ObjectRef,
+    Upload,
+    claim_schema,
+    content_type_for,
+    object_key,
+    ref_field,
+)
 from fleetlink.edge.errors import RenderError
 from fleetlink.edge.mapping import BoundMapping, Delivery
 from fleetlink.edge.runtime.encoding import AvroWriter, SchemaIdentity, identity_of
@@ -32,6 +49,7 @@ from fleetlink.roswire.subscriber import RosSample
 from fleetlink.schemas.codec import Codec
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.wire import SINGLE_OBJECT_MAGIC, PayloadTemplate, Record, single_object
+from fleetlink.wire.limits import DEFAULT_MAX_RECORD_BYTES, SINGLE_OBJECT_EXTRA, kafka_record_bytes
 from fleetlink.wire.robot_events import EDGE_HEADER, ROBOT_HEADER, SITE_HEADER
 
 H_SOURCE_TOPIC = "fleetlink.source_topic"
@@ -53,6 +71,12 @@ H_ROS_KEY = "fleetlink.ros_key"
 
 Matcher = Callable[[str], Sequence[BoundMapping]]
 _PLAN_CACHE_SIZE = 4096
+FAST_MARGIN = 16 << 10
+"""Room the fast path leaves below the record limit for a record's key and headers: a value
+within it of the limit takes the general path, which measures the whole record."""
+DEAD_LETTER_MARGIN = 64 << 10
+"""Room a dead letter's value leaves below the record limit for its headers."""
+Oversize = Literal["dead_letter", "drop"]
 
 
 class TypeSource(Protocol):
@@ -84,6 +108,16 @@ class Origin:
     raw: bytes | None
 
 
+@dataclass(frozen=True, slots=True)
+class _Claim:
+    """How a claim-checking mapping writes its records (``edge.claim_check``)."""
+
+    field: str
+    ref: str
+    above: int
+    writer: AvroWriter
+
+
 @dataclass(slots=True)
 class _Route:
     """How one mapping handles one ROS type."""
@@ -98,6 +132,49 @@ class _Route:
     problem: str | None = None
     dead_lettered_problem: bool = False
     last_totals: dict[str, int] = field(default_factory=dict)
+    claim: _Claim | None = None
+    claim_spec: Any = None
+
+
+@dataclass(frozen=True, slots=True)
+class ClaimContext:
+    """What ``finish_claim`` needs to make a claim job's record (the maker's own data)."""
+
+    bound: BoundMapping
+    claim: _Claim
+    origin: Origin
+    topic: str
+    key: str
+    value: dict[str, Any]
+    """The message with its payload field emptied (a job with an upload) or as it was."""
+    encoded: bytes | None
+    """The record's value, when the payload stays inline."""
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class LatestPayload:
+    """The newest payload of a robot's claim-checking mapping, for the console."""
+
+    robot: str
+    mapping: str
+    stamp_ns: int
+    content_type: str
+    size: int
+    sha256: str
+    ref: ObjectRef | None
+    """Where it is stored; None when it stayed inline (then ``data`` holds it)."""
+    data: bytes | None
+
+
+@dataclass(slots=True)
+class ClaimStats:
+    inline: int = 0
+    """Records of claim-checking mappings whose payload stayed in the record."""
+    claimed: int = 0
+    """Records whose payload went to the object store."""
+    failed: int = 0
+    """Records dead-lettered because their payload could not be stored."""
 
 
 class RecordMaker:
@@ -114,6 +191,9 @@ class RecordMaker:
         max_value_bytes: int = 16 << 20,
         max_dead_letter_bytes: int = 900_000,
         on_schema: Callable[[bytes, str], None] | None = None,
+        max_record_bytes: int = DEFAULT_MAX_RECORD_BYTES,
+        oversize: Oversize = "dead_letter",
+        object_prefix: str = "",
     ) -> None:
         self.site = site
         self.edge_id = edge_id
@@ -132,6 +212,28 @@ class RecordMaker:
         self.unknown_type_samples = 0
         self.rejected = 0
         """Samples the subscriber refused (no attachment, bad CDR header, bad key)."""
+        self.oversize = oversize
+        self.oversized = 0
+        """Records kept off the WAN because they pass the record limit (dead-lettered or dropped)."""
+        self.object_prefix = object_prefix
+        self.max_record_bytes = max_record_bytes
+        self.fast_value_limit = max_value_bytes
+        self.set_record_limit(max_record_bytes)
+        self.claims: list[ClaimJob] = []
+        """Jobs made since the last ``drain_claims``."""
+        self.claim_stats = ClaimStats()
+        self.latest: dict[tuple[str, str], LatestPayload] = {}
+        """(robot, mapping) -> the newest payload of a claim-checking mapping."""
+
+    def set_record_limit(self, max_record_bytes: int) -> None:
+        """The largest Kafka record the uplink produces (``edge.runtime.limits.RecordLimit``)."""
+        self.max_record_bytes = max_record_bytes
+        self.fast_value_limit = min(self.max_value_bytes, max(1024, max_record_bytes - FAST_MARGIN))
+
+    def drain_claims(self) -> list[ClaimJob]:
+        """The claim jobs made since the last call, in order (for the uploader)."""
+        jobs, self.claims = self.claims, []
+        return jobs
 
     # -- entry points ----------------------------------------------------------------------------
     def make(self, sample: RosSample, now_ns: int) -> list[Outgoing]:
@@ -141,7 +243,7 @@ class RecordMaker:
         if plan is None or plan.bounds is not bounds or plan.topic != sample.topic:
             plan = self._plan(sample, bounds)
         if plan.lanes is not None:
-            return run_plan(plan, sample, self.max_value_bytes, self._one, now_ns)
+            return run_plan(plan, sample, self.fast_value_limit, self._one, now_ns)
         out: list[Outgoing] = []
         for bound in bounds:
             counters = self._counters(bound.name)
@@ -328,6 +430,9 @@ class RecordMaker:
                 result.stamp_ns,
                 result.raw,
             )
+        if route.claim is not None:
+            self._claim(bound, route.claim, result, origin, out)
+            return
         raw = result.raw
         try:
             if route.writer is None:
@@ -359,25 +464,22 @@ class RecordMaker:
     def _finish(
         self, bound: BoundMapping, made: tuple[str, str, bytes], origin: Origin, out: list[Outgoing]
     ) -> None:
-        """Add the record ``made`` = (Kafka topic, key, value), or a dead letter when too large."""
+        """Add the record ``made`` = (Kafka topic, key, value), unless it is too large: then the
+        ``oversize`` policy (a dead letter with its size and SHA-256, or a counted drop)."""
         topic, key, value = made
-        if len(value) > self.max_value_bytes:
-            reason = (
-                f"Avro value of {len(value)} bytes exceeds the edge's record limit of "
-                f"{self.max_value_bytes} bytes"
-            )
+        key_bytes = key.encode("utf-8")
+        headers = self._headers(bound, origin)
+        problem = self._too_large(key_bytes, value, headers)
+        if problem is not None:
+            self.oversized += 1
+            counters = self._counters(bound.name)
+            if self.oversize == "drop":
+                counters.dropped += 1
+                return
             if origin.raw is None:
-                origin = Origin(
-                    origin.topic,
-                    origin.typename,
-                    origin.type_hash,
-                    origin.seq,
-                    origin.key_expr,
-                    origin.stamp_ns,
-                    value,
-                )
-            self._counters(bound.name).dead_lettered += 1
-            out.append(self._dead_letter("size", reason, origin, bound, bound.delivery, intended=topic))
+                origin = replace(origin, raw=value)
+            counters.dead_lettered += 1
+            out.append(self._dead_letter("size", problem, origin, bound, bound.delivery, intended=topic))
             return
         self._counters(bound.name).emitted += 1
         out.append(
@@ -385,20 +487,121 @@ class RecordMaker:
                 bound.delivery,
                 Record(
                     kafka_topic=topic,
-                    key=key.encode("utf-8"),
+                    key=key_bytes,
                     value=value,
-                    headers=self._headers(bound, origin),
+                    headers=headers,
                     timestamp_ms=origin.stamp_ns // 1_000_000,
                 ),
                 bound.linger_s,
             )
         )
 
+    def _too_large(self, key: bytes, value: bytes, headers: Sequence[tuple[str, bytes]]) -> str | None:
+        """Why a record cannot go (the edge's own limit, or the uplink's), or None when it fits."""
+        if len(value) > self.max_value_bytes:
+            return (
+                f"Avro value of {len(value)} bytes exceeds the edge's record limit of "
+                f"{self.max_value_bytes} bytes"
+            )
+        size = kafka_record_bytes(len(key), len(value) - SINGLE_OBJECT_EXTRA, headers)
+        if size > self.max_record_bytes:
+            return (
+                f"record of {size} bytes exceeds the uplink's Kafka limit of {self.max_record_bytes} "
+                "bytes (kafka.message_max_bytes): kept off the WAN"
+            )
+        return None
+
+    # -- claim checks ----------------------------------------------------------------------------
+    def _claim(
+        self, bound: BoundMapping, claim: _Claim, result: Sample, origin: Origin, out: list[Outgoing]
+    ) -> None:
+        """Make the claim job of one record: its payload stays inline when small enough, else it is
+        uploaded first. The job goes to ``claims``; its record comes from ``finish_claim``."""
+        value = dict(result.value)
+        payload = value.get(claim.field)
+        if not isinstance(payload, bytes | bytearray | memoryview):
+            self._dead("encode", f"claim_check: field {claim.field!r} holds no bytes", origin, bound, out)
+            return
+        payload = bytes(payload)
+        try:
+            topic, key = bound.render_topic(result.value), bound.render_key(result.value)
+        except RenderError as exc:
+            self._dead("map", str(exc), origin, bound, out)
+            return
+        value[claim.ref] = None
+        encoded: bytes | None = None
+        if len(payload) <= claim.above:
+            try:
+                encoded = single_object(claim.writer.fingerprint, claim.writer.body(value))
+            except EncodingError as exc:
+                self._dead("encode", str(exc), _with_raw(origin, value), bound, out)
+                return
+            if self._too_large(key.encode("utf-8"), encoded, self._headers(bound, origin)) is not None:
+                encoded = None  # the whole record does not fit: the payload goes to the store
+        upload: Upload | None = None
+        if encoded is None:
+            digest = hashlib.sha256(payload).hexdigest()
+            content_type = content_type_for(value)
+            name = object_key(
+                prefix=self.object_prefix,
+                site=self.site,
+                robot=bound.robot,
+                mapping=bound.name,
+                stamp_ns=origin.stamp_ns,
+                sha256=digest,
+                content_type=content_type,
+            )
+            upload = Upload(name, payload, digest, content_type)
+            value[claim.field] = b""
+        context = ClaimContext(bound, claim, origin, topic, key, value, encoded, payload)
+        lane = f"{bound.name}/{bound.robot or ''}"
+        self.claims.append(ClaimJob(lane, upload, context, len(payload) if upload else 0))
+
+    def finish_claim(self, claimed: Claimed) -> list[Outgoing]:
+        """The record of a finished claim job (or its dead letter, when its payload was not stored)."""
+        job = claimed.job
+        ctx: ClaimContext = job.context
+        bound, claim, origin = ctx.bound, ctx.claim, ctx.origin
+        out: list[Outgoing] = []
+        if claimed.error is not None:
+            self.claim_stats.failed += 1
+            self._dead("claim_check", claimed.error, replace(origin, raw=ctx.payload), bound, out)
+            return out
+        if job.upload is None or claimed.ref is None:
+            self.claim_stats.inline += 1
+            encoded = ctx.encoded or b""
+        else:
+            self.claim_stats.claimed += 1
+            value = {**ctx.value, claim.ref: claimed.ref.as_datum()}
+            try:
+                encoded = single_object(claim.writer.fingerprint, claim.writer.body(value))
+            except EncodingError as exc:
+                self._dead("encode", str(exc), replace(origin, raw=ctx.payload), bound, out)
+                return out
+        self._finish(bound, (ctx.topic, ctx.key, encoded), origin, out)
+        if bound.robot:
+            self.latest[(bound.robot, bound.name)] = LatestPayload(
+                robot=bound.robot,
+                mapping=bound.name,
+                stamp_ns=origin.stamp_ns,
+                content_type=claimed.ref.content_type if claimed.ref else content_type_for(ctx.value),
+                size=len(ctx.payload),
+                sha256=claimed.ref.sha256 if claimed.ref else hashlib.sha256(ctx.payload).hexdigest(),
+                ref=claimed.ref,
+                data=None if claimed.ref else ctx.payload,
+            )
+        return out
+
     # -- routes ----------------------------------------------------------------------------------
     def _route(self, bound: BoundMapping, typename: str) -> _Route | None:
-        fast = not bound.stages and not bound.needs_message_fields
+        fast = not bound.stages and not bound.needs_message_fields and bound.claim_check is None
         route = self._routes.get((bound.name, typename))
-        if route is not None and route.stages is bound.stages and route.fast == fast:
+        if (
+            route is not None
+            and route.stages is bound.stages
+            and route.fast == fast
+            and route.claim_spec is bound.claim_check
+        ):
             return route
         try:
             codec = self._types.codec(typename)
@@ -419,6 +622,17 @@ class RecordMaker:
             except StageConfigError as exc:
                 problem = f"mapping {bound.name!r} cannot handle {typename}: {exc}"
                 pipeline = None
+        claim: _Claim | None = None
+        spec = bound.claim_check
+        if spec is not None and problem is None:
+            try:
+                schema = claim_schema(writer.schema if writer is not None else codec.schema, spec.field)
+            except ClaimCheckError as exc:
+                problem = f"mapping {bound.name!r} cannot handle {typename}: {exc}"
+            else:
+                claim_writer = AvroWriter(schema)
+                self._on_schema(claim_writer.fingerprint, claim_writer.identity.json)
+                claim = _Claim(spec.field, ref_field(spec.field), int(spec.above), claim_writer)
         route = _Route(
             stages=bound.stages,
             codec=codec,
@@ -427,6 +641,8 @@ class RecordMaker:
             writer=writer,
             fast=fast,
             problem=problem,
+            claim=claim,
+            claim_spec=spec,
         )
         self._routes[(bound.name, typename)] = route
         return route
@@ -500,7 +716,7 @@ class RecordMaker:
             (H_ROS_KEY, origin.key_expr.encode("utf-8", "replace")),
         ]
         value = raw
-        if len(raw) > self.max_dead_letter_bytes:
+        if len(raw) > min(self.max_dead_letter_bytes, self.max_record_bytes - DEAD_LETTER_MARGIN):
             headers += [(H_DLQ_SHA256, hashlib.sha256(raw).hexdigest().encode()), (H_DLQ_TRUNCATED, b"true")]
             value = b""
         robot = bound.robot if bound is not None else None
@@ -515,6 +731,14 @@ class RecordMaker:
                 raw_value=True,
             ),
         )
+
+
+def _with_raw(origin: Origin, value: Any) -> Origin:
+    """``origin`` with the text of ``value`` as its raw bytes, when it has none (a dead letter of a
+    value a stage made)."""
+    if origin.raw is not None:
+        return origin
+    return replace(origin, raw=repr(value).encode("utf-8", "replace"))
 
 
 def _delivery_of(bounds: Sequence[BoundMapping]) -> Delivery:

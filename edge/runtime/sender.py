@@ -16,7 +16,8 @@ A batch carries the text of each schema its records use until the uplink has ack
 batch that carried it; later batches list the fingerprint alone. An uplink that does not know a
 left-out schema (it restarted, or it is another uplink) answers ``need_schemas``: the batch goes
 again at once with those texts, without backoff, and they travel again until acknowledged.
-One warning is logged when an outage starts and one line when it ends.
+One warning is logged when an outage starts and one line when it ends. Every answer says the
+largest Kafka record the uplink produces; ``on_limit`` hears it (docs/images.md).
 """
 
 from __future__ import annotations
@@ -119,8 +120,11 @@ class WanSender:
         options: SenderOptions | None = None,
         clock: Callable[[], float] = time.monotonic,
         rng: random.Random | None = None,
+        on_limit: Callable[[int], object] | None = None,
     ) -> None:
         self.buffer = buffer
+        self._on_limit = on_limit
+        """Hears the uplink's record limit from every answer (``edge.runtime.limits.RecordLimit``)."""
         self.transport = transport
         self.schemas = schemas
         self.site = site
@@ -381,6 +385,8 @@ class WanSender:
             ack = decode_ack(reply)
         except WireError as exc:
             return f"unreadable acknowledgement: {exc}"
+        if self._on_limit is not None and ack.max_record_bytes:
+            self._on_limit(ack.max_record_bytes)
         if (ack.edge_id, ack.stream, ack.first_seq, ack.last_seq) != (
             self.edge_id,
             self.stream,

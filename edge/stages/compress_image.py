@@ -11,6 +11,7 @@ encoding (the ``images`` extra). An image that cannot be compressed (an encoding
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Any
 
@@ -66,7 +67,8 @@ class CompressImageStage:
         counters.passed += 1
         counters.emitted += 1
         out = {"header": value["header"], "format": format_text, "data": data}
-        return [Sample(sample.robot, sample.topic, sample.stamp_ns, out, None)]
+        # replace keeps what the caller's sample type carries besides (the edge: its sequence number)
+        return [dataclasses.replace(sample, value=out, raw=None)]
 
     def tick(self, now_ns: int) -> list[Sample]:  # noqa: ARG002 - nothing is time-driven here
         return []
