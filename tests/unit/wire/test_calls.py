@@ -60,7 +60,8 @@ def test_call_round_trip(env: CallEnvelope) -> None:
 def test_large_call_is_compressed_and_still_decodes() -> None:
     env = replace(SERVICE, payload=b"\x00\x01\x00\x00" + b"a" * 4000)
     data = encode_call(env)
-    assert data[4] == 1 and len(data) < 500
+    assert data[4] == 1
+    assert len(data) < 500
     assert decode_call(data) == env
 
 
