@@ -26,6 +26,7 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.schemas.registry import SchemaRegistry
 from fleetlink.uplink.admission import Admission, Refused
+from fleetlink.uplink.calls.convert import load_call_types
 from fleetlink.uplink.commands.decode import CommandDecoder
 from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.registrations import RegistrationsReader
@@ -110,6 +111,7 @@ class Uplink:
 
     def start(self) -> Uplink:
         cfg = self.config
+        call_types = load_call_types(cfg)  # before any socket: a missing type names its YAML path
         check_kafka_access(cfg.kafka)
         ensure_topics(cfg.kafka, cfg.topics)
         self._registry = SchemaRegistry(cfg.registry.url)
@@ -128,9 +130,14 @@ class Uplink:
             key = f"fleetlink/{site}/ingest/*"
             self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
             log.info("serving edge batches on %s", key)
-        if cfg.commands:
+        if cfg.commands or cfg.services or cfg.actions:
             self._commands = CommandRouter(
-                cfg, session=self._session, sink=self._sink, registry=self._registry, directory=self.directory
+                cfg,
+                session=self._session,
+                sink=self._sink,
+                registry=self._registry,
+                directory=self.directory,
+                call_types=call_types,
             ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
@@ -343,5 +350,11 @@ def _policy(cfg: UplinkConfig) -> TopicPolicy:
     topics = cfg.topics
     owned = {topics.command_dead_letter, topics.command_status, topics.refused}
     owned.update(mapping.from_ for mapping in cfg.commands)
+    for service in cfg.services:
+        owned.update((service.from_, service.reply_to))
+    for action in cfg.actions:
+        owned.update((action.from_, action.feedback_to, action.result_to))
+        if action.cancel_from is not None:
+            owned.add(action.cancel_from)
     internal = InternalTopics(topics.registrations, topics.dead_letter, frozenset(owned))
     return TopicPolicy(cfg.policy.patterns(), cfg.policy.default.topics, internal)
