@@ -317,7 +317,6 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
                 sys.executable,
                 "-m",
                 "fleetlink",
-                "ros",
                 "sim",
                 "--robots",
                 "1",
@@ -329,8 +328,8 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
                 bed.site.endpoint,
             ],
             env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            stdout=(tmp_path / "sim.log").open("w"),
+            stderr=subprocess.STDOUT,
         )
         try:
             with (
