@@ -275,7 +275,11 @@ def test_a_service_that_never_answers_times_out(
             RosNode("slow", "/tb4_01", config=robot_config(bed.site.endpoint), typestore=req.ts) as node,
             TopicLog(kafka_bootstrap, schema_registry_url, t["slow.replies"]) as replies,
         ):
-            RosServiceServer(node, "take_a_while", TRIGGER, lambda call: held.append(call)).start()  # type: ignore[func-returns-value]
+
+            def hold(call: ServiceCall) -> None:  # never answers
+                held.append(call)
+
+            RosServiceServer(node, "take_a_while", TRIGGER, hold).start()
             with running_uplink(bed.config) as uplink:
                 assert uplink.commands is not None
                 wait_until(
@@ -335,39 +339,37 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
             with (
                 Repeater(repeater_config(bed.site, tmp_path / "rep")) as repeater,
                 TopicLog(kafka_bootstrap, schema_registry_url, t["dock.results"]) as results,
+                running_uplink(bed.config) as uplink,
             ):
-                with running_uplink(bed.config) as uplink:
-                    assert uplink.commands is not None
-                    wait_until(
-                        lambda: (
-                            uplink.commands is not None
-                            and uplink.commands.directory.site_of("tb4_01") == "site-a"
-                        ),
-                        timeout=10,
-                        message="registered",
-                    )
-                    goal = str(uuid.uuid4())
-                    req.goal(t["dock"], "tb4_01", goal)
-                    _one(
-                        results,
-                        lambda v: v["goal_id"] == goal and v["status"] == "accepted",
-                        "accepted",
-                        timeout=30,
-                    )
-                    sim.send_signal(signal.SIGKILL)  # the robot's process dies mid-goal (docking takes 2 s)
-                    sim.wait(10)
-                    final = _one(
-                        results, lambda v: v["goal_id"] == goal and v["status"] != "accepted", "final"
-                    )
-                    assert final["status"] == "error"
-                    assert "went away" in final["detail"]
-                    assert final["result"] is None
-                    time.sleep(1.0)
-                    assert [v["status"] for v in results.values() if v["goal_id"] == goal] == [
-                        "accepted",
-                        "error",
-                    ]
-                    assert repeater.calls.calls[("goal", goal, "tb4_01")].done
+                assert uplink.commands is not None
+                wait_until(
+                    lambda: (
+                        uplink.commands is not None
+                        and uplink.commands.directory.site_of("tb4_01") == "site-a"
+                    ),
+                    timeout=10,
+                    message="registered",
+                )
+                goal = str(uuid.uuid4())
+                req.goal(t["dock"], "tb4_01", goal)
+                _one(
+                    results,
+                    lambda v: v["goal_id"] == goal and v["status"] == "accepted",
+                    "accepted",
+                    timeout=30,
+                )
+                sim.send_signal(signal.SIGKILL)  # the robot's process dies mid-goal (docking takes 2 s)
+                sim.wait(10)
+                final = _one(results, lambda v: v["goal_id"] == goal and v["status"] != "accepted", "final")
+                assert final["status"] == "error"
+                assert "went away" in final["detail"]
+                assert final["result"] is None
+                time.sleep(1.0)
+                assert [v["status"] for v in results.values() if v["goal_id"] == goal] == [
+                    "accepted",
+                    "error",
+                ]
+                assert repeater.calls.calls[("goal", goal, "tb4_01")].done
         finally:
             if sim.poll() is None:
                 sim.kill()
