@@ -55,6 +55,10 @@ def register(sub: Any) -> None:
     add_zenoh_arguments(graph)
     graph.set_defaults(handler=graph_command)
 
+    from fleetlink.cli.ros_call import register_calls
+
+    register_calls(ros_sub, _add_types_arguments)
+
     sim = sub.add_parser("sim", help="run a simulated TurtleBot 4 fleet (iRobot Create 3 topics)")
     sim.add_argument("--robots", type=int, default=3, metavar="N", help="number of robots (default 3)")
     sim.add_argument("--prefix", default="tb4_", help="robot name prefix (default tb4_: tb4_01, tb4_02 …)")
