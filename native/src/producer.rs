@@ -152,6 +152,11 @@ impl ScannedBatch {
     fn seqs(&self) -> Vec<u64> {
         self.records.iter().map(|r| r.seq).collect()
     }
+
+    /// The tail (an index into `tails()`) of every record, in order.
+    fn tail_ids(&self) -> Vec<u32> {
+        self.records.iter().map(|r| r.tail).collect()
+    }
 }
 
 fn scan(body: Vec<u8>, start: usize) -> Result<ScannedBatch, String> {
