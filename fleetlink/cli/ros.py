@@ -200,10 +200,8 @@ def sim_command(args: argparse.Namespace, out: TextIO = sys.stdout, inp: TextIO 
 
     if args.robots < 0:
         raise ConfigError("--robots must be >= 0")
-    from fleetlink.schemas.bundled import bundled_message_paths
-
-    # the Create 3 definitions ship with fleetlink; --msg-path adds (or overrides) packages
-    ts = load_typestore(args.distro, [*bundled_message_paths(), *_msg_paths(args)])
+    # the Create 3 definitions ship with fleetlink; --msg-path adds (or replaces) packages
+    ts = load_typestore(args.distro, _msg_paths(args))
     if IR_VECTOR not in ts.fielddefs:
         raise ConfigError(
             "the simulator needs the irobot_create_msgs definitions: pass "

@@ -115,11 +115,8 @@ class Demo:
         cloud = self._exit.enter_context(ZenohRouter())
         site = self._exit.enter_context(ZenohRouter(connect=(cloud.endpoint,)))
         self.say(f"Zenoh routers: cloud {cloud.endpoint}, site warehouse-a {site.endpoint} (linked)")
-        from fleetlink.schemas.bundled import bundled_message_paths
-
-        return DemoPlaces(
-            bootstrap, registry, cloud.endpoint, site.endpoint, work, tuple(bundled_message_paths())
-        )
+        # the Create 3 definitions ship with fleetlink: no message paths needed
+        return DemoPlaces(bootstrap, registry, cloud.endpoint, site.endpoint, work, ())
 
     def _process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
         log = self.o.workdir / "logs" / f"{name}.log"
