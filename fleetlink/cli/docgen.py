@@ -20,7 +20,7 @@ from typing import Any
 from pydantic import BaseModel, ByteSize, PlainSerializer
 from pydantic_core import PydanticUndefined
 
-from fleetlink.cli.validate import KINDS, model_for
+from fleetlink.cli.configs import KINDS, model_for
 
 
 @cache

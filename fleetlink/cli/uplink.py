@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from fleetlink.cli.configs import load_service
 from fleetlink.cli.service import add_service_command, wait_for_stop
-from fleetlink.common.configfile import load_config
 from fleetlink.common.zenoh_options import options_from_args
 from fleetlink.uplink.config import UplinkConfig
 
@@ -26,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
     from fleetlink.console.uplink import console_extensions
     from fleetlink.uplink.service import Uplink
 
-    config = load_config(UplinkConfig, args.config)
+    config = load_service(UplinkConfig, "uplink", args)
     options = config.zenoh.merged_with(options_from_args(args))
     with Uplink(config, options, extensions=console_extensions(config)):
         print(
