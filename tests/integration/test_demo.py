@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import io
+import re
+import threading
 from pathlib import Path
+from typing import Any
+
+import httpx
 
 from fleetlink.demo.runner import Demo, DemoOptions
+from tests.helpers import wait_until
 
 
 def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
@@ -20,7 +26,15 @@ def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tm
             step_timeout_s=60,
         )
     )
-    summary = demo.run()
+    result: dict[str, Any] = {}
+    runner = threading.Thread(target=lambda: result.update(summary=demo.run()))
+    runner.start()
+    try:
+        wait_until(lambda: "metrics: " in out.getvalue(), timeout=120, message="the demo's URLs told")
+        _consoles_and_metrics_answer(out.getvalue(), demo.token)
+    finally:
+        runner.join(300)
+    summary = result["summary"]
     told = out.getvalue()
 
     faulted = summary["faulted_robot"]
@@ -36,4 +50,25 @@ def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tm
     assert 0 < summary["fault_to_red_led_s"] < 30
     assert 0 < summary["heal_to_green_led_s"] < 30
     assert (tmp_path / "demo" / "summary.json").exists()
-    assert "stopped" in told.splitlines()[-1]
+    lines = told.splitlines()
+    assert lines[-2].endswith("stopping everything the demo started ...")
+    assert lines[-1].endswith("] stopped")  # nothing told after it, nothing between
+    assert "summary written to" in lines[-3]
+
+
+def _consoles_and_metrics_answer(told: str, token: str) -> None:
+    consoles = re.search(r"web console: (http://\S+/console/) \(the fleet\), (http://\S+/console/)", told)
+    assert consoles is not None, told
+    assert f"sign in with token {token}" in told
+    for console in consoles.groups():
+        assert httpx.get(console + "login", timeout=10).status_code == 200
+        bearer = {"Authorization": f"Bearer {token}"}
+        page = httpx.get(console, headers=bearer, timeout=10, follow_redirects=True)
+        assert page.status_code == 200, console
+        assert httpx.get(console + "api/sites", timeout=10).status_code == 401  # the token is needed
+    metrics = re.findall(r"(http://\S+/metrics) \(", told)
+    assert len(metrics) == 2, told
+    for url in metrics:
+        scrape = httpx.get(url, timeout=10)
+        assert scrape.status_code == 200
+        assert "fleetlink_" in scrape.text
