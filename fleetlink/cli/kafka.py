@@ -81,7 +81,7 @@ def _plain(value: Any) -> Any:
 
 
 def read_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    from confluent_kafka import Consumer, KafkaException
+    from confluent_kafka import Consumer
     from confluent_kafka.schema_registry import SchemaRegistryClient
     from confluent_kafka.schema_registry.avro import AvroDeserializer
     from confluent_kafka.serialization import MessageField, SerializationContext
@@ -114,8 +114,8 @@ def read_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             if raw is not None and raw[:1] == b"\x00":
                 try:
                     value = decode(raw, SerializationContext(msg.topic() or "", MessageField.VALUE))
-                except (KafkaException, ValueError, TypeError) as exc:
-                    value = {"undecoded": raw.hex(), "error": str(exc)}
+                except Exception as exc:  # noqa: BLE001 - any decoder failure: show the bytes and why
+                    value = {"undecoded": raw.hex(), "error": f"{type(exc).__name__}: {exc}"}
             elif raw is not None:
                 value = _text(raw)
             where = (msg.topic() or "", msg.partition() or 0, msg.offset() or 0)

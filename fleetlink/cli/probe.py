@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from typing import Any
 
 
@@ -18,19 +19,35 @@ def register(sub: Any) -> None:
         description="GET a URL; exit 0 on a 2xx answer, 1 otherwise (the reason on stderr).",
     )
     parser.add_argument("url", help="e.g. http://127.0.0.1:8480/health")
-    parser.add_argument("--timeout", type=float, default=3.0, metavar="S", help="default 3 s")
+    parser.add_argument("--timeout", type=float, default=3.0, metavar="S", help="per request (default 3 s)")
+    parser.add_argument(
+        "--wait",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="ask again until it answers, for up to S seconds (for scripts starting a service)",
+    )
     parser.set_defaults(handler=_probe)
 
 
 def _probe(args: argparse.Namespace) -> int:
+    deadline = time.monotonic() + max(0.0, args.wait)
+    while True:
+        problem = _ask(args.url, args.timeout)
+        if problem is None:
+            return 0
+        if time.monotonic() >= deadline:
+            print(f"{args.url}: {problem}", file=sys.stderr)
+            return 1
+        time.sleep(0.5)  # ok-sleep: --wait polls a starting service
+
+
+def _ask(url: str, timeout: float) -> str | None:
+    """None when ``url`` answers 2xx, else why not."""
     import httpx
 
     try:
-        response = httpx.get(args.url, timeout=args.timeout)
+        response = httpx.get(url, timeout=timeout)
     except httpx.HTTPError as exc:
-        print(f"{args.url}: {exc}", file=sys.stderr)
-        return 1
-    if not response.is_success:
-        print(f"{args.url}: HTTP {response.status_code}", file=sys.stderr)
-        return 1
-    return 0
+        return str(exc) or type(exc).__name__
+    return None if response.is_success else f"HTTP {response.status_code}"
