@@ -57,11 +57,11 @@ def test_service_configs_get_their_addresses_and_state_moved() -> None:
         "spool": {"dir": "var/edge/spool"},
         "site": "warehouse-a",
     }
-    lines = service_overrides(config, PORTS, Path("/tmp/s"), {"listen": ["tcp/127.0.0.1:7447"]})
+    lines = service_overrides(config, PORTS, Path("state"), {"listen": ["tcp/127.0.0.1:7447"]})
     assert lines == [
         "kafka.bootstrap_servers=127.0.0.1:19092",
         "zenoh.connect[0]=tcp/127.0.0.1:17448",
-        "spool.dir=/tmp/s/spool",
+        "spool.dir=state/spool",
         "zenoh.listen=[tcp/127.0.0.1:17447]",
     ]
 
