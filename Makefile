@@ -4,21 +4,30 @@
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+DEMO_STAMP := $(VENV)/.installed-demo
 STAMP := $(VENV)/.installed
 
 .PHONY: install demo test lint typecheck unit integration fault bench clean
 
-$(STAMP): pyproject.toml
+$(BIN)/python:
 	@$(PY) -c 'import sys; assert sys.version_info >= (3, 11), "fleetlink needs Python 3.11+"' \
 		|| { echo "fleetlink needs Python 3.11 or newer as '$(PY)'; set PY=python3.11"; exit 2; }
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
+
+# the demo needs fleetlink with its demo extra (the stream app, the console); the checks need the dev
+# extra (the demo's and the test tools); an edge device needs neither: `pip install fleetlink`
+$(DEMO_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/pip install --quiet -e '.[demo]'
+	@touch $(DEMO_STAMP)
+
+$(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/pip install --quiet -e '.[dev]'
-	@touch $(STAMP)
+	@touch $(STAMP) $(DEMO_STAMP)
 
 install: $(STAMP)
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	$(BIN)/fleetlink demo
 
 lint: $(STAMP)

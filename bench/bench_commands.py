@@ -259,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         config = UplinkConfig.model_validate(
             {
-                "kafka": {"bootstrap_servers": bootstrap, "client_id": f"bench-{run}", "linger_ms": 0},
+                "kafka": {"bootstrap_servers": bootstrap, "client_id": f"bench-{run}", "linger": "0ms"},
                 "registry": {"url": registry_url},
                 "zenoh": {"mode": "client", "connect": [cloud.endpoint]},
                 "topics": {

@@ -136,7 +136,7 @@ class Pipeline:
     def __init__(self, work: Path, bootstrap: str, registry: str, topic: str, stack: ExitStack) -> None:
         self.cloud_port, self.site_port = free_port(), free_port()
         uplink: dict[str, Any] = {
-            "kafka": {"bootstrap_servers": bootstrap, "linger_ms": 5},
+            "kafka": {"bootstrap_servers": bootstrap, "linger": "5ms"},
             "registry": {"url": registry},
             "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.cloud_port}"]},
         }

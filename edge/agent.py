@@ -3,12 +3,13 @@
     with EdgeAgent(load_config(EdgeConfig, path)) as agent:   # start(): sockets, files, threads
         ...                                                   # stop(): bounded, flushes the spool
 
-Inside: one Zenoh session (the config's ``zenoh:`` section, command-line options on top);
-robot registration (discovered or explicit) instantiating the robot types' mappings; one
-subscriber per mapped topic; a bounded intake queue; one processing thread (decode, stages,
-Avro, dead letters); the durable spool (``at_least_once``) and the memory buffer
-(``best_effort``); one WAN sender per buffer. Nothing opens a socket or a file before ``start``.
-See docs/edge.md.
+Inside: one Zenoh session (the config's ``zenoh:`` section, command-line options on top) for
+discovery, registration, the admin space and the WAN; the native data plane (a second session,
+a client of the same router) receiving every mapped topic into one bounded intake; robot
+registration (discovered or explicit) instantiating the robot types' mappings; one processing
+thread (the general path: decode, stages, Avro, dead letters); the durable spool
+(``at_least_once``) and the memory buffer (``best_effort``); one WAN sender per buffer. Nothing
+opens a socket or a file before ``start``. See docs/edge.md.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.edge.config import EdgeConfig
 from fleetlink.edge.errors import MappingError
 from fleetlink.edge.mapping import Delivery, MappingSpec, MappingTable
+from fleetlink.edge.runtime.dataplane import NativeSource, python_config_json
 from fleetlink.edge.runtime.errors import RuntimeSetupError
 from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
@@ -94,7 +96,11 @@ class EdgeAgent:
         self.zenoh_options = config.zenoh.merged_with(zenoh_options or ZenohOptions())
         self.table: MappingTable = config.mapping_table()
         self.stop_timeout_s = stop_timeout_s
-        self.intake: Intake[Item] = Intake(max_items=intake_items, max_bytes=intake_bytes)
+        self.intake_items = intake_items
+        self.intake_bytes = intake_bytes
+        self.intake: Intake[Item] = Intake()
+        """Control items for the processing thread (registration events); samples go through the
+        data plane's intake (``intake_items`` samples, ``intake_bytes`` bytes)."""
         self._lock = threading.Lock()
         self._started = False
         self._session: zenoh.Session | None = None
@@ -106,6 +112,7 @@ class EdgeAgent:
         self._processor: Processor | None = None
         self._senders: dict[Delivery, WanSender] = {}
         self._subscriptions: SubscriptionManager | None = None
+        self._source: NativeSource | None = None
         self._registrar: Registrar | None = None
         self.robot_errors = 0
         self._gc_before = gc.get_threshold()
@@ -164,7 +171,14 @@ class EdgeAgent:
             max_value_bytes=max(limit, 1024),
             on_schema=book.add,
         )
-        self._session = session = open_session(edge_session_config(self.zenoh_options))
+        session_config = edge_session_config(self.zenoh_options)
+        self._source = source = NativeSource(
+            python_config_json(session_config),
+            max_items=self.intake_items,
+            max_bytes=self.intake_bytes,
+            max_value_bytes=self._maker.max_value_bytes,
+        )
+        self._session = session = open_session(session_config)
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)
         self._senders = {
@@ -179,6 +193,8 @@ class EdgeAgent:
             self._maker,
             buffers,
             on_appended=lambda delivery, linger: senders[delivery].pump(linger),
+            source=source,
+            table_version=lambda: self.table.version,
             default_linger_s=options.linger_s,
         )
         attachment: AttachmentVersion = 1 if config.ros.attachment == "v1" else 2
@@ -192,7 +208,7 @@ class EdgeAgent:
             attachment_version=attachment,
         ).start()
         self._subscriptions = SubscriptionManager(
-            self._node, self.table, self.intake, known_type=lambda t: _known(codecs, t)
+            self._node, self.table, source, known_type=lambda t: _known(codecs, t)
         )
         registration = config.registration
         self._registrar = Registrar(
@@ -238,6 +254,8 @@ class EdgeAgent:
         self.intake.close()
         if self._processor is not None:
             self._processor.stop()
+        if self._source is not None:
+            self._source.close()
         for sender in self._senders.values():
             sender.request_stop(timeout_s)
         for sender in self._senders.values():
@@ -255,6 +273,7 @@ class EdgeAgent:
         self._registrar = None
         self._subscriptions = None
         self._processor = None
+        self._source = None
         self._node = None
         self._session = None
         self._spool = None
@@ -289,7 +308,11 @@ class EdgeAgent:
         record = event_record(
             change, site=self.config.site, edge_id=self.config.edge_id, topic=self.config.topics.registrations
         )
-        self.intake.offer(Emit((Outgoing.of("at_least_once", record),)), force=True)
+        item = Emit((Outgoing.of("at_least_once", record),))
+        if self._processor is not None:
+            self._processor.post(item)
+        else:
+            self.intake.offer(item, force=True)
 
     def register_robot(self, robot_type: str, name: str) -> None:
         """Register a robot explicitly (as a message on the register topic would)."""
@@ -331,7 +354,7 @@ class EdgeAgent:
             "edge_id": self.config.edge_id,
             "running": self._started,
             "robots": self.table.robots(),
-            "intake": self.intake.stats().as_dict(),
+            "intake": self._source.intake_stats() if self._source is not None else {},
             "robot_errors": self.robot_errors,
         }
         if self._processor is not None:

@@ -8,22 +8,21 @@ sizes are bytes or text (``64MiB``, ``1GiB``). See deploy/edge.example.yaml.
 
 from __future__ import annotations
 
-import re
 import socket
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Literal
 
 from pydantic import (
-    BaseModel,
     ByteSize,
     ConfigDict,
     Field,
-    StringConstraints,
     ValidationInfo,
     field_validator,
     model_validator,
 )
 
+from fleetlink.common.configfile import Section
+from fleetlink.common.names import KafkaTopic, KeyChunk, NamespaceGlob, RosTopic, RosType, Site, host_id
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.edge.errors import EdgeError, MappingError
 from fleetlink.edge.mapping import (
@@ -33,36 +32,26 @@ from fleetlink.edge.mapping import (
     RobotTypeSpec,
     Template,
     TopicPattern,
-    check_ros_type,
 )
-from fleetlink.edge.mapping.spec import NAME_PATTERN, check_captures, check_topic_literal
-from fleetlink.edge.mapping.templates import kafka_topic_problem
+from fleetlink.edge.mapping.spec import check_captures, check_topic_literal
 from fleetlink.edge.spool import FsyncPolicy, FullPolicy, MemoryBuffer, SpoolOptions
 from fleetlink.edge.stages import AggregateSpec, DurationNs, StageSpec
-from fleetlink.wire import Codec, WireError, check_key_name
+from fleetlink.wire import Codec
 
 _NS = 1_000_000_000
-Name = Annotated[str, StringConstraints(pattern=f"^{NAME_PATTERN.pattern}$", max_length=128)]
-_GLOB = re.compile(r"/?[A-Za-z0-9_/*?\[\]!-]+")
-_ROS_TOPIC = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
 
 
-def _why(exc: EdgeError | WireError) -> str:
+def _why(exc: EdgeError) -> str:
     """The reason without the 'mapping X:' prefix (the YAML path already says where)."""
     return str(exc).split(": ", 1)[1] if str(exc).startswith("mapping ") else str(exc)
 
 
 def default_edge_id() -> str:
     """The host name, cut to a valid key-expression chunk."""
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", socket.gethostname()).strip("-.") or "edge"
-    return name[:64]
+    return host_id(socket.gethostname(), "edge")
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class RosSection(_Section):
+class RosSection(Section):
     domain_id: int = Field(default=0, ge=0, le=232)
     distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "jazzy"
     """Decides type hashes and the rmw_zenoh wire details."""
@@ -72,16 +61,16 @@ class RosSection(_Section):
     attachment: Literal["auto", "v1", "v2"] = "auto"
 
 
-class MappingConfig(_Section):
+class MappingConfig(Section):
     """One mapping: ROS topic pattern ``from`` -> Kafka topic template ``to``."""
 
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    model_config = ConfigDict(populate_by_name=True)
 
-    name: Name
+    name: KeyChunk
     from_: str = Field(alias="from")
     to: str
     key: str | None = Field(default=None, validate_default=True)
-    type: str | None = None
+    type: RosType | None = None
     delivery: Delivery = "at_least_once"
     stages: list[StageSpec] = []
     linger: DurationNs | None = None
@@ -122,16 +111,6 @@ class MappingConfig(_Section):
                 )
             return None
         return _check_template(value, info, "key template", topic=False)
-
-    @field_validator("type")
-    @classmethod
-    def _type(cls, value: str | None) -> str | None:
-        if value is not None:
-            try:
-                check_ros_type(value)
-            except MappingError as exc:
-                raise ValueError(_why(exc)) from None
-        return value
 
     def spec(self) -> MappingSpec:
         return MappingSpec(
@@ -182,36 +161,22 @@ class RobotMappingConfig(MappingConfig):
         return value
 
 
-class RobotTypeConfig(_Section):
-    match: str
+class RobotTypeConfig(Section):
+    match: NamespaceGlob
     """Glob over robot namespaces, e.g. ``/tb4_*``."""
     mappings: list[RobotMappingConfig] = []
 
-    @field_validator("match")
-    @classmethod
-    def _glob(cls, value: str) -> str:
-        if _GLOB.fullmatch(value) is None:
-            raise ValueError(f"{value!r} is not a namespace glob such as '/tb4_*'")
-        return value
 
-
-class RegistrationSection(_Section):
-    topic: str = "/fleetlink/register"
+class RegistrationSection(Section):
+    topic: RosTopic = "/fleetlink/register"
     """ROS topic on which robots may register explicitly."""
     discover: bool = True
     """Register robots found in the ROS graph whose namespace matches a robot type."""
     grace_period: DurationNs = 5 * _NS
     """How long a robot may be gone (liveliness lost) before it is deregistered."""
 
-    @field_validator("topic")
-    @classmethod
-    def _topic(cls, value: str) -> str:
-        if _ROS_TOPIC.fullmatch(value) is None:
-            raise ValueError(f"{value!r} is not an absolute ROS topic name")
-        return value
 
-
-class SpoolSection(_Section):
+class SpoolSection(Section):
     dir: Path
     max_bytes: ByteSize = ByteSize(1 << 30)
     segment_bytes: ByteSize = ByteSize(16 << 20)
@@ -241,7 +206,7 @@ class SpoolSection(_Section):
         )
 
 
-class MemorySection(_Section):
+class MemorySection(Section):
     """The in-memory buffer of ``best_effort`` mappings."""
 
     max_bytes: ByteSize = ByteSize(64 << 20)
@@ -251,7 +216,7 @@ class MemorySection(_Section):
         return MemoryBuffer(max_bytes=int(self.max_bytes), max_records=self.max_records)
 
 
-class WanSection(_Section):
+class WanSection(Section):
     # Defaults measured with bench/bench_e2e.py (docs/benchmarks.md): batches of 500 records cost
     # the edge 14% and the uplink 12% more CPU per record than batches of up to 2,000 (each batch
     # is a Zenoh query with its reply callbacks on both sides); 1 MiB, about 1,500 IMU records, is
@@ -278,24 +243,16 @@ class WanSection(_Section):
         return self
 
 
-class TopicsSection(_Section):
+class TopicsSection(Section):
     """Kafka topics the edge writes to besides the mappings' own."""
 
-    dead_letter: str = "fleetlink.dead-letter"
+    dead_letter: KafkaTopic = "fleetlink.dead-letter"
     """Records that could not be received, decoded, mapped or encoded (raw bytes + reason)."""
-    registrations: str = "fleetlink.robots"
+    registrations: KafkaTopic = "fleetlink.robots"
     """Robot registration events, keyed by robot (create it with cleanup.policy=compact)."""
 
-    @field_validator("dead_letter", "registrations")
-    @classmethod
-    def _legal(cls, value: str) -> str:
-        problem = kafka_topic_problem(value)
-        if problem is not None:
-            raise ValueError(problem)
-        return value
 
-
-class AdminSection(_Section):
+class AdminSection(Section):
     listen: str = "127.0.0.1:8480"
     """host:port of the admin HTTP API."""
 
@@ -308,14 +265,14 @@ class AdminSection(_Section):
         return value
 
 
-class EdgeConfig(_Section):
+class EdgeConfig(Section):
     """Everything one edge process needs; one YAML file."""
 
-    site: str
-    edge_id: str = Field(default_factory=default_edge_id)
+    site: Site
+    edge_id: KeyChunk = Field(default_factory=default_edge_id)
     ros: RosSection = RosSection()
     zenoh: ZenohSection = ZenohSection()
-    robot_types: dict[Name, RobotTypeConfig] = {}
+    robot_types: dict[KeyChunk, RobotTypeConfig] = {}
     mappings: list[MappingConfig] = []
     """Site-level mappings, not tied to a robot type (patterns may still capture ``{robot}``)."""
     registration: RegistrationSection = RegistrationSection()
@@ -324,16 +281,6 @@ class EdgeConfig(_Section):
     wan: WanSection = WanSection()
     topics: TopicsSection = TopicsSection()
     admin: AdminSection | None = None
-
-    @field_validator("site", "edge_id")
-    @classmethod
-    def _key_chunk(cls, value: str, info: ValidationInfo) -> str:
-        try:
-            if "/" in value:
-                raise WireError(f"{value!r} must be a single key chunk (no '/')")
-            return check_key_name(value, str(info.field_name))
-        except WireError as exc:
-            raise ValueError(str(exc)) from None
 
     @model_validator(mode="after")
     def _unique_names(self) -> EdgeConfig:

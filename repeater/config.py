@@ -15,30 +15,27 @@ Durations are ``"250ms"``, ``"1s"``, ``"2m"``, ``"1h"`` or a number of seconds
 
 from __future__ import annotations
 
-import re
 import socket
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.durations import PositiveSeconds
+from fleetlink.common.names import KeyChunk, Site, host_id
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.schemas.typestore import Distro
 
-_CHUNK = re.compile(r"[A-Za-z0-9_.-]+")
-
 
 def default_repeater_id() -> str:
-    host = re.sub(r"[^A-Za-z0-9_.-]", "_", socket.gethostname()) or "repeater"
-    return host[:100]
+    """The host name, cut to a valid key-expression chunk."""
+    return host_id(socket.gethostname(), "repeater")
 
 
-class RepeaterSection(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-    site: str = Field(min_length=1, max_length=100, examples=["warehouse-a"])
+class RepeaterSection(Section):
+    site: Site = Field(examples=["warehouse-a"])
     state_dir: Path
-    id: str = Field(default_factory=default_repeater_id, min_length=1, max_length=100)
+    id: KeyChunk = Field(default_factory=default_repeater_id)
     """Names this repeater in status batches (one key chunk)."""
     dead_man: PositiveSeconds | None = None
     """Stop repeating when the uplink has been unreachable this long (capped by each command's lease)."""
@@ -49,17 +46,8 @@ class RepeaterSection(BaseModel):
     max_active: int = Field(default=10_000, ge=1, le=1_000_000)
     """Active commands at most (one per robot and ROS topic); more are rejected."""
 
-    @field_validator("site", "id")
-    @classmethod
-    def _key_chunk(cls, value: str) -> str:
-        if _CHUNK.fullmatch(value) is None:
-            raise ValueError(f"{value!r} must be one key chunk: letters, digits, '_', '.', '-'")
-        return value
 
-
-class RosSection(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class RosSection(Section):
     domain_id: int = Field(default=0, ge=0, le=232)
     distro: Distro = "jazzy"
     """Decides type hashes (and so the data keys robots subscribe on)."""
@@ -68,9 +56,7 @@ class RosSection(BaseModel):
     with fleetlink (a folder here replaces a package of its name)."""
 
 
-class RepeaterConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class RepeaterConfig(Section):
     repeater: RepeaterSection
     ros: RosSection = RosSection()
     zenoh: ZenohSection = ZenohSection()

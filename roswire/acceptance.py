@@ -66,9 +66,17 @@ Decoder = Callable[[str, str, bytes], Any]
 
 
 class SampleAcceptor:
-    def __init__(self, *, accept_missing_attachment: bool = False, decoder: Decoder | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        accept_missing_attachment: bool = False,
+        decoder: Decoder | None = None,
+        track_sequences: bool = True,
+    ) -> None:
         self.accept_missing_attachment = accept_missing_attachment
         self.decoder = decoder
+        self.track_sequences = track_sequences
+        """False when the samples' sequence numbers were already followed (the edge's data plane)."""
         self.stats = SubscriberStats()
         self.sequences = SequenceTracker()
         self._keys: dict[str, DataKey] = {}
@@ -102,7 +110,7 @@ class SampleAcceptor:
             except PayloadError:
                 stats.bad_payload += 1
                 raise
-        if gid is not None and seq is not None:
+        if gid is not None and seq is not None and self.track_sequences:
             self._observe(gid, seq)
         stats.delivered += 1
         return RosSample(

@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from fleetlink.common.names import ros_segments_problem, ros_topic_problem
+from fleetlink.common.names import ROS_SEGMENT, ros_segments_problem, ros_topic_problem
 from fleetlink.roswire.errors import InvalidNameError, KeyParseError
 
 HASH_NOT_SUPPORTED = "TypeHashNotSupported"
@@ -17,7 +17,6 @@ HASH_NOT_SUPPORTED = "TypeHashNotSupported"
 
 _HASH_RE = re.compile(r"RIHS[0-9]{2}_[0-9a-f]+")
 _RIHS01_RE = re.compile(r"RIHS01_[0-9a-f]{64}")
-_IDENT_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 TYPE_KINDS = ("msg", "srv", "action")
 
 
@@ -101,7 +100,7 @@ def split_ros_type(typename: str) -> tuple[str, str, str]:
     if kind not in TYPE_KINDS:
         raise InvalidNameError(typename, f"kind {kind!r} is not one of {', '.join(TYPE_KINDS)}")
     for part in (pkg, base):
-        if not _IDENT_RE.fullmatch(part):
+        if not ROS_SEGMENT.fullmatch(part):
             raise InvalidNameError(typename, f"{part!r} is not an identifier")
     return pkg, kind, base
 

@@ -10,16 +10,14 @@ been gone for the grace period (:meth:`RobotRegistry.tick`).
 from __future__ import annotations
 
 import fnmatch
-import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
+from fleetlink.common.names import ROS_SEGMENT
 from fleetlink.roswire.errors import RobotError
 from fleetlink.roswire.graph import EventKind, GraphEvent
 from fleetlink.roswire.names import first_segment
-
-_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 class RobotEventKind(Enum):
@@ -77,7 +75,7 @@ class Robot:
 def parse_registration(text: str) -> tuple[str, str]:
     """``"turtlebot4/tb4_07"`` (the ``/fleetlink/register`` message) -> ``("turtlebot4", "tb4_07")``."""
     robot_type, sep, name = text.strip().partition("/")
-    if not sep or not robot_type or not _NAME_RE.fullmatch(name):
+    if not sep or not robot_type or not ROS_SEGMENT.fullmatch(name):
         raise RobotError(f"registration {text!r}: expected '<robot_type>/<robot_name>'")
     return robot_type, name
 
@@ -131,7 +129,7 @@ class RobotRegistry:
         """Explicit registration; a robot already known keeps its entities (no new event)."""
         if robot_type not in self._type_names:
             raise RobotError(f"unknown robot type {robot_type!r} (known: {sorted(self._type_names)})")
-        if not _NAME_RE.fullmatch(name):
+        if not ROS_SEGMENT.fullmatch(name):
             raise RobotError(f"robot name {name!r} is not a single namespace segment")
         robot = self._robots.get(name)
         if robot is not None:

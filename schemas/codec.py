@@ -54,6 +54,11 @@ class Codec:
         self.avro_to_cdr = AvroToCdr(self._root).compile(self._namespace("cdr"))
         self.decode = CdrToDict(self._root, little_endian=True).compile_decoder(self._namespace("dict"))
 
+    @property
+    def layout(self) -> Record:
+        """The type's node tree (what the converters are generated from)."""
+        return self._root
+
     def read_avro(self, body: bytes) -> dict[str, Any]:
         """An Avro body of this type read with fastavro (same shape as :attr:`decode`)."""
         try:

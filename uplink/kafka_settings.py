@@ -11,8 +11,10 @@ import os
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 
+from fleetlink.common.configfile import Section
+from fleetlink.common.durations import Seconds
 from fleetlink.uplink.errors import UnsafeKafkaSettingError
 
 # What the producer always runs with; none of it can be overridden to something weaker.
@@ -33,9 +35,7 @@ _NOT_OVERRIDABLE = {
 }
 
 
-class SaslSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class SaslSection(Section):
     mechanism: Literal["PLAIN", "SCRAM-SHA-256", "SCRAM-SHA-512"] = "SCRAM-SHA-512"
     username: str
     password: SecretStr | None = None
@@ -43,7 +43,7 @@ class SaslSettings(BaseModel):
     password_env: str | None = None
 
     @model_validator(mode="after")
-    def _one_password_source(self) -> SaslSettings:
+    def _one_password_source(self) -> SaslSection:
         given = [x for x in (self.password, self.password_file, self.password_env) if x is not None]
         if len(given) != 1:
             raise ValueError("give exactly one of password, password_file, password_env")
@@ -66,9 +66,7 @@ class SaslSettings(BaseModel):
         return SecretStr(value)
 
 
-class SslSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class SslSection(Section):
     ca_location: Path | None = None
     certificate_location: Path | None = None
     key_location: Path | None = None
@@ -76,19 +74,20 @@ class SslSettings(BaseModel):
     endpoint_identification: Literal["https", "none"] = "https"
 
 
-class KafkaSettings(BaseModel):
+class KafkaSection(Section):
     """The ``kafka:`` section of the uplink config."""
-
-    model_config = ConfigDict(extra="forbid")
 
     bootstrap_servers: str = Field(min_length=1, examples=["127.0.0.1:9092"])
     security_protocol: Literal["PLAINTEXT", "SSL", "SASL_PLAINTEXT", "SASL_SSL"] = "PLAINTEXT"
-    sasl: SaslSettings | None = None
-    ssl: SslSettings | None = None
+    sasl: SaslSection | None = None
+    ssl: SslSection | None = None
     client_id: str = "fleetlink-uplink"
-    linger_ms: int = Field(default=5, ge=0, le=10_000)
+    linger: Seconds = Field(default=0.005, ge=0, le=10)
+    """How long the producer waits to fill a request (librdkafka's ``linger.ms``)."""
     compression: Literal["none", "lz4", "zstd", "snappy", "gzip"] = "lz4"
-    delivery_timeout_ms: int = Field(default=120_000, ge=1_000)
+    delivery_timeout: Seconds = Field(default=120.0, ge=1)
+    """How long the producer tries to deliver a record (librdkafka's ``delivery.timeout.ms``): a batch
+    is answered by then at the latest, with ``error`` for the records Kafka has not acknowledged."""
     message_max_bytes: int = Field(default=1_000_000, ge=1_000)
     producer_overrides: dict[str, str | int | float | bool] = {}
     consumer_overrides: dict[str, str | int | float | bool] = {}
@@ -108,7 +107,7 @@ class KafkaSettings(BaseModel):
         return value
 
     @model_validator(mode="after")
-    def _security_consistent(self) -> KafkaSettings:
+    def _security_consistent(self) -> KafkaSection:
         if self.security_protocol.startswith("SASL") and self.sasl is None:
             raise ValueError(f"security_protocol {self.security_protocol} needs a sasl section")
         return self
@@ -140,9 +139,9 @@ class KafkaSettings(BaseModel):
         conf = self.common_config()
         conf.update(
             {
-                "linger.ms": self.linger_ms,
+                "linger.ms": round(self.linger * 1000),
                 "compression.type": self.compression,
-                "delivery.timeout.ms": self.delivery_timeout_ms,
+                "delivery.timeout.ms": round(self.delivery_timeout * 1000),
                 "message.max.bytes": self.message_max_bytes,
             }
         )

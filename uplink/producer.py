@@ -19,7 +19,7 @@ from confluent_kafka import KafkaError, KafkaException, Message, Producer
 
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.uplink.errors import ProduceError
-from fleetlink.uplink.kafka_settings import KafkaSettings, redacted
+from fleetlink.uplink.kafka_settings import KafkaSection, redacted
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,7 @@ def _exception_error(exc: KafkaException) -> ProduceError:
 class KafkaSink:
     """A started ``KafkaSink`` owns one idempotent producer and one thread polling it."""
 
-    def __init__(self, settings: KafkaSettings, *, queue_wait_s: float = 30.0) -> None:
+    def __init__(self, settings: KafkaSection, *, queue_wait_s: float = 30.0) -> None:
         self._settings = settings
         self._queue_wait_s = queue_wait_s
         self._producer: Producer | None = None

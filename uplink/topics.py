@@ -7,13 +7,13 @@ import logging
 from confluent_kafka import KafkaException
 from confluent_kafka.admin import AdminClient, NewTopic
 
-from fleetlink.uplink.config import TopicSettings
-from fleetlink.uplink.kafka_settings import KafkaSettings
+from fleetlink.uplink.config import TopicsSection
+from fleetlink.uplink.kafka_settings import KafkaSection
 
 log = logging.getLogger(__name__)
 
 
-def ensure_topics(kafka: KafkaSettings, topics: TopicSettings, timeout_s: float = 15.0) -> None:
+def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float = 15.0) -> None:
     """Create the registrations (compacted), dead-letter and command topics if missing.
 
     A broker that cannot be reached now is not fatal: the uplink starts, records wait in the

@@ -11,7 +11,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from fleetlink.edge.config import MappingConfig, Name, RobotMappingConfig
+from fleetlink.common.names import KeyChunk, NamespaceGlob
+from fleetlink.edge.config import MappingConfig, RobotMappingConfig
 
 
 class MappingBody(MappingConfig):
@@ -20,7 +21,7 @@ class MappingBody(MappingConfig):
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True, title="MappingBody")
 
-    robot_type: Name | None = None
+    robot_type: KeyChunk | None = None
 
 
 class MappingChangeBody(MappingBody):
@@ -28,7 +29,7 @@ class MappingChangeBody(MappingBody):
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True, title="MappingChangeBody")
 
-    name: Name | None = None  # type: ignore[assignment]
+    name: KeyChunk | None = None  # type: ignore[assignment]
 
 
 class DryRunBody(MappingBody):
@@ -36,7 +37,7 @@ class DryRunBody(MappingBody):
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True, title="DryRunBody")
 
-    name: Name = "dry-run"
+    name: KeyChunk = "dry-run"
 
 
 class RobotTypeBody(BaseModel):
@@ -45,7 +46,7 @@ class RobotTypeBody(BaseModel):
 
     model_config = ConfigDict(extra="forbid", title="RobotTypeBody")
 
-    match: str = Field(examples=["/tb4_*"])
+    match: NamespaceGlob = Field(examples=["/tb4_*"])
     mappings: list[RobotMappingConfig] | None = None
 
 

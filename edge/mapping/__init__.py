@@ -6,7 +6,7 @@
         topic = bound.kafka_topic or bound.render_topic(decoded_message)
         key = bound.key or bound.render_key(decoded_message)
 
-Pattern syntax: ``edge.mapping.patterns``; template syntax and Kafka topic rules:
+Pattern syntax: ``edge.mapping.patterns``; template syntax (Kafka topic rules: ``common.names``):
 ``edge.mapping.templates``; validation: ``edge.mapping.spec``; the live table:
 ``edge.mapping.table``. ``edge.config.EdgeConfig.mapping_table()`` builds a table from the YAML.
 """
@@ -24,11 +24,10 @@ from fleetlink.edge.mapping.spec import (
     compile_mapping,
 )
 from fleetlink.edge.mapping.table import BoundMapping, MappingInfo, MappingTable
-from fleetlink.edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
+from fleetlink.edge.mapping.templates import Template
 
 __all__ = [
     "DELIVERIES",
-    "KAFKA_TOPIC_MAX",
     "BoundMapping",
     "Capture",
     "CompiledMapping",
@@ -44,5 +43,4 @@ __all__ = [
     "check_ros_type",
     "check_unique_names",
     "compile_mapping",
-    "kafka_topic_problem",
 ]

@@ -7,21 +7,23 @@ legality, the ROS type's form) and returns a ``CompiledMapping`` ready for the t
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
 
+from fleetlink.common.names import (
+    KAFKA_TOPIC_MAX,
+    kafka_bad_chars,
+    kafka_topic_problem,
+    key_chunk_problem,
+    ros_type_problem,
+)
 from fleetlink.edge.errors import MappingError
 from fleetlink.edge.mapping.patterns import TopicPattern
-from fleetlink.edge.mapping.templates import KAFKA_TOPIC_MAX, Template, kafka_topic_problem
+from fleetlink.edge.mapping.templates import Template
 
 Delivery = Literal["at_least_once", "best_effort"]
 DELIVERIES: tuple[str, ...] = get_args(Delivery)
-
-NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
-ROS_TYPE_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*")
-_KAFKA_CHAR = re.compile(r"[A-Za-z0-9._-]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,14 +74,16 @@ class CompiledMapping:
 
 
 def check_name(name: str, *, what: str = "mapping name") -> str:
-    if NAME_PATTERN.fullmatch(name) is None:
-        raise MappingError(f"{what} {name!r} must be non-empty and use only letters, digits, '_', '.', '-'")
+    problem = key_chunk_problem(name)
+    if problem is not None:
+        raise MappingError(f"{what} {name!r} {problem}")
     return name
 
 
 def check_ros_type(ros_type: str, *, mapping: str | None = None) -> str:
-    if ROS_TYPE_PATTERN.fullmatch(ros_type) is None:
-        raise MappingError(f"ROS type {ros_type!r} must look like 'package/msg/Type'", mapping=mapping)
+    problem = ros_type_problem(ros_type)
+    if problem is not None:
+        raise MappingError(f"ROS type {ros_type!r} {problem}", mapping=mapping)
     return ros_type
 
 
@@ -104,11 +108,11 @@ def check_topic_literal(template: Template, mapping: str) -> None:
             )
         return
     literal = template.literal_text
-    bad = sorted({c for c in literal if _KAFKA_CHAR.fullmatch(c) is None})
+    bad = kafka_bad_chars(literal)
     if bad:
         raise MappingError(
             f"Kafka topic template {template.text!r}: Kafka topic names use only [a-zA-Z0-9._-]; "
-            f"{''.join(bad)!r} is not allowed",
+            f"{bad!r} is not allowed",
             mapping=mapping,
             template=template.text,
         )

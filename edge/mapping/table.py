@@ -18,6 +18,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from fleetlink.common.names import kafka_topic_problem
 from fleetlink.edge.errors import MappingError, RenderError
 from fleetlink.edge.mapping.patterns import TopicPattern, check_robot_name
 from fleetlink.edge.mapping.spec import (
@@ -28,7 +29,7 @@ from fleetlink.edge.mapping.spec import (
     check_unique_names,
     compile_mapping,
 )
-from fleetlink.edge.mapping.templates import Template, kafka_topic_problem
+from fleetlink.edge.mapping.templates import Template
 
 
 @dataclass(frozen=True, slots=True)

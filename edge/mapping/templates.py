@@ -19,23 +19,7 @@ from typing import Any
 
 from fleetlink.edge.errors import MappingError, RenderError
 
-KAFKA_TOPIC_MAX = 249
-_KAFKA_TOPIC_CHARS = re.compile(r"[A-Za-z0-9._-]+")
 _PLACEHOLDER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*")
-
-
-def kafka_topic_problem(name: str) -> str | None:
-    """Why ``name`` is not a legal Kafka topic name, or ``None`` when it is."""
-    if not name:
-        return "a Kafka topic name cannot be empty"
-    if len(name) > KAFKA_TOPIC_MAX:
-        return f"Kafka topic names have at most {KAFKA_TOPIC_MAX} characters, this one has {len(name)}"
-    if name in (".", ".."):
-        return f"{name!r} is not a legal Kafka topic name"
-    if _KAFKA_TOPIC_CHARS.fullmatch(name) is None:
-        bad = sorted({c for c in name if _KAFKA_TOPIC_CHARS.fullmatch(c) is None})
-        return f"Kafka topic names use only [a-zA-Z0-9._-]; {''.join(bad)!r} is not allowed"
-    return None
 
 
 @dataclass(frozen=True, slots=True)

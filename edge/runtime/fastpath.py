@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from fleetlink.edge.mapping import BoundMapping, Delivery
 from fleetlink.edge.runtime.outgoing import MappingCounters, Outgoing
 from fleetlink.roswire.subscriber import RosSample
+from fleetlink.schemas.codec import Codec
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.wire import PayloadTemplate
 
@@ -27,6 +28,8 @@ class Lane:
 
     bound: BoundMapping
     counters: MappingCounters
+    codec: Codec
+    """The type's codec: ``convert`` is its ``cdr_to_avro``, the native path compiles its layout."""
     convert: Callable[[bytes], bytes]
     head: bytes
     """``C3 01`` + the schema fingerprint: the single-object header."""

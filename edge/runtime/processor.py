@@ -1,10 +1,13 @@
-"""The processing thread: intake -> records -> the buffer of each record's delivery class.
+"""The processing thread: samples -> records -> the buffer of each record's delivery class.
 
 One thread, so the records of a robot are appended in the order their samples arrived. It takes
-items from the ``Intake`` in chunks, turns them into records (``RecordMaker``), ticks the stages
-a few times a second, and appends each chunk with one ``append_many`` per buffer. A full spool
-under the ``block`` policy makes this thread wait (up to the spool's ``block_timeout``) while
-the intake fills up and then drops, counted: the Zenoh callbacks never wait.
+samples from the ``SampleSource`` (the native data plane: records it made already, and samples
+for the general path) and control items (registration events) from the ``Intake``, turns
+samples into records (``RecordMaker``), ticks the stages a few times a second, and appends each
+chunk with one ``append_many`` per buffer. A full spool under the ``block`` policy makes this
+thread wait (up to the spool's ``block_timeout``) while the source's intake fills up and then
+drops, counted: the Zenoh callbacks never wait. Without a source (unit tests) samples come
+through the ``Intake`` too.
 """
 
 from __future__ import annotations
@@ -12,8 +15,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Protocol
 
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.edge.errors import SpoolError, SpoolFullError
@@ -48,6 +52,46 @@ Item = RosSample | Rejected | Emit
 
 
 @dataclass(slots=True)
+class Taken:
+    """What one ``SampleSource.take`` brought: record groups made natively per delivery class
+    (``(count, blob)``, blob = ``{u32 length | payload}*``), samples for the general path, the
+    shortest linger of each group's records (``None``: the default), samples taken in all."""
+
+    groups: dict[Delivery, tuple[int, bytes]] = field(default_factory=dict)
+    samples: list[RosSample | Rejected] = field(default_factory=list)
+    lingers: dict[Delivery, float | None] = field(default_factory=dict)
+    count: int = 0
+    oldest_received_ns: int = 0
+    """When the oldest sample of this take arrived (0: none): the lag behind the robots."""
+
+
+class SampleSource(Protocol):
+    """Where samples come from (``fleetlink.edge.runtime.dataplane.NativeSource``)."""
+
+    def take(self, max_samples: int, timeout_s: float) -> Taken: ...
+
+    def wake(self) -> None: ...
+
+    def sync(self, table_version: int) -> None: ...
+
+    def install(self, maker: RecordMaker, keys: Iterable[str]) -> None: ...
+
+
+def split_group(blob: bytes) -> list[bytes]:
+    """The record payloads of a group blob (``{u32 length | payload}*``)."""
+    out: list[bytes] = []
+    pos, end = 0, len(blob)
+    view = memoryview(blob)
+    from_bytes = int.from_bytes
+    while pos < end:
+        size = from_bytes(view[pos : pos + 4], "little")
+        pos += 4
+        out.append(bytes(view[pos : pos + size]))
+        pos += size
+    return out
+
+
+@dataclass(slots=True)
 class ProcessorStats:
     samples: int = 0
     records: int = 0
@@ -70,6 +114,8 @@ class Processor:
         buffers: Mapping[Delivery, RecordBuffer],
         *,
         on_appended: Callable[[Delivery, float], object] | None = None,
+        source: SampleSource | None = None,
+        table_version: Callable[[], int] = lambda: 0,
         default_linger_s: float = 0.0,
         tick_interval_s: float = 0.1,
         chunk: int = 512,
@@ -79,6 +125,10 @@ class Processor:
         self.maker = maker
         self.buffers = buffers
         self._on_appended = on_appended or _nothing
+        self.source = source
+        self._table_version = table_version
+        self.lag_ns = 0
+        """How long the oldest sample of the last take had waited (receipt -> processing)."""
         self.default_linger_s = default_linger_s
         """The linger of records that bring none (the edge passes its ``wan.linger``)."""
         self.tick_interval_s = tick_interval_s
@@ -89,6 +139,12 @@ class Processor:
         self._lock = threading.Lock()
         self._limiter = LogLimiter(log)
         self.stats = ProcessorStats()
+
+    def post(self, item: Item) -> None:
+        """Queue a control item (it is never dropped) and wake the thread for it."""
+        self.intake.offer(item, force=True)
+        if self.source is not None:
+            self.source.wake()
 
     def start(self) -> Processor:
         if self._thread is None:
@@ -126,28 +182,45 @@ class Processor:
         last_tick = 0
         tick_ns = int(self.tick_interval_s * 1e9)
         while True:
-            items = self.intake.take(self.chunk, timeout=self.tick_interval_s)
-            if not items and self._stop.is_set():
+            taken = self._take()
+            wait_s = 0.0 if self.source is not None else self.tick_interval_s
+            items = self.intake.take(self.chunk, timeout=wait_s)
+            if not items and not taken.count and self._stop.is_set():
                 return
             now = self._clock_ns()
+            if taken.oldest_received_ns:
+                self.lag_ns = max(0, now - taken.oldest_received_ns)
             try:
                 with self._lock:
+                    if self.source is not None:
+                        self.source.sync(self._table_version())
                     out = self._records(items, now)
+                    if taken.samples:
+                        out.extend(self._records(taken.samples, now))
+                        if self.source is not None:
+                            keys = {s.key for s in taken.samples if isinstance(s, RosSample)}
+                            self.source.install(self.maker, keys)
+                    self.stats.samples += taken.count - len(taken.samples)
                     if now - last_tick >= tick_ns:
                         last_tick = now
                         out.extend(self.maker.tick(now))
-                self._append(out)
+                self._append(out, taken)
             except Exception as exc:  # noqa: BLE001 - one bad chunk must not stop the edge; logged, counted
                 self.stats.errors += 1
                 self._limiter.log(
                     logging.ERROR,
                     "chunk",
                     "edge processor: a chunk of %d item(s) failed: %r",
-                    len(items),
+                    len(items) + taken.count,
                     exc,
                 )
 
-    def _records(self, items: list[Item], now_ns: int) -> list[Outgoing]:
+    def _take(self) -> Taken:
+        if self.source is None:
+            return Taken()
+        return self.source.take(self.chunk, self.tick_interval_s)
+
+    def _records(self, items: Sequence[Item], now_ns: int) -> list[Outgoing]:
         out: list[Outgoing] = []
         extend, make = out.extend, self.maker.make
         for item in items:
@@ -160,13 +233,14 @@ class Processor:
                 out.extend(item.records)
         return out
 
-    def _append(self, out: list[Outgoing]) -> None:
-        if not out:
-            return
-        self.stats.records += len(out)
+    def _append(self, out: list[Outgoing], taken: Taken) -> None:
         groups: dict[Delivery, list[bytes]] = {}
         lingers: dict[Delivery, float] = {}  # per buffer, the shortest linger of what it got
         default = self.default_linger_s
+        for delivery, (_count, blob) in taken.groups.items():
+            groups[delivery] = split_group(blob)
+            own = taken.lingers.get(delivery)
+            lingers[delivery] = default if own is None else own
         for delivery, payload, own in out:
             linger = default if own is None else own
             group = groups.get(delivery)
@@ -176,6 +250,9 @@ class Processor:
             elif linger < lingers[delivery]:
                 lingers[delivery] = linger
             group.append(payload)
+        if not groups:
+            return
+        self.stats.records += sum(len(g) for g in groups.values())
         for delivery, payloads in groups.items():
             self._append_to(delivery, self.buffers[delivery], payloads)
             self._on_appended(delivery, lingers[delivery])

@@ -178,6 +178,7 @@ class RecordMaker:
                 Lane(
                     bound,
                     self._counters(bound.name),
+                    route.codec,
                     route.codec.cdr_to_avro,
                     SINGLE_OBJECT_MAGIC + route.source.fingerprint,
                     template,
@@ -191,6 +192,10 @@ class RecordMaker:
             self._plans.clear()
         self._plans[sample.key] = plan
         return plan
+
+    def plan_for(self, key: str) -> FastPlan | None:
+        """The fast plan made for data key ``key`` (by the last sample of it), if any."""
+        return self._plans.get(key)
 
     def tick(self, now_ns: int) -> list[Outgoing]:
         """Time-driven stage output (held samples, heartbeats, closed windows)."""

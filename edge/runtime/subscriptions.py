@@ -10,33 +10,33 @@ different definition is still received, and the hash each sample really carried 
 record's headers. A mapping that declares its type subscribes as soon as its topic is known
 (a robot registered), before any publisher shows up.
 
-Each subscriber receives through a Rust-side ring channel drained by a thread of its own
-(``RosSubscriber(ring=...)``: a Python callback on a Zenoh thread loses samples on a busy edge)
-and hands its samples to the ``Intake`` a burst at a time, waiting up to ``offer_wait_s`` for
-room when the processing thread is behind (the ring holds what arrives meanwhile); refused
-samples (no attachment, broken CDR header) are handed over as ``Rejected`` so they become dead
-letters.
+Every subscription is a key expression of the edge's native data plane
+(``dataplane.NativeSource``): one bounded intake for all of them, no thread per subscription, so
+an idle subscription costs nothing but its entry in the router. The liveliness token of a
+subscription (``MS``, so that ``ros2 topic info`` counts the edge) is declared on the edge's
+Python session, as its node is.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from types import TracebackType
 
+import zenoh
+
 from fleetlink.edge.errors import MappingError
 from fleetlink.edge.mapping import MappingTable, TopicPattern
-from fleetlink.edge.runtime.intake import Intake
-from fleetlink.edge.runtime.processor import Item, Rejected
+from fleetlink.edge.runtime.dataplane import NativeSource
 from fleetlink.roswire.discovery import GraphWatcher
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.graph import EventKind, GraphEvent
-from fleetlink.roswire.node import RosNode
-from fleetlink.roswire.subscriber import RosSample, RosSubscriber
-from fleetlink.roswire.tokens import EndpointInfo, EntityKind
+from fleetlink.roswire.names import data_key_expr
+from fleetlink.roswire.node import RosNode, next_entity_id
+from fleetlink.roswire.qos import DEFAULT
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind, endpoint_token
 from fleetlink.schemas.errors import SchemaError
 
 log = logging.getLogger(__name__)
@@ -86,7 +86,8 @@ def plan(
 @dataclass
 class _Active:
     typename: str | None
-    subscriber: RosSubscriber
+    sub_id: int
+    token: zenoh.LivelinessToken | None
 
 
 class SubscriptionManager:
@@ -96,19 +97,14 @@ class SubscriptionManager:
         self,
         node: RosNode,
         table: MappingTable,
-        intake: Intake[Item],
+        source: NativeSource,
         *,
         known_type: Callable[[str], bool] | None = None,
-        capacity: int = 65536,
-        offer_wait_s: float = 1.0,
     ) -> None:
         self.node = node
         self.table = table
-        self.intake = intake
+        self.source = source
         self._known_type = known_type or _any_type
-        self.capacity = capacity
-        self.offer_wait_s = offer_wait_s
-        """How long a receiver waits for room in a full intake (its ring keeps what comes meanwhile)."""
         self._publishers: dict[str, dict[str, str]] = {}  # topic -> token key -> type
         self._active: dict[str, _Active] = {}
         self._lock = threading.Lock()
@@ -144,7 +140,7 @@ class SubscriptionManager:
         with self._lock:
             active, self._active = self._active, {}
         for entry in active.values():
-            self._close(entry.subscriber)
+            self._close(entry)
 
     def __enter__(self) -> SubscriptionManager:
         return self.start()
@@ -171,19 +167,10 @@ class SubscriptionManager:
     def snapshot(self) -> dict[str, dict[str, object]]:
         with self._lock:
             active = dict(self._active)
-        out: dict[str, dict[str, object]] = {}
-        for topic, entry in sorted(active.items()):
-            stats = entry.subscriber.stats
-            out[topic] = {
-                "type": entry.typename,
-                "received": stats.received,
-                "delivered": stats.delivered,
-                "rejected": stats.rejected,
-                "gaps": stats.gaps,
-                "missing": stats.missing,
-                "duplicates": stats.duplicates,
-            }
-        return out
+        return {
+            topic: {"type": entry.typename, **self.source.subscription_stats(entry.sub_id)}
+            for topic, entry in sorted(active.items())
+        }
 
     # -- discovery -------------------------------------------------------------------------------
     def _on_graph(self, event: GraphEvent) -> None:
@@ -223,47 +210,49 @@ class SubscriptionManager:
             if wanted.get(topic, "\0") != typename:
                 with self._lock:
                     entry = self._active.pop(topic)
-                self._close(entry.subscriber)
+                self._close(entry)
                 log.info("unsubscribed %s", topic)
         for topic, typename in wanted.items():
             with self._lock:
                 present = topic in self._active
             if present:
                 continue
-            subscriber = self._open(topic, typename)
+            active = self._open(topic, typename)
             with self._lock:
-                self._active[topic] = _Active(typename, subscriber)
+                self._active[topic] = active
             log.info("subscribed %s (type %s)", topic, typename or "any")
         self.generation += 1
 
-    def _open(self, topic: str, typename: str | None) -> RosSubscriber:
-        intake, wait_s = self.intake, self.offer_wait_s
-
-        def on_samples(samples: list[RosSample]) -> None:  # a burst: one lock for all of it
-            intake.offer_many([(sample, len(sample.payload)) for sample in samples], wait_s=wait_s)
-
-        def on_error(error: RoswireError) -> None:
-            intake.offer(Rejected(topic, error, time.time_ns()), len(getattr(error, "raw", b"")))
-
-        token = typename is not None and self._known_type(typename)
+    def _open(self, topic: str, typename: str | None) -> _Active:
+        node = self.node
         # any type hash: a robot built against another revision of the type is still received
-        return RosSubscriber(
-            self.node,
-            topic,
-            typename,
-            None,
-            on_samples=on_samples,
-            on_error=on_error,
-            ring=self.capacity,
-            declare_token=token,
-        ).start()
+        sub_id = self.source.subscribe(topic, data_key_expr(node.domain_id, topic, typename, None))
+        token: zenoh.LivelinessToken | None = None
+        if typename is not None and self._known_type(typename):
+            key = endpoint_token(
+                domain=node.domain_id,
+                zid=node.zid,
+                nid=node.nid,
+                eid=next_entity_id(),
+                kind=EntityKind.SUBSCRIPTION,
+                namespace=node.namespace,
+                node_name=node.name,
+                topic=topic,
+                typename=typename,
+                type_hash=node.type_hash(typename),
+                qos=DEFAULT,
+                enclave=node.enclave,
+            )
+            token = node.session.liveliness().declare_token(key)
+        return _Active(typename, sub_id, token)
 
-    @staticmethod
-    def _close(subscriber: RosSubscriber) -> None:
+    def _close(self, entry: _Active) -> None:
         try:
-            subscriber.stop()
+            if entry.token is not None:
+                entry.token.undeclare()
+            self.source.unsubscribe(entry.sub_id)
         except Exception as exc:  # noqa: BLE001 - a closed session must not stop the rest of the cleanup
-            log.debug("stopping subscriber on %s failed: %r", subscriber.topic, exc)
+            log.debug("closing subscription %d failed: %r", entry.sub_id, exc)
 
 
 def _any_type(_typename: str) -> bool:

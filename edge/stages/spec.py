@@ -9,22 +9,23 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.durations import DurationNs
+from fleetlink.common.names import KeyChunk
 from fleetlink.edge.stages.errors import StageConfigError
 from fleetlink.edge.stages.expr import check_predicate, parse_expression
 from fleetlink.edge.stages.paths import parse_path
 
 Op = Literal["count", "mean", "min", "max", "last", "stddev"]
-StageName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
 FieldPaths = Annotated[list[str], Field(min_length=1)]
 
 
-class _Spec(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+class _Spec(Section):
+    model_config = ConfigDict(strict=True, frozen=True)
 
-    name: StageName | None = None
+    name: KeyChunk | None = None
     """Label for metrics and the admin API; defaults to the stage type."""
 
 

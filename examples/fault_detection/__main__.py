@@ -1,4 +1,4 @@
-"""``python -m examples.fault_detection``: run the fault-detection app until SIGINT/SIGTERM."""
+"""``python -m fleetlink.examples.fault_detection``: run the fault-detection app until SIGINT/SIGTERM."""
 
 import sys
 

@@ -22,12 +22,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from quixstreams import Application, State
-from quixstreams.dataframe.windows.aggregations import Count, Max, Sum
-from quixstreams.models import Row, SchemaRegistryClientConfig
-from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
-from quixstreams.models.serializers.exceptions import SerializationError
-
+from fleetlink.common.extras import missing_extra
 from fleetlink.examples.fault_detection.errors import BadRecordError, FaultDetectionError, SettingsError
 from fleetlink.examples.fault_detection.rules import (
     INITIAL_MEMORY,
@@ -41,6 +36,15 @@ from fleetlink.examples.fault_detection.rules import (
     window_verdict,
 )
 from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, check_copartitioned
+
+try:
+    from quixstreams import Application, State
+    from quixstreams.dataframe.windows.aggregations import Count, Max, Sum
+    from quixstreams.models import Row, SchemaRegistryClientConfig
+    from quixstreams.models.serializers.avro import AvroDeserializer, AvroSerializer
+    from quixstreams.models.serializers.exceptions import SerializationError
+except ModuleNotFoundError as exc:  # the demo's stream app is an extra, not part of an edge install
+    raise missing_extra(exc, "demo") from None
 
 __all__ = ["COMMAND_ID_HEADER", "LIGHTRING_TYPE", "build_app", "lightring_schema", "run"]
 
@@ -189,8 +193,8 @@ def build_app(settings: FaultDetectionSettings, on_command: CommandCallback | No
         consumer_group=settings.group,
         auto_offset_reset=settings.offset_reset,
         state_dir=settings.state_dir,
-        consumer_poll_timeout=settings.poll_timeout_s,
-        commit_interval=settings.commit_interval_s,
+        consumer_poll_timeout=settings.poll_timeout,
+        commit_interval=settings.commit_interval,
         on_consumer_error=on_consumer_error,
         on_processing_error=on_processing_error,
         loglevel=None,
@@ -212,7 +216,9 @@ def build_app(settings: FaultDetectionSettings, on_command: CommandCallback | No
     ]
     events = frames[0].concat(frames[1]).concat(frames[2])
     windows = (
-        events.sliding_window(duration_ms=settings.window_ms, grace_ms=settings.grace_ms, on_late=on_late)
+        events.sliding_window(
+            duration_ms=round(settings.window * 1000), grace_ms=round(settings.grace * 1000), on_late=on_late
+        )
         .agg(events=Count(), failures=Sum("failure"), newest=Max("ts"))
         .current()
     )

@@ -1,4 +1,4 @@
-"""Command line: ``python -m examples.fault_detection --bootstrap HOST:PORT --registry URL ...``."""
+"""Command line: ``python -m fleetlink.examples.fault_detection --bootstrap HOST:PORT --registry URL ...``."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def _hazards(text: str) -> frozenset[int]:
 def build_parser() -> argparse.ArgumentParser:
     defaults = Topics()
     parser = argparse.ArgumentParser(
-        prog="python -m examples.fault_detection",
+        prog="python -m fleetlink.examples.fault_detection",
         description="Fault detection over the fleet's sensor topics: a sliding window per robot; when "
         "every event in it says failure the robot is failed (red light ring), when every event says "
         "healthy it runs again (green). One command per change of state.",
@@ -122,8 +122,8 @@ def settings_from_args(args: argparse.Namespace) -> FaultDetectionSettings:
     return FaultDetectionSettings(
         bootstrap=args.bootstrap,
         registry_url=args.registry,
-        window_ms=args.window,
-        grace_ms=args.grace,
+        window=args.window / 1000,
+        grace=args.grace / 1000,
         group=args.group,
         state_dir=args.state_dir,
         offset_reset="earliest" if args.from_beginning else "latest",

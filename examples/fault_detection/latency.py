@@ -1,4 +1,4 @@
-"""Measure the app's share of the fault-to-LED time: ``python -m examples.fault_detection.latency``.
+"""Measure the app's share of the fault-to-LED time: ``python -m fleetlink.examples.fault_detection.latency``.
 
 A simulated robot produces its three sensor topics at ``--rate`` Hz each, stamped with the wall
 clock as a live robot does. Each run switches it to "picked up" and waits for the red command,
@@ -188,7 +188,7 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
         settings = FaultDetectionSettings(
             bootstrap=args.bootstrap,
             registry_url=args.registry,
-            window_ms=args.window,
+            window=args.window / 1000,
             group=f"latency-{run_id}",
             state_dir=Path(state_dir),
             offset_reset="earliest",
@@ -245,7 +245,9 @@ def summary(rows: Sequence[Measurement]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m examples.fault_detection.latency", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="python -m fleetlink.examples.fault_detection.latency", description=__doc__
+    )
     parser.add_argument("--bootstrap", required=True)
     parser.add_argument("--registry", required=True)
     parser.add_argument(

@@ -10,9 +10,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, NonNegativeInt, PositiveFloat, PositiveInt
+from pydantic import ConfigDict, Field, PositiveInt
 
 from fleetlink.common import durations
+from fleetlink.common.configfile import Section
+from fleetlink.common.durations import PositiveSeconds, Seconds
+from fleetlink.common.names import KafkaTopic
 from fleetlink.examples.fault_detection.errors import SettingsError
 from fleetlink.examples.fault_detection.rules import HAZARD_CLIFF, HAZARD_WHEEL_DROP, RuleConfig
 
@@ -43,30 +46,32 @@ def parse_duration_ms(text: str) -> int:
         raise SettingsError(f"invalid duration {text!r}: {exc}; e.g. 2s, 500ms, 1.5s or 1m") from None
 
 
-class Topics(BaseModel):
+class Topics(Section):
     """Kafka topics the app reads (one per sensor) and writes (light-ring commands)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(frozen=True)
 
-    ir_intensity: str = "fleet.ir_intensity"
-    hazard_detection: str = "fleet.hazard_detection"
-    kidnap_status: str = "fleet.kidnap_status"
-    commands: str = "fleet.commands.lightring"
+    ir_intensity: KafkaTopic = "fleet.ir_intensity"
+    hazard_detection: KafkaTopic = "fleet.hazard_detection"
+    kidnap_status: KafkaTopic = "fleet.kidnap_status"
+    commands: KafkaTopic = "fleet.commands.lightring"
 
 
-class FaultDetectionSettings(BaseModel):
+class FaultDetectionSettings(Section):
     """Everything the app needs.
 
     ``msg_paths``: ROS package folders to take the irobot_create_msgs definitions from; empty
     means the copy fleetlink ships (``schemas/msgs``).
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(frozen=True)
 
     bootstrap: str = Field(min_length=1, description="Kafka bootstrap servers, HOST:PORT[,...]")
     registry_url: str = Field(min_length=1, description="Confluent-compatible schema registry URL")
-    window_ms: PositiveInt = 2000
-    grace_ms: NonNegativeInt = 1000
+    window: PositiveSeconds = 2.0
+    """The sliding window per robot (``2s``)."""
+    grace: Seconds = Field(default=1.0, ge=0)
+    """How late a record may arrive and still count."""
     group: str = Field(default="fleetlink-fault-detection", min_length=1)
     state_dir: Path = DEFAULT_STATE_DIR
     offset_reset: Literal["earliest", "latest"] = "latest"
@@ -76,8 +81,8 @@ class FaultDetectionSettings(BaseModel):
     distro: Literal["humble", "jazzy", "kilted"] = "jazzy"
     msg_paths: tuple[Path, ...] = ()
     topics: Topics = Topics()
-    poll_timeout_s: PositiveFloat = 0.2
-    commit_interval_s: PositiveFloat = 1.0
+    poll_timeout: PositiveSeconds = 0.2
+    commit_interval: PositiveSeconds = 1.0
 
     def rule_config(self) -> RuleConfig:
         return RuleConfig(

@@ -82,11 +82,24 @@ def _serializer(field: Any) -> Any:
     return next((m.func for m in field.metadata if isinstance(m, PlainSerializer)), None)
 
 
+def _is_duration(meta: Any) -> bool:
+    schema = getattr(meta, "json_schema", None) or {}
+    return str(schema.get("description", "")).startswith("a duration")
+
+
+def _duration_in(annotation: Any) -> bool:
+    """Whether a duration type is inside ``annotation`` (``DurationNs | None``)."""
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) is typing.Annotated and any(_is_duration(m) for m in args[1:]):
+        return True
+    return any(_duration_in(a) for a in args)
+
+
 def _field_type(field: Any) -> str:
-    for meta in field.metadata:
-        schema = getattr(meta, "json_schema", None) or {}
-        if str(schema.get("description", "")).startswith("a duration"):
-            return "duration"
+    if any(_is_duration(meta) for meta in field.metadata):
+        return "duration"
+    if _duration_in(field.annotation):
+        return "duration (optional)" if type(None) in typing.get_args(field.annotation) else "duration"
     if isinstance(field.annotation, type) and issubclass(field.annotation, ByteSize):
         return "size"
     models = _models_in(field.annotation)

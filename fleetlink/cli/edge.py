@@ -15,11 +15,17 @@ import signal
 import threading
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fleetlink.cli.configs import add_set_argument, load_service
 from fleetlink.cli.logs import SERVICE_VERBOSITY
+from fleetlink.common.extras import MissingExtraError
 from fleetlink.common.zenoh_options import add_zenoh_arguments, options_from_args
+
+if TYPE_CHECKING:
+    from pydantic import SecretStr
+
+    from fleetlink.edge.admin.server import ExtensionFactory
 
 log = logging.getLogger(__name__)
 
@@ -67,8 +73,17 @@ def write_stats(path: Path, snapshot: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+def console_extensions(token: SecretStr | None, edge_id: str) -> list[ExtensionFactory]:
+    """The web console beside the admin API, when its extra is installed (else the API alone)."""
+    try:
+        from fleetlink.console.edge import console_extension
+    except MissingExtraError as exc:
+        log.info("%s; the admin API runs without it", exc)
+        return []
+    return [console_extension(token, edge_id)]
+
+
 def run_command(args: argparse.Namespace) -> int:
-    from fleetlink.console.edge import console_extension
     from fleetlink.edge.admin import EdgeAdmin, load_token
     from fleetlink.edge.agent import EdgeAgent
     from fleetlink.edge.config import EdgeConfig
@@ -77,7 +92,7 @@ def run_command(args: argparse.Namespace) -> int:
     # the admin API (HTTP when admin.listen is set, and the Zenoh admin space) with the changes
     # operators made at runtime, saved beside the spool and applied on top of the file
     token = load_token()
-    admin = EdgeAdmin(config, token=token, extensions=[console_extension(token, config.edge_id)])
+    admin = EdgeAdmin(config, token=token, extensions=console_extensions(token, config.edge_id))
     agent = EdgeAgent(admin.load(), options_from_args(args), stop_timeout_s=args.stop_timeout)
     done = threading.Event()
 

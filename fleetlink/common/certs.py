@@ -18,7 +18,6 @@ from __future__ import annotations
 import ipaddress
 import logging
 import os
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
@@ -30,6 +29,7 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from fleetlink.common.errors import FleetlinkError
+from fleetlink.common.names import cert_name_problem
 
 __all__ = [
     "CLOUD_NAME",
@@ -55,7 +55,6 @@ CLOUD_NAME = "fleetlink-cloud"
 #: Common name of the uplink's client certificate (full rights on ``fleetlink/**`` at the cloud).
 UPLINK_NAME = "fleetlink-uplink"
 
-_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 _DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 
 
@@ -117,11 +116,9 @@ class CertBundle:
 
 
 def _check_name(name: str) -> None:
-    if not _NAME_RE.fullmatch(name):
-        raise CertError(
-            f"certificate name {name!r}: use 1-64 letters, digits, '.', '_' or '-', "
-            "starting with a letter or digit"
-        )
+    problem = cert_name_problem(name)
+    if problem is not None:
+        raise CertError(f"certificate name {name!r}: {problem}")
 
 
 def _common_name(cert: x509.Certificate) -> str:

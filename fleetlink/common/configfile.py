@@ -1,8 +1,10 @@
 """Load one YAML file into one typed config model, with errors that name the YAML path.
 
-Every fleetlink process has one pydantic model (``extra="forbid"``) for its config.
-``load_config`` reads the file, applies ``--set`` overrides (:mod:`.overrides`), validates it
-and, on failure, raises a ``ConfigError`` listing every problem as
+Every fleetlink process has one config model, and every model of every section derives from
+``Section``: unknown keys are refused, durations are text (``fleetlink.common.durations``) and
+names have one type each (``fleetlink.common.names``). ``load_config`` reads the file, applies
+``--set`` overrides (:mod:`.overrides`), validates it and, on failure, raises a ``ConfigError``
+listing every problem as
 ``path.to[0].field (line N): message``. No socket is opened.
 """
 
@@ -14,7 +16,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from fleetlink.common.errors import ConfigError
 from fleetlink.common.overrides import Override, apply_overrides
@@ -24,6 +26,7 @@ __all__ = [
     "PathPart",
     "Places",
     "Problem",
+    "Section",
     "format_path",
     "load_config",
     "problems_error",
@@ -34,6 +37,14 @@ __all__ = [
 ]
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+class Section(BaseModel):
+    """The base of every config model and section: a key it does not declare is an error (a
+    misspelt key would otherwise leave its default in force without a word). A subclass's own
+    ``model_config`` adds to this one."""
+
+    model_config = ConfigDict(extra="forbid")
 
 
 def _line_index(node: yaml.Node, prefix: tuple[PathPart, ...], out: dict[tuple[PathPart, ...], int]) -> None:

@@ -47,6 +47,7 @@ import zenoh
 
 from fleetlink.common.certs import edge_name
 from fleetlink.common.errors import ConfigError
+from fleetlink.common.names import site_problem
 
 __all__ = [
     "ALL_MESSAGES",
@@ -101,7 +102,6 @@ _TOKEN_RE = re.compile(
 )
 _WHOLE_RE = re.compile(rf"^\$\{{({_NAME})\}}$")
 _EMBEDDED_RE = re.compile(rf"\$\{{({_NAME})\}}")
-_SITE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,57}$")
 
 
 class RouterConfigError(ConfigError):
@@ -191,10 +191,11 @@ def render_text(text: str, values: Mapping[str, Value], *, source: str = "<text>
 
 
 def _check_site(site: str, *, source: str) -> None:
-    if not _SITE_RE.fullmatch(site):
+    problem = site_problem(site)
+    if problem is not None:
         raise RouterConfigError(
-            f"site name {site!r}: use 1-58 letters, digits, '.', '_' or '-', starting with a "
-            "letter or digit (it becomes one key-expression chunk and part of a certificate name)",
+            f"site name {site!r} {problem} (it becomes one key-expression chunk and part of a "
+            "certificate name)",
             source=source,
             name="SITE",
         )

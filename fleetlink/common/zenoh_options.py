@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 import zenoh
-from pydantic import BaseModel, ConfigDict
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.errors import ConfigError
 from fleetlink.common.zenoh_configs import placeholders
 
@@ -171,10 +171,8 @@ def options_from_args(args: argparse.Namespace) -> ZenohOptions:
     )
 
 
-class ZenohSection(BaseModel):
+class ZenohSection(Section):
     """The ``zenoh:`` section of a fleetlink config: a JSON5 file plus explicit overrides."""
-
-    model_config = ConfigDict(extra="forbid")
 
     config_file: Path | None = None
     mode: Mode | None = None

@@ -14,6 +14,6 @@ polls JSON; every asset ships in the package (no network at run time).
 
 The console sits above the edge, the uplink and the repeater: it is served *by* their processes
 as an extension the command line attaches (``edge.console_extension``, ``uplink.uplink_console``);
-its settings model lives in ``fleetlink.common.console_settings`` so config files can name it.
+its config section lives in ``fleetlink.common.console_config`` so config files can name it.
 See docs/console.md.
 """

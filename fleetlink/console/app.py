@@ -30,11 +30,11 @@ from fastapi import Depends, FastAPI, Path, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
-from jinja2 import Environment, PackageLoader, select_autoescape
 from pydantic import SecretStr
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fleetlink import __version__
+from fleetlink.common.extras import missing_extra
 from fleetlink.console.auth import COOKIE, Access, check, cookie_value, may_change, token_matches
 from fleetlink.console.envelope import Envelope
 from fleetlink.console.errors import FormError
@@ -42,6 +42,11 @@ from fleetlink.console.forms import MappingForm, field_errors, mapping_body, ref
 from fleetlink.console.rates import RateBoard
 from fleetlink.console.sources import Sites
 from fleetlink.console.views import site_view
+
+try:
+    from jinja2 import Environment, PackageLoader, select_autoescape
+except ModuleNotFoundError as exc:  # pip install fleetlink leaves the console out
+    raise missing_extra(exc, "console") from None
 
 SiteParam = Annotated[str, Path(pattern=r"^[A-Za-z0-9_.-]+$", max_length=128)]
 NameParam = Annotated[str, Path(pattern=r"^[A-Za-z0-9_.-]+$", max_length=128)]

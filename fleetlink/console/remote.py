@@ -14,20 +14,22 @@ as such, never waited on forever.
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Callable
 from typing import Any
 
 import zenoh
 from pydantic import SecretStr
 
+from fleetlink.common.names import key_path_problem, site_problem
 from fleetlink.console.envelope import Envelope, failure, parse
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
 from fleetlink.uplink.latency import DeliveryLatency
 
-SITE = re.compile(r"[A-Za-z0-9_.-]+")
-_PATH = re.compile(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)?")
+
+def _admin_path_problem(path: str) -> str | None:
+    """An admin resource is one or two key chunks (``robots``, ``mappings/imu``)."""
+    return key_path_problem(path) or (None if path.count("/") <= 1 else "has more than two chunks")
 
 
 def status_key(site: str) -> str:
@@ -85,7 +87,7 @@ class ZenohSites:
         return [found[s] for s in sorted(found)]
 
     def read(self, site: str) -> dict[str, Envelope]:
-        if SITE.fullmatch(site) is None:
+        if site_problem(site) is not None:
             return {"health": failure(400, f"not a site name: {site!r}", site=site)}
         admin = self._get(f"fleetlink/{site}/admin/*")
         status = self._get(status_key(site))
@@ -103,7 +105,7 @@ class ZenohSites:
         return out
 
     def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:
-        if SITE.fullmatch(site) is None or _PATH.fullmatch(path) is None:
+        if site_problem(site) is not None or _admin_path_problem(path) is not None:
             return failure(400, f"not an admin resource: {site!r} {path!r}", site=site)
         key = f"fleetlink/{site}/admin/{path}"
         selector = key if op is None else f"{key}?op={op}"

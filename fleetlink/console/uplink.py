@@ -22,7 +22,7 @@ from fastapi import FastAPI
 from fastapi.responses import RedirectResponse
 from pydantic import SecretStr
 
-from fleetlink.common.console_settings import ConsoleSettings
+from fleetlink.common.console_config import ConsoleSection
 from fleetlink.common.metrics import HttpServer
 from fleetlink.console.app import create_console_app
 from fleetlink.console.auth import load_console_token
@@ -72,7 +72,7 @@ def command_view(router: CommandRouter | None) -> dict[str, Any]:
 class UplinkConsole:
     def __init__(
         self,
-        settings: ConsoleSettings,
+        settings: ConsoleSection,
         *,
         session: zenoh.Session,
         router: Callable[[], CommandRouter | None] = lambda: None,
@@ -101,12 +101,12 @@ class UplinkConsole:
         sites = ZenohSites(
             self.session,
             token=token,
-            timeout_s=s.query_timeout_s,
+            timeout_s=s.query_timeout,
             latency=self.latency,
             commands=lambda: command_view(self._router()),
         )
         app = FastAPI(title="fleetlink fleet console", docs_url=None, redoc_url=None, openapi_url=None)
-        app.mount("/console", create_console_app(sites, token=token, poll_interval_s=s.poll_interval_s))
+        app.mount("/console", create_console_app(sites, token=token, poll_interval_s=s.poll_interval))
 
         @app.get("/", include_in_schema=False)
         def front() -> RedirectResponse:
@@ -137,7 +137,7 @@ class UplinkConsole:
 
 
 def uplink_console(
-    settings: ConsoleSettings, *, token: SecretStr | None = None
+    settings: ConsoleSection, *, token: SecretStr | None = None
 ) -> Callable[[Uplink], UplinkConsole]:
     """The fleet console as an uplink extension (``Uplink(..., extensions=[...])``)."""
 

@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from fleetlink.common.extras import MissingExtraError
+
 
 def register(sub: Any) -> None:
     parser: argparse.ArgumentParser = sub.add_parser(
@@ -35,9 +37,23 @@ def register(sub: Any) -> None:
     parser.set_defaults(handler=_run)
 
 
+def missing_parts() -> str | None:
+    """Why this install cannot run the demo (its stream app and the console are extras), or None."""
+    try:
+        import fleetlink.console.app
+        import fleetlink.examples.fault_detection.app  # noqa: F401 - imported to see that it can be
+    except MissingExtraError as exc:
+        return f"the demo needs its extra, pip install 'fleetlink[demo]' ({exc.package} is not installed)"
+    return None
+
+
 def _run(args: argparse.Namespace) -> int:
     from fleetlink.demo.runner import Demo, DemoOptions, interrupted_on_sigint
 
+    missing = missing_parts()
+    if missing is not None:
+        print(f"fleetlink demo: {missing}")
+        return 2
     if args.robots < 2:
         print("fleetlink demo: --robots must be at least 2 (one to fault, one to stay healthy)")
         return 2

@@ -72,7 +72,7 @@ def edge_config(p: DemoPlaces) -> dict[str, Any]:
 
 def uplink_config(p: DemoPlaces) -> dict[str, Any]:
     return {
-        "kafka": {"bootstrap_servers": p.bootstrap, "linger_ms": 2},
+        "kafka": {"bootstrap_servers": p.bootstrap, "linger": "2ms"},
         "registry": {"url": p.registry_url},
         "zenoh": {"mode": "client", "connect": [p.cloud_router]},
         "commands": [

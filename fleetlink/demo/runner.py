@@ -249,7 +249,7 @@ class Demo:
         settings = FaultDetectionSettings(
             bootstrap=places.bootstrap,
             registry_url=places.registry_url,
-            window_ms=parse_duration_ms(self.o.window),
+            window=parse_duration_ms(self.o.window) / 1000,
             state_dir=places.workdir / "app-state",
             # a fresh consumer group per run: on a shared Kafka, earlier runs' records are not replayed
             group=self._app_group,

@@ -18,15 +18,15 @@ Record payload (what the edge spool stores, so a batch is built without re-encod
 With bit 2 the record has one more header, ``fleetlink.seq`` = the decimal source seq (the ROS
 publication sequence number), after the others. It keeps the rest of the payload (the *tail*:
 topic, key, headers) the same for every record of one robot and mapping, so the edge encodes it
-once and the uplink parses it once per batch. Version 1 batches are version 2 without bit 2; the
-uplink reads both, the edge writes version 2 (an uplink that only knows version 1 refuses such
-a batch with "unsupported batch version 2", and the edge keeps it until the uplink is upgraded).
+once and the uplink parses it once per batch. The edge writes version 3 and the uplink reads
+only that (another version is refused with "unsupported batch version N"; the edge keeps such a
+batch in its spool).
 
 A value is Avro single-object encoded (``C3 01`` + 8-byte CRC-64-AVRO fingerprint, little-endian,
 + Avro body) unless the raw flag is set (dead letters are produced exactly as given). A batch
 lists every fingerprint its records use, with the schema JSON, so that any stateless uplink can
 register it, until an uplink has acknowledged a batch carrying that schema: from then on the
-edge sends the fingerprint alone (length 0xFFFFFFFF, version 3). An uplink remembers the schema
+edge sends the fingerprint alone (length 0xFFFFFFFF). An uplink remembers the schema
 text of every batch it read; one that meets a left-out schema it does not know (restarted, or
 another uplink) produces nothing of the batch and answers ``need_schemas`` with the missing
 fingerprints, and the edge sends the batch again with their text. A schema costs 300-700 bytes
@@ -65,6 +65,7 @@ from fleetlink.wire.keys import (
     ROOT,
     ack_key,
     admin_key,
+    check_key_chunk,
     check_key_name,
     command_key,
     events_key,
@@ -107,6 +108,7 @@ __all__ = [
     "WireError",
     "ack_key",
     "admin_key",
+    "check_key_chunk",
     "check_key_name",
     "command_key",
     "decode_ack",

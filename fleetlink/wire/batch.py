@@ -10,7 +10,7 @@ from typing import Literal
 
 from fleetlink.wire.errors import WireError
 from fleetlink.wire.framing import U16, U32, U64, Reader, str16
-from fleetlink.wire.records import FLAGS_V1, FLAGS_V2, Record, Tails, decode_record, encode_payload
+from fleetlink.wire.records import Record, Tails, decode_record, encode_payload
 
 try:  # zstd is in the standard library from Python 3.14; the backport is a rosbags dependency
     from compression import zstd as _zstd  # type: ignore[import-not-found,unused-ignore]
@@ -30,12 +30,9 @@ _CODEC_NAMES = {v: k for k, v in _CODECS.items()}
 
 BATCH_MAGIC = b"FLB"
 BATCH_VERSION = 3
-"""What ``encode_batch_payloads`` writes. Version 2 adds the record flag ``FLAG_SOURCE_SEQ``,
-version 3 schema entries without their text (``Batch.elided``); versions 1 and 2 (from edges
-not yet upgraded) are still read."""
-_RECORD_FLAGS = {1: FLAGS_V1, 2: FLAGS_V2, 3: FLAGS_V2}
+"""The only version written and read (fleetlink 0.1.0 is the first release; others are refused)."""
 _ELIDED = 0xFFFFFFFF
-"""A schema entry's length that says "text left out" (version 3)."""
+"""A schema entry's length that says "text left out" (``Batch.elided``)."""
 MAX_BATCH_BYTES = 64 * 1024 * 1024
 """Default cap on a batch's uncompressed body (a decompression-bomb guard)."""
 _ELIDED_BYTES = U32.pack(_ELIDED)
@@ -160,8 +157,8 @@ def _decompress(codec: int, data: memoryview, size: int) -> bytes:
     return bytes(out)
 
 
-def _read_schemas(r: Reader, version: int) -> tuple[dict[bytes, str], frozenset[bytes]]:
-    """The schema section: texts by fingerprint, and the fingerprints left out (version 3)."""
+def _read_schemas(r: Reader) -> tuple[dict[bytes, str], frozenset[bytes]]:
+    """The schema section: texts by fingerprint, and the fingerprints left out."""
     (n_schemas,) = r.unpack(U16, "schema count")
     schemas: dict[bytes, str] = {}
     elided: set[bytes] = set()
@@ -169,7 +166,7 @@ def _read_schemas(r: Reader, version: int) -> tuple[dict[bytes, str], frozenset[
         fingerprint = r.take(8, "schema fingerprint")
         if fingerprint in schemas or fingerprint in elided:
             raise WireError(f"schema {fingerprint.hex()} is listed twice", offset=r.pos - 8)
-        if version >= 3 and r.data[r.pos : r.pos + 4] == _ELIDED_BYTES:
+        if r.data[r.pos : r.pos + 4] == _ELIDED_BYTES:
             r.pos += 4
             elided.add(fingerprint)
         else:
@@ -185,8 +182,7 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     magic, version, codec, size = _HEAD.unpack_from(view, 0)
     if magic != BATCH_MAGIC:
         raise WireError(f"not a fleetlink batch (magic {bytes(magic).hex()})", offset=0)
-    allowed_flags = _RECORD_FLAGS.get(version)
-    if allowed_flags is None:
+    if version != BATCH_VERSION:
         raise WireError(f"unsupported batch version {version}", offset=3)
     if size > max_bytes:
         raise WireError(f"batch body of {size} bytes exceeds the {max_bytes}-byte limit", offset=5)
@@ -196,7 +192,7 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     r = Reader(body)
     site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
     (first_seq,) = r.unpack(U64, "first_seq")
-    schemas, elided = _read_schemas(r, version)
+    schemas, elided = _read_schemas(r)
     (n_records,) = r.unpack(U32, "record count")
     if n_records == 0:
         raise WireError("a batch needs at least one record", offset=r.pos - 4)
@@ -216,7 +212,7 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
         pos += _SEQ_LEN.size
         if length > end - pos:
             raise WireError(f"truncated record {seq}", offset=pos)
-        append(decode_record(body, pos, pos + length, seq, tails=tails, allowed_flags=allowed_flags))
+        append(decode_record(body, pos, pos + length, seq, tails=tails))
         pos += length
     r.pos = pos
     r.done("the batch")

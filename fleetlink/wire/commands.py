@@ -27,9 +27,9 @@ import zlib
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
 
-from fleetlink.common.names import ROS_MSG_TYPE, ros_topic_problem
+from fleetlink.common.names import ros_topic_problem, ros_type_problem
 from fleetlink.wire.errors import EnvelopeError, WireError
-from fleetlink.wire.keys import check_key_name
+from fleetlink.wire.keys import check_key_chunk, check_key_name
 from fleetlink.wire.records import single_object, split_single_object
 
 MAGIC = b"FLC"
@@ -224,16 +224,15 @@ def check_envelope(env: CommandEnvelope) -> None:
         raise bad("command id must have 1 to 1000 characters")
     try:
         check_key_name(env.robot, "robot")
-        check_key_name(env.mapping, "command")
+        check_key_chunk(env.mapping, "command")
     except WireError as exc:
         raise bad(str(exc)) from None
-    if "/" in env.mapping:
-        raise bad(f"command {env.mapping!r} must be a single key chunk")
     problem = ros_topic_problem(env.ros_topic)
     if problem is not None:
         raise bad(f"ROS topic {env.ros_topic!r}: {problem}")
-    if ROS_MSG_TYPE.fullmatch(env.ros_type) is None:
-        raise bad(f"ROS type {env.ros_type!r} is not of the form package/msg/Name")
+    problem = ros_type_problem(env.ros_type)
+    if problem is not None:
+        raise bad(f"ROS type {env.ros_type!r} {problem}")
     if env.issued_at_ms < 0 or env.lease_until_ms < env.issued_at_ms:
         raise bad(f"lease [{env.issued_at_ms}, {env.lease_until_ms}] ms is not a time span")
     if env.period_ms <= 0:

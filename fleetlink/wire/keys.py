@@ -2,52 +2,48 @@
 
 from __future__ import annotations
 
-import re
-
+from fleetlink.common.names import key_chunk_problem, key_path_problem
 from fleetlink.wire.errors import WireError
 
 ROOT = "fleetlink"
-_KEY_CHUNK = re.compile(r"[A-Za-z0-9_.-]+(?:/[A-Za-z0-9_.-]+)*")
 
 
 def check_key_name(name: str, what: str = "name") -> str:
-    """A site, edge id or robot as key-expression chunks: letters, digits, '_', '.', '-'
-    (robots may span several '/'-separated chunks). No wildcards, no empty chunks."""
-    if _KEY_CHUNK.fullmatch(name) is None:
-        raise WireError(
-            f"{what} {name!r} cannot be used in a key expression: use letters, digits, "
-            "'_', '.', '-' (no wildcards, no empty chunks)"
-        )
+    """A robot as key-expression chunks: letters, digits, '_', '.', '-' (a robot may span
+    several '/'-separated chunks). No wildcards, no empty chunks."""
+    problem = key_path_problem(name)
+    if problem is not None:
+        raise WireError(f"{what} {name!r} {problem}")
+    return name
+
+
+def check_key_chunk(name: str, what: str = "name") -> str:
+    """A site, edge id or command name: one key chunk (``common.names.key_chunk_problem``)."""
+    problem = key_chunk_problem(name)
+    if problem is not None:
+        raise WireError(f"{what} {name!r} {problem}")
     return name
 
 
 def site_prefix(site: str) -> str:
     """``fleetlink/<site>``: every key of a site lives under it, so routers and ACLs scope a site."""
-    if "/" in site:
-        raise WireError(f"site {site!r} must be a single key chunk")
-    return f"{ROOT}/{check_key_name(site, 'site')}"
+    return f"{ROOT}/{check_key_chunk(site, 'site')}"
 
 
 def ingest_key(site: str, edge_id: str) -> str:
     """Where an edge sends its batches: ``fleetlink/<site>/ingest/<edge_id>``."""
-    if "/" in edge_id:
-        raise WireError(f"edge_id {edge_id!r} must be a single key chunk")
-    return f"{site_prefix(site)}/ingest/{check_key_name(edge_id, 'edge_id')}"
+    return f"{site_prefix(site)}/ingest/{check_key_chunk(edge_id, 'edge_id')}"
 
 
 def ack_key(site: str, edge_id: str) -> str:
     """Where acks for one edge go when sent as puts: ``fleetlink/<site>/ack/<edge_id>``."""
-    if "/" in edge_id:
-        raise WireError(f"edge_id {edge_id!r} must be a single key chunk")
-    return f"{site_prefix(site)}/ack/{check_key_name(edge_id, 'edge_id')}"
+    return f"{site_prefix(site)}/ack/{check_key_chunk(edge_id, 'edge_id')}"
 
 
 def command_key(site: str, robot: str, command: str) -> str:
     """Commands for one robot: ``fleetlink/<site>/command/<robot>/<command>``."""
-    if "/" in command:
-        raise WireError(f"command {command!r} must be a single key chunk")
     robot = check_key_name(robot, "robot")
-    return f"{site_prefix(site)}/command/{robot}/{check_key_name(command, 'command')}"
+    return f"{site_prefix(site)}/command/{robot}/{check_key_chunk(command, 'command')}"
 
 
 def events_key(site: str) -> str:

@@ -4,8 +4,8 @@ A payload is ``head | value | [source seq] | tail``: the head and the value vary
 tail (topic, key, headers) is usually the same for every record of one robot and mapping. The
 edge therefore encodes the tail once (``PayloadTemplate``) and the uplink parses each distinct
 tail once per batch (``decode_record``). The ROS sequence number, the one header that changes
-with every record, travels as a fixed field (``FLAG_SOURCE_SEQ``, batch version 2) and comes
-out as the ``fleetlink.seq`` header.
+with every record, travels as a fixed field (``FLAG_SOURCE_SEQ``) and comes out as the
+``fleetlink.seq`` header.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ FLAG_RAW_VALUE = 0x01
 FLAG_NULL_KEY = 0x02
 FLAG_SOURCE_SEQ = 0x04
 """A u64 source sequence number follows the value; decoded as the ``fleetlink.seq`` header."""
-FLAGS_V1 = FLAG_RAW_VALUE | FLAG_NULL_KEY
-FLAGS_V2 = FLAGS_V1 | FLAG_SOURCE_SEQ
+RECORD_FLAGS = FLAG_RAW_VALUE | FLAG_NULL_KEY | FLAG_SOURCE_SEQ
+"""Every flag a record payload may carry; any other bit is refused."""
 SOURCE_SEQ_HEADER = "fleetlink.seq"
 _PAYLOAD_HEAD = struct.Struct("<BqI")
 VALUE_OFFSET = _PAYLOAD_HEAD.size
@@ -80,7 +80,7 @@ def _tail(kafka_topic: str, key: bytes | None, headers: Sequence[tuple[str, byte
 
 
 def encode_payload(record: Record) -> bytes:
-    """A record's spool payload (everything but its seq); readable by batch versions 1 and 2."""
+    """A record's spool payload (everything but its seq)."""
     flags = (FLAG_RAW_VALUE if record.raw_value else 0) | (FLAG_NULL_KEY if record.key is None else 0)
     return (
         _PAYLOAD_HEAD.pack(flags, record.timestamp_ms, len(record.value))
@@ -93,7 +93,7 @@ class PayloadTemplate:
     """Payloads that share topic, key and headers, made with one ``struct.pack`` each.
 
     ``payload(value, timestamp_ms, source_seq)`` equals ``encode_payload`` of the record with
-    ``headers + (("fleetlink.seq", str(source_seq)),)`` once decoded (batch version 2).
+    ``headers + (("fleetlink.seq", str(source_seq)),)`` once decoded.
     """
 
     __slots__ = ("_flags", "_tail")
@@ -103,6 +103,16 @@ class PayloadTemplate:
     ) -> None:
         self._tail = _tail(kafka_topic, key, headers)
         self._flags = FLAG_NULL_KEY if key is None else 0
+
+    @property
+    def tail(self) -> bytes:
+        """Topic, key and headers as encoded after each payload's value (and source seq)."""
+        return self._tail
+
+    @property
+    def flags(self) -> int:
+        """The record flags every payload of the template carries (besides ``FLAG_SOURCE_SEQ``)."""
+        return self._flags
 
     def payload(self, value: bytes, timestamp_ms: int, source_seq: int | None = None) -> bytes:
         if source_seq is None:
@@ -140,23 +150,23 @@ def payload_fingerprints(payloads: Iterable[bytes]) -> set[bytes]:
 def decode_payload(payload: bytes | memoryview, seq: int = 0) -> Record:
     """Inverse of ``encode_payload`` (and of ``PayloadTemplate.payload``); raises ``WireError``."""
     data = bytes(payload)
-    return decode_record(data, 0, len(data), seq, tails={}, allowed_flags=FLAGS_V2)
+    return decode_record(data, 0, len(data), seq, tails={})
 
 
 Tails = dict[bytes, tuple[str, bytes, Headers]]
 """Parsed tails by their bytes: a cache for one batch (``decode_record``)."""
 
 
-def decode_record(data: bytes, pos: int, end: int, seq: int, *, tails: Tails, allowed_flags: int) -> Record:
+def decode_record(data: bytes, pos: int, end: int, seq: int, *, tails: Tails) -> Record:
     """The record payload ``data[pos:end]``; every failure is a ``WireError`` with the offset.
 
     ``tails`` remembers each distinct tail already parsed (pass the same dict for the records of
-    one batch); ``allowed_flags`` is ``FLAGS_V1`` or ``FLAGS_V2`` by batch version.
+    one batch).
     """
     if end - pos < VALUE_OFFSET:
         raise WireError("truncated record header", offset=pos)
     flags, timestamp_ms, value_len = _PAYLOAD_HEAD.unpack_from(data, pos)
-    if flags & ~allowed_flags:
+    if flags & ~RECORD_FLAGS:
         raise WireError(f"unknown record flags 0x{flags:02x}", offset=pos)
     start = pos + VALUE_OFFSET
     tail_at = start + value_len

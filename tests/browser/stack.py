@@ -21,7 +21,7 @@ from typing import Any
 import httpx
 from pydantic import SecretStr
 
-from fleetlink.common.console_settings import ConsoleSettings
+from fleetlink.common.console_config import ConsoleSection
 from fleetlink.console.edge import console_extension
 from fleetlink.console.uplink import UplinkConsole, console_extensions
 from fleetlink.edge.admin import EdgeAdmin
@@ -81,8 +81,8 @@ def console_stack(
     domain = next_domain()
     with ExitStack() as stack:
         cloud_router = stack.enter_context(ZenohRouter())
-        settings = ConsoleSettings(
-            listen="127.0.0.1:0", token_env=None, token_file=token_file, poll_interval_s=0.5
+        settings = ConsoleSection(
+            listen="127.0.0.1:0", token_env=None, token_file=token_file, poll_interval=0.5
         )
         config = uplink_config(cloud_router.endpoint, bootstrap, registry_url, suffix=suffix)
         config = config.model_copy(update={"console": settings})

@@ -235,12 +235,17 @@ def test_row25_repeater_restarted_after_the_lease_does_not_replay(
         )
         with (
             TopicLog(kafka_bootstrap, schema_registry_url, config.topics.command_status) as status,
-            running_uplink(config),
+            running_uplink(config) as uplink,
             fleet(site, ts, leds) as robots,
         ):
+            router = uplink.commands
+            assert router is not None
             with Repeater(repeater_config(site, state)) as rep:
                 sent = producer.send(topic, "tb4_01", RED, command_id=f"stale-{run}")
                 wait_until(lambda: rep.stats.applied == 1, timeout=10, message="applied, robot offline")
+                # the repeater counts a command applied before its answer leaves: stopped at once, the
+                # uplink would hear nothing, retry until the lease ends and report it expired itself
+                wait_until(lambda: router.stats.settled == 1, timeout=10, message="the uplink got the answer")
             assert leds.count("tb4_01") == 0
             wait_until(
                 lambda: time.time() > sent + lease + 0.5,

@@ -304,7 +304,7 @@ def uplink_config(
 ) -> UplinkConfig:
     return UplinkConfig.model_validate(
         {
-            "kafka": {"bootstrap_servers": bootstrap, "client_id": f"uplink-{suffix}", "linger_ms": 0},
+            "kafka": {"bootstrap_servers": bootstrap, "client_id": f"uplink-{suffix}", "linger": "0ms"},
             "registry": {"url": registry_url},
             "zenoh": {"mode": "client", "connect": [cloud]},
             "topics": {

@@ -283,13 +283,13 @@ def app_settings(
     return FaultDetectionSettings(
         bootstrap=bootstrap,
         registry_url=registry_url,
-        window_ms=WINDOW_MS,
+        window=WINDOW_MS / 1000,
         group=group,
         state_dir=state_dir,
         offset_reset="earliest",
         msg_paths=(IROBOT,),
         topics=topics,
-        commit_interval_s=0.5,
+        commit_interval=0.5,
     )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 import uuid
 
-from fleetlink.uplink.kafka_settings import KafkaSettings
+from fleetlink.uplink.kafka_settings import KafkaSection
 from fleetlink.uplink.producer import Delivery, KafkaSink
 
 
@@ -19,7 +19,7 @@ def test_every_record_gets_one_successful_report(kafka_bootstrap: str) -> None:
         if len(reports) == 500:
             done.set()
 
-    with KafkaSink(KafkaSettings(bootstrap_servers=kafka_bootstrap)) as sink:
+    with KafkaSink(KafkaSection(bootstrap_servers=kafka_bootstrap)) as sink:
         for i in range(500):
             sink.produce(
                 topic,
@@ -43,7 +43,7 @@ def test_oversized_record_is_reported_not_raised(kafka_bootstrap: str) -> None:
         reports.append(d)
         got.set()
 
-    settings = KafkaSettings(bootstrap_servers=kafka_bootstrap, message_max_bytes=10_000)
+    settings = KafkaSection(bootstrap_servers=kafka_bootstrap, message_max_bytes=10_000)
     with KafkaSink(settings) as sink:
         sink.produce(topic, b"k", b"x" * 50_000, on_delivery=on_delivery)
         assert got.wait(10)

@@ -33,21 +33,18 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
+from fleetlink.common.configfile import Section
 from fleetlink.common.durations import PositiveSeconds
+from fleetlink.common.names import KafkaTopic, KeyChunk, RosType, key_path_problem
 from fleetlink.roswire.errors import InvalidNameError
 from fleetlink.roswire.names import validate_topic
 from fleetlink.roswire.qos import Durability, QoS, Reliability
 from fleetlink.uplink.commands.errors import RoutingError
-from fleetlink.wire.errors import WireError
-from fleetlink.wire.keys import check_key_name
 
 _PLACEHOLDER = re.compile(r"\{([^{}]*)\}")
 _FIELD_PATH = re.compile(r"msg(?:\.[A-Za-z_][A-Za-z0-9_]*)+")
-_NAME = re.compile(r"[A-Za-z0-9_.-]{1,100}")
-_KAFKA_TOPIC = re.compile(r"[A-Za-z0-9._-]{1,249}")
-_ROS_TYPE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*/msg/[A-Za-z_][A-Za-z0-9_]*")
 
 
 # -- templates ------------------------------------------------------------------------------
@@ -138,8 +135,8 @@ def resolve(ref: Ref, *, key: str | None, robot: str | None, record: Mapping[str
 # -- config model ---------------------------------------------------------------------------
 
 
-class RepeatSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class RepeatSection(Section):
+    model_config = ConfigDict(frozen=True)
 
     period: PositiveSeconds = 1.0
     """How often the repeater publishes the command while its lease holds."""
@@ -147,8 +144,8 @@ class RepeatSettings(BaseModel):
     """How long the command is valid, from its Kafka record's timestamp."""
 
 
-class CommandQoS(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class CommandQoS(Section):
+    model_config = ConfigDict(frozen=True)
 
     reliability: Literal["reliable", "best_effort"] = "reliable"
     durability: Literal["volatile", "transient_local"] = "volatile"
@@ -162,40 +159,19 @@ class CommandQoS(BaseModel):
         ).to_keyexpr()
 
 
-class CommandMapping(BaseModel):
+class CommandMapping(Section):
     """One Kafka topic -> one ROS topic per addressed robot."""
 
-    model_config = ConfigDict(extra="forbid", populate_by_name=True, frozen=True)
+    model_config = ConfigDict(populate_by_name=True, frozen=True)
 
-    name: str
-    from_: str = Field(alias="from")
+    name: KeyChunk
+    from_: KafkaTopic = Field(alias="from")
     to: str
-    type: str
+    type: RosType
     robot: str | None = None
     broadcast: bool = False
-    repeat: RepeatSettings = RepeatSettings()
+    repeat: RepeatSection = RepeatSection()
     qos: CommandQoS | None = None
-
-    @field_validator("name")
-    @classmethod
-    def _name(cls, value: str) -> str:
-        if _NAME.fullmatch(value) is None:
-            raise ValueError(f"{value!r}: a command name is one key chunk (letters, digits, '_', '.', '-')")
-        return value
-
-    @field_validator("from_")
-    @classmethod
-    def _kafka_topic(cls, value: str) -> str:
-        if _KAFKA_TOPIC.fullmatch(value) is None or value in (".", ".."):
-            raise ValueError(f"{value!r} is not a Kafka topic name (1-249 of [a-zA-Z0-9._-])")
-        return value
-
-    @field_validator("type")
-    @classmethod
-    def _ros_type(cls, value: str) -> str:
-        if _ROS_TYPE.fullmatch(value) is None:
-            raise ValueError(f"{value!r} is not a ROS message type (package/msg/Name)")
-        return value
 
     @field_validator("to")
     @classmethod
@@ -282,10 +258,9 @@ def targets(
     robots = sorted(set(known_robots)) if ref is None else [resolve(ref, key=key, robot=None, record=record)]
     out: list[Target] = []
     for robot in robots:
-        try:
-            check_key_name(robot, "robot")
-        except WireError as exc:
-            raise RoutingError(str(exc)) from None
+        problem = key_path_problem(robot)
+        if problem is not None:
+            raise RoutingError(f"robot {robot!r} {problem}")
         topic = template.render(key=key, robot=robot, record=record)
         try:
             validate_topic(topic)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from fleetlink.uplink.commands.decode import DecodedValue
 from fleetlink.uplink.commands.mapping import CommandMapping, targets
 from fleetlink.wire.commands import CommandEnvelope
-from fleetlink.wire.keys import ROOT, check_key_name, command_key
+from fleetlink.wire.keys import ROOT, check_key_chunk, check_key_name, command_key
 
 COMMAND_ID_HEADER = "fleetlink-command-id"
 
@@ -72,7 +72,7 @@ def lease_until_ms(record: CommandRecord, mapping: CommandMapping, now_ms: int) 
 def any_site_key(robot: str, command: str) -> str:
     """``fleetlink/*/command/<robot>/<command>``: the command at every site's repeater."""
     check_key_name(robot, "robot")
-    return f"{ROOT}/*/command/{robot}/{check_key_name(command, 'command')}"
+    return f"{ROOT}/*/command/{robot}/{check_key_chunk(command, 'command')}"
 
 
 def plan(

@@ -22,7 +22,7 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.uplink.commands.decode import CommandDecoder
 from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
-from fleetlink.uplink.kafka_settings import KafkaSettings
+from fleetlink.uplink.kafka_settings import KafkaSection
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +31,7 @@ METADATA_EVERY_S = 5.0
 
 class RegistrationsReader:
     def __init__(
-        self, kafka: KafkaSettings, topic: str, decoder: CommandDecoder, directory: RobotDirectory
+        self, kafka: KafkaSection, topic: str, decoder: CommandDecoder, directory: RobotDirectory
     ) -> None:
         self._kafka = kafka
         self._topic = topic

@@ -371,7 +371,7 @@ class CommandRouter:
                     timestamp_ms=dl.timestamp_ms,
                     on_delivery=delivered,
                 )
-                done.wait(cfg.kafka.delivery_timeout_ms / 1000 + 5)
+                done.wait(cfg.kafka.delivery_timeout + 5)
             except Exception as exc:  # noqa: BLE001 - retried below
                 errors.append(str(exc))
             if done.is_set() and not errors:

@@ -53,7 +53,7 @@ def test_parse_duration_rejects(text: str) -> None:
 
 def test_settings_defaults_and_rule_config() -> None:
     settings = FaultDetectionSettings(bootstrap="k:9092", registry_url="http://r")
-    assert (settings.window_ms, settings.grace_ms, settings.min_events) == (2000, 1000, 2)
+    assert (settings.window, settings.grace, settings.min_events) == (2.0, 1.0, 2)
     assert settings.offset_reset == "latest"
     assert settings.topics == Topics(
         ir_intensity="fleet.ir_intensity",
@@ -73,13 +73,16 @@ def test_settings_defaults_and_rule_config() -> None:
 @pytest.mark.parametrize(
     ("field", "value"),
     [
-        ("window_ms", 0),
-        ("grace_ms", -1),
+        ("window", 0),
+        ("window", "0s"),
+        ("grace", -1),
+        ("grace", "-1s"),
         ("min_events", 0),
         ("bootstrap", ""),
         ("offset_reset", "middle"),
         ("distro", "rolling"),
-        ("poll_timeout_s", 0),
+        ("poll_timeout", 0),
+        ("commit_interval", "soon"),
         ("topic", "typo"),  # unknown option
     ],
 )
@@ -112,8 +115,8 @@ def test_check_copartitioned(partitions: dict[str, int], ok: bool) -> None:
 @pytest.mark.parametrize(
     ("extra", "expected"),
     [
-        ([], {"window_ms": 2000, "grace_ms": 1000, "offset_reset": "latest", "msg_paths": ()}),
-        (["--window", "500ms", "--grace", "0.2s"], {"window_ms": 500, "grace_ms": 200}),
+        ([], {"window": 2.0, "grace": 1.0, "offset_reset": "latest", "msg_paths": ()}),
+        (["--window", "500ms", "--grace", "0.2s"], {"window": 0.5, "grace": 0.2}),
         (["--from-beginning"], {"offset_reset": "earliest"}),
         (["--msg-path", "/a", "--msg-path", "/b"], {"msg_paths": (Path("/a"), Path("/b"))}),
         (["--failure-hazards", "4"], {"failure_hazards": frozenset({4})}),

@@ -9,15 +9,29 @@ import pytest
 from pydantic import ValidationError
 
 from fleetlink.uplink.errors import UnsafeKafkaSettingError
-from fleetlink.uplink.kafka_settings import KafkaSettings, redacted
+from fleetlink.uplink.kafka_settings import KafkaSection, redacted
 
 
 def test_producer_always_runs_acks_all_and_idempotent() -> None:
-    settings = KafkaSettings(bootstrap_servers="b:9092", producer_overrides={"batch.size": 65536})
+    settings = KafkaSection(bootstrap_servers="b:9092", producer_overrides={"batch.size": 65536})
     conf = settings.producer_config()
     assert conf["acks"] == "all"
     assert conf["enable.idempotence"] is True
     assert conf["batch.size"] == 65536
+
+
+def test_durations_are_text_and_reach_librdkafka_in_milliseconds() -> None:
+    defaults = KafkaSection(bootstrap_servers="b").producer_config()
+    assert (defaults["linger.ms"], defaults["delivery.timeout.ms"]) == (5, 120_000)
+    settings = KafkaSection.model_validate(
+        {"bootstrap_servers": "b", "linger": "20ms", "delivery_timeout": "3m"}
+    )
+    conf = settings.producer_config()
+    assert (conf["linger.ms"], conf["delivery.timeout.ms"]) == (20, 180_000)
+    assert settings.model_dump(mode="json")["delivery_timeout"] == "3m"
+    for bad in ({"linger": "11s"}, {"delivery_timeout": "500ms"}, {"linger_ms": 5}):
+        with pytest.raises(ValidationError):
+            KafkaSection.model_validate({"bootstrap_servers": "b", **bad})
 
 
 @pytest.mark.parametrize(
@@ -32,26 +46,26 @@ def test_producer_always_runs_acks_all_and_idempotent() -> None:
 )
 def test_weakening_overrides_are_refused(override: dict[str, Any], message: str) -> None:
     with pytest.raises(ValidationError, match=message):
-        KafkaSettings(bootstrap_servers="b:9092", producer_overrides=override)
+        KafkaSection(bootstrap_servers="b:9092", producer_overrides=override)
 
 
 def test_acks_all_spelled_minus_one_is_accepted() -> None:
-    settings = KafkaSettings(bootstrap_servers="b", producer_overrides={"acks": "-1"})
+    settings = KafkaSection(bootstrap_servers="b", producer_overrides={"acks": "-1"})
     assert settings.producer_config()["acks"] == "all"
 
 
 def test_consumer_never_auto_commits() -> None:
-    settings = KafkaSettings(bootstrap_servers="b", consumer_overrides={"enable.auto.commit": True})
+    settings = KafkaSection(bootstrap_servers="b", consumer_overrides={"enable.auto.commit": True})
     assert settings.consumer_config("g")["enable.auto.commit"] is False
 
 
 def test_sasl_needs_exactly_one_password_source(tmp_path: Path) -> None:
     with pytest.raises(ValidationError, match="exactly one of password"):
-        KafkaSettings.model_validate(
+        KafkaSection.model_validate(
             {"bootstrap_servers": "b", "security_protocol": "SASL_SSL", "sasl": {"username": "u"}}
         )
     with pytest.raises(ValidationError, match="needs a sasl section"):
-        KafkaSettings(bootstrap_servers="b", security_protocol="SASL_SSL")
+        KafkaSection(bootstrap_servers="b", security_protocol="SASL_SSL")
 
 
 def test_password_sources_never_printed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -63,7 +77,7 @@ def test_password_sources_never_printed(tmp_path: Path, monkeypatch: pytest.Monk
         ({"username": "u", "password_env": "KAFKA_PW"}, "s3cret-from-env"),
         ({"username": "u", "password": "s3cret-inline"}, "s3cret-inline"),
     ):
-        settings = KafkaSettings.model_validate(
+        settings = KafkaSection.model_validate(
             {"bootstrap_servers": "b", "security_protocol": "SASL_SSL", "sasl": sasl}
         )
         conf = settings.producer_config()
@@ -74,7 +88,7 @@ def test_password_sources_never_printed(tmp_path: Path, monkeypatch: pytest.Monk
 
 def test_missing_password_env_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("NOPE_PW", raising=False)
-    settings = KafkaSettings.model_validate(
+    settings = KafkaSection.model_validate(
         {
             "bootstrap_servers": "b",
             "security_protocol": "SASL_PLAINTEXT",

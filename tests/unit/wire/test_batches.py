@@ -155,18 +155,15 @@ def test_template_refuses_a_source_seq_beyond_u64(source_seq: int) -> None:
         PayloadTemplate("t", b"k").payload(b"v", 0, source_seq)
 
 
-def test_version_3_is_written_and_versions_1_and_2_still_read() -> None:
+def test_version_3_is_the_only_one_written_and_read() -> None:
     record = rec(1)
     assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 3
-    assert decode_batch(_raw(_body([(1, encode_payload(record))]), version=2)).records == (record,)
-    v1 = _raw(_body([(1, encode_payload(record))]), version=1)
-    assert decode_batch(v1).records == (record,)
+    assert decode_batch(_raw(_body([(1, encode_payload(record))]))).records == (record,)
+    for version in (1, 2):
+        with pytest.raises(WireError, match=f"unsupported batch version {version}"):
+            decode_batch(_raw(_body([(1, encode_payload(record))]), version=version))
     seq_payload = PayloadTemplate("t", b"k").payload(b"v", 0, 5)
-    with pytest.raises(WireError, match="unknown record flags 0x04"):
-        decode_batch(_raw(_body([(1, seq_payload)]), version=1))
-    assert decode_batch(_raw(_body([(1, seq_payload)]), version=2)).records[0].headers == (
-        (SOURCE_SEQ_HEADER, b"5"),
-    )
+    assert decode_batch(_raw(_body([(1, seq_payload)]))).records[0].headers == ((SOURCE_SEQ_HEADER, b"5"),)
 
 
 def test_records_sharing_a_tail_keep_their_own_key_value_and_seq() -> None:
@@ -201,7 +198,7 @@ def test_single_object_helpers() -> None:
 
 
 def _raw(
-    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 1
+    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 3
 ) -> bytes:
     header = struct.pack("<3sBBI", magic, version, codec, len(body) if size is None else size)
     return header + (zlib.compress(body) if codec == 1 else body)
@@ -327,16 +324,13 @@ def test_a_batch_lists_left_out_schemas_by_fingerprint_alone() -> None:
             )
         )
 
-    # before version 3 the marker is a length like any other (here: far past the end)
     def body(entries: int) -> bytes:
         head = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QH", 1, entries)
         return head + (FP + b"\xff\xff\xff\xff") * entries + _body([(1, encode_payload(rec(1)))])[19:]
 
-    assert decode_batch(_raw(body(1), version=3)).elided == frozenset({FP})
-    with pytest.raises(WireError, match="truncated"):
-        decode_batch(_raw(body(1), version=2))
+    assert decode_batch(_raw(body(1))).elided == frozenset({FP})
     with pytest.raises(WireError, match="listed twice"):
-        decode_batch(_raw(body(2), version=3))
+        decode_batch(_raw(body(2)))
 
 
 @pytest.mark.parametrize("ack", ACKS)

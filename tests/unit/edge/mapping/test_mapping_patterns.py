@@ -6,8 +6,9 @@ from typing import Any
 
 import pytest
 
+from fleetlink.common.names import kafka_topic_problem
 from fleetlink.edge.errors import MappingError, RenderError
-from fleetlink.edge.mapping import Template, TopicPattern, kafka_topic_problem
+from fleetlink.edge.mapping import Template, TopicPattern
 
 MATCHES: list[tuple[str, str, dict[str, str] | None]] = [
     ("/{robot}/imu", "/tb4_01/imu", {"robot": "tb4_01"}),

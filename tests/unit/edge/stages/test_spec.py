@@ -107,7 +107,7 @@ def test_json_schema_is_available_for_the_admin_api() -> None:
             "idle_timeout",
         ),
         ({"type": "aggregate", "window": "1s", "fields": ["x"]}, "stages[0].aggregate.ops: Field required"),
-        ({"type": "filter", "expr": "x > 1", "name": "has space"}, "should match pattern"),
+        ({"type": "filter", "expr": "x > 1", "name": "has space"}, "must be one key chunk"),
     ],
 )
 def test_refused_with_the_yaml_path(stage: dict[str, Any], fragment: str) -> None:

@@ -124,8 +124,8 @@ def test_records_that_address_no_usable_robot(fields: dict[str, Any], key: str |
     ("fields", "reason"),
     [
         ({"name": "light ring"}, "one key chunk"),
-        ({"from": "fleet commands"}, "not a Kafka topic name"),
-        ({"type": "LightringLeds"}, "not a ROS message type"),
+        ({"from": "fleet commands"}, "Kafka topic names use only"),
+        ({"type": "LightringLeds"}, "must look like 'package/msg/Type'"),
         ({"to": "{key}/cmd"}, "absolute ROS topic"),
         ({"to": "/{key}//cmd"}, "makes no valid ROS topic"),
         ({"to": "/{nope}/cmd"}, "unknown placeholder"),

@@ -1,15 +1,16 @@
-"""The fleet console's settings (the ``console`` section of the uplink's config)."""
+"""The fleet console's section (``console:`` of the uplink's config)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from fleetlink.common.configfile import Section
+from fleetlink.common.durations import Seconds
 
 
-class ConsoleSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class ConsoleSection(Section):
     listen: str = Field(
         examples=["127.0.0.1:8490"],
         description="host:port the fleet web console listens on (HTTP; put TLS in front when exposed)",
@@ -22,10 +23,10 @@ class ConsoleSettings(BaseModel):
     token_file: Path | None = Field(
         default=None, description="file holding the access token (wins over token_env)"
     )
-    query_timeout_s: float = Field(
+    query_timeout: Seconds = Field(
         default=3.0, gt=0, le=60, description="how long to wait for the sites' answers over Zenoh"
     )
-    poll_interval_s: float = Field(
+    poll_interval: Seconds = Field(
         default=1.0,
         ge=0.2,
         le=60,

@@ -1,0 +1,506 @@
+//! The edge's receive path: one Zenoh session, any number of subscriptions feeding ONE bounded
+//! intake (no thread per subscription), and `take()`, which turns what arrived into spool record
+//! payloads without holding the GIL.
+//!
+//! A subscription callback (on Zenoh's threads) copies the sample into the intake and returns;
+//! when the intake is at its bound (samples or bytes) the sample is dropped and counted, so
+//! Zenoh's buffers never pile up behind a slow consumer. `take()` reads the attachment, follows
+//! each publisher's sequence numbers, and for a data key with a *plan* (installed by the Python
+//! side once it has decided how a key maps) converts CDR to Avro and writes each mapping's
+//! record payload (`fleetlink.wire.records.PayloadTemplate` format) into one group per delivery
+//! class. Everything else — keys without a plan, attachments that do not parse, payloads the
+//! converter refuses — goes back to Python as a raw sample, where the general path makes the
+//! same record or the dead letter.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict};
+use zenoh::pubsub::Subscriber;
+use zenoh::{Config, Session, Wait};
+
+use crate::attachment;
+use crate::cdr_avro::Program;
+use crate::seq::{SeqTracker, Seen};
+
+const FLAG_SOURCE_SEQ: u8 = 0x04;
+/// A lane that only counts: a mapping that declares another ROS type than the key carries.
+pub const MISMATCH: u32 = u32::MAX;
+
+fn zerr<E: std::fmt::Display>(e: E) -> PyErr {
+    PyRuntimeError::new_err(e.to_string())
+}
+
+fn now_ns() -> i64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as i64).unwrap_or(0)
+}
+
+struct Raw {
+    sub: u32,
+    key: String,
+    payload: Vec<u8>,
+    attachment: Option<Vec<u8>>,
+    received_ns: i64,
+}
+
+impl Raw {
+    fn size(&self) -> usize {
+        self.payload.len() + self.attachment.as_ref().map_or(0, |a| a.len()) + self.key.len() + 64
+    }
+}
+
+#[derive(Default)]
+struct SubAtomics {
+    received: AtomicU64,
+    dropped: AtomicU64,
+}
+
+#[derive(Default, Clone, Copy)]
+struct SubCounts {
+    gaps: u64,
+    missing: u64,
+    duplicates: u64,
+}
+
+struct Queue {
+    items: VecDeque<Raw>,
+    bytes: usize,
+    high_water: usize,
+    woken: bool,
+}
+
+struct Shared {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+    max_items: usize,
+    max_bytes: usize,
+    dropped: AtomicU64,
+    dropped_bytes: AtomicU64,
+    taken: AtomicU64,
+}
+
+impl Shared {
+    fn offer(&self, raw: Raw, sub: &SubAtomics) {
+        sub.received.fetch_add(1, Ordering::Relaxed);
+        let size = raw.size();
+        let mut q = self.queue.lock().unwrap();
+        if q.items.len() >= self.max_items || q.bytes + size > self.max_bytes {
+            drop(q);
+            sub.dropped.fetch_add(1, Ordering::Relaxed);
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+            self.dropped_bytes.fetch_add(size as u64, Ordering::Relaxed);
+            return;
+        }
+        let was_empty = q.items.is_empty();
+        q.items.push_back(raw);
+        q.bytes += size;
+        if q.items.len() > q.high_water {
+            q.high_water = q.items.len();
+        }
+        drop(q);
+        if was_empty {
+            self.ready.notify_one();
+        }
+    }
+}
+
+struct Lane {
+    id: u32,
+    program: Option<Arc<Program>>,
+    head: Vec<u8>,
+    tail: Vec<u8>,
+    flags: u8,
+    delivery: u8,
+}
+
+struct Plan {
+    lanes: Vec<Lane>,
+}
+
+struct State {
+    programs: HashMap<u32, Arc<Program>>,
+    plans: HashMap<String, Arc<Plan>>,
+    seqs: SeqTracker,
+    counts: HashMap<u32, SubCounts>,
+    subs: HashMap<u32, Arc<SubAtomics>>,
+    topics: HashMap<u32, String>,
+}
+
+/// What one `take()` made, before it becomes Python objects.
+struct Taken {
+    groups: [(u64, Vec<u8>); 2],
+    slow: Vec<Raw>,
+    lanes: HashMap<u32, (u64, u64)>,
+    samples: usize,
+    oldest_ns: i64,
+}
+
+#[pyclass(module = "fleetlink._native")]
+pub struct DataPlane {
+    session: Mutex<Option<Session>>,
+    shared: Arc<Shared>,
+    subscribers: Mutex<HashMap<u32, Subscriber<()>>>,
+    state: Mutex<State>,
+}
+
+#[pymethods]
+impl DataPlane {
+    /// `DataPlane(config_file, overrides, max_items, max_bytes, max_sources)`: open a Zenoh
+    /// session from a JSON5 config file (or the defaults) with `overrides` (key, JSON5 value)
+    /// inserted, and an intake bounded by `max_items` samples and `max_bytes` bytes.
+    #[new]
+    #[pyo3(signature = (config_file, overrides, max_items, max_bytes, max_sources=65536))]
+    fn new(
+        py: Python<'_>,
+        config_file: Option<String>,
+        overrides: Vec<(String, String)>,
+        max_items: usize,
+        max_bytes: usize,
+        max_sources: usize,
+    ) -> PyResult<Self> {
+        if max_items == 0 || max_bytes == 0 {
+            return Err(PyValueError::new_err("intake bounds must be positive"));
+        }
+        let mut config = match config_file {
+            Some(path) => Config::from_file(&path).map_err(|e| PyValueError::new_err(format!("zenoh config {path}: {e}")))?,
+            None => Config::default(),
+        };
+        for (key, value) in overrides {
+            config
+                .insert_json5(&key, &value)
+                .map_err(|e| PyValueError::new_err(format!("zenoh config {key}={value}: {e}")))?;
+        }
+        let session = py.detach(|| zenoh::open(config).wait()).map_err(zerr)?;
+        Ok(DataPlane {
+            session: Mutex::new(Some(session)),
+            shared: Arc::new(Shared {
+                queue: Mutex::new(Queue { items: VecDeque::new(), bytes: 0, high_water: 0, woken: false }),
+                ready: Condvar::new(),
+                max_items,
+                max_bytes,
+                dropped: AtomicU64::new(0),
+                dropped_bytes: AtomicU64::new(0),
+                taken: AtomicU64::new(0),
+            }),
+            subscribers: Mutex::new(HashMap::new()),
+            state: Mutex::new(State {
+                programs: HashMap::new(),
+                plans: HashMap::new(),
+                seqs: SeqTracker::new(max_sources),
+                counts: HashMap::new(),
+                subs: HashMap::new(),
+                topics: HashMap::new(),
+            }),
+        })
+    }
+
+    /// The Zenoh id of the data plane's session.
+    fn zid(&self) -> PyResult<String> {
+        let guard = self.session.lock().unwrap();
+        let session = guard.as_ref().ok_or_else(|| PyRuntimeError::new_err("the data plane is closed"))?;
+        Ok(session.zid().to_string())
+    }
+
+    /// Receive `key_expr` into the intake, under `sub_id` (its counters); `topic` names it.
+    fn subscribe(&self, py: Python<'_>, sub_id: u32, key_expr: String, topic: String) -> PyResult<()> {
+        let session = {
+            let guard = self.session.lock().unwrap();
+            guard.as_ref().ok_or_else(|| PyRuntimeError::new_err("the data plane is closed"))?.clone()
+        };
+        let atomics = {
+            let mut state = self.state.lock().unwrap();
+            state.topics.insert(sub_id, topic);
+            state.subs.entry(sub_id).or_insert_with(|| Arc::new(SubAtomics::default())).clone()
+        };
+        let shared = self.shared.clone();
+        let subscriber = py
+            .detach(move || {
+                session
+                    .declare_subscriber(key_expr)
+                    .callback(move |sample| {
+                        let raw = Raw {
+                            sub: sub_id,
+                            key: sample.key_expr().as_str().to_owned(),
+                            payload: sample.payload().to_bytes().into_owned(),
+                            attachment: sample.attachment().map(|a| a.to_bytes().into_owned()),
+                            received_ns: now_ns(),
+                        };
+                        shared.offer(raw, &atomics);
+                    })
+                    .wait()
+            })
+            .map_err(zerr)?;
+        if let Some(old) = self.subscribers.lock().unwrap().insert(sub_id, subscriber) {
+            py.detach(|| old.undeclare().wait()).map_err(zerr)?;
+        }
+        Ok(())
+    }
+
+    /// Stop receiving under `sub_id` (what is already in the intake is still taken).
+    fn unsubscribe(&self, py: Python<'_>, sub_id: u32) -> PyResult<bool> {
+        let removed = self.subscribers.lock().unwrap().remove(&sub_id);
+        match removed {
+            Some(sub) => {
+                py.detach(|| sub.undeclare().wait()).map_err(zerr)?;
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    }
+
+    /// Register a compiled CDR -> Avro layout under `program_id`.
+    fn add_program(&self, program_id: u32, code: &[u8]) -> PyResult<()> {
+        let program = Program::parse(code).map_err(PyValueError::new_err)?;
+        self.state.lock().unwrap().programs.insert(program_id, Arc::new(program));
+        Ok(())
+    }
+
+    /// How the samples of data key `key` become records: one lane per mapping,
+    /// `(lane_id, program_id, head, tail, flags, delivery)`; `program_id` MISMATCH only counts.
+    fn set_plan(&self, key: String, lanes: Vec<(u32, u32, Vec<u8>, Vec<u8>, u8, u8)>) -> PyResult<()> {
+        let mut state = self.state.lock().unwrap();
+        let mut built = Vec::with_capacity(lanes.len());
+        for (id, program_id, head, tail, flags, delivery) in lanes {
+            if delivery > 1 {
+                return Err(PyValueError::new_err(format!("delivery class {delivery} is not 0 or 1")));
+            }
+            let program = if program_id == MISMATCH {
+                None
+            } else {
+                Some(
+                    state
+                        .programs
+                        .get(&program_id)
+                        .cloned()
+                        .ok_or_else(|| PyValueError::new_err(format!("no program {program_id}")))?,
+                )
+            };
+            built.push(Lane { id, program, head, tail, flags, delivery });
+        }
+        state.plans.insert(key, Arc::new(Plan { lanes: built }));
+        Ok(())
+    }
+
+    /// Forget every plan (the mapping table changed): keys go to Python until planned again.
+    fn clear_plans(&self) {
+        self.state.lock().unwrap().plans.clear();
+    }
+
+    fn plans(&self) -> usize {
+        self.state.lock().unwrap().plans.len()
+    }
+
+    /// Wake a waiting `take()` (something else needs the processing thread).
+    fn wake(&self) {
+        let mut q = self.shared.queue.lock().unwrap();
+        q.woken = true;
+        drop(q);
+        self.shared.ready.notify_all();
+    }
+
+    /// Up to `max_samples` samples, waiting at most `timeout_s` for the first. Returns
+    /// `(groups, slow, lanes, samples, oldest_received_ns)`: `groups` a list of
+    /// `(delivery, count, blob)` (`blob` = `{u32 length | record payload}*`), `slow` the raw
+    /// samples for the Python path `(sub_id, key, payload, attachment | None, received_ns)`,
+    /// `lanes` the `(lane_id, received, emitted)` counts of this call.
+    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes))]
+    fn take<'py>(
+        &self,
+        py: Python<'py>,
+        max_samples: usize,
+        timeout_s: f64,
+        max_value_bytes: usize,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let taken = py.detach(|| {
+            let raws = self.wait_and_drain(max_samples.max(1), timeout_s);
+            self.process(raws, max_value_bytes)
+        });
+        let groups: Vec<(u8, u64, Bound<'py, PyBytes>)> = taken
+            .groups
+            .iter()
+            .enumerate()
+            .filter(|(_, (n, _))| *n > 0)
+            .map(|(d, (n, blob))| (d as u8, *n, PyBytes::new(py, blob)))
+            .collect();
+        let slow: Vec<(u32, String, Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, i64)> = taken
+            .slow
+            .into_iter()
+            .map(|r| {
+                (
+                    r.sub,
+                    r.key,
+                    PyBytes::new(py, &r.payload),
+                    r.attachment.as_ref().map(|a| PyBytes::new(py, a)),
+                    r.received_ns,
+                )
+            })
+            .collect();
+        let lanes: Vec<(u32, u64, u64)> = taken.lanes.into_iter().map(|(id, (r, e))| (id, r, e)).collect();
+        (groups, slow, lanes, taken.samples, taken.oldest_ns).into_pyobject(py).map(|t| t.into_any())
+    }
+
+    /// The intake's counters.
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let q = self.shared.queue.lock().unwrap();
+        d.set_item("queued", q.items.len())?;
+        d.set_item("queued_bytes", q.bytes)?;
+        d.set_item("high_water", q.high_water)?;
+        d.set_item("oldest_ns", q.items.front().map_or(0, |r| r.received_ns))?;
+        drop(q);
+        d.set_item("dropped", self.shared.dropped.load(Ordering::Relaxed))?;
+        d.set_item("dropped_bytes", self.shared.dropped_bytes.load(Ordering::Relaxed))?;
+        d.set_item("taken", self.shared.taken.load(Ordering::Relaxed))?;
+        d.set_item("max_items", self.shared.max_items)?;
+        d.set_item("max_bytes", self.shared.max_bytes)?;
+        d.set_item("subscriptions", self.subscribers.lock().unwrap().len())?;
+        Ok(d)
+    }
+
+    /// Per subscription: `(received, dropped, gaps, missing, duplicates)`.
+    fn sub_stats(&self) -> HashMap<u32, (u64, u64, u64, u64, u64)> {
+        let state = self.state.lock().unwrap();
+        state
+            .subs
+            .iter()
+            .map(|(id, a)| {
+                let c = state.counts.get(id).copied().unwrap_or_default();
+                (*id, (a.received.load(Ordering::Relaxed), a.dropped.load(Ordering::Relaxed), c.gaps, c.missing, c.duplicates))
+            })
+            .collect()
+    }
+
+    /// The last sequence number seen from a publisher GID (16 bytes), if any.
+    fn last_seq(&self, gid: &[u8]) -> Option<i64> {
+        let gid: [u8; 16] = gid.try_into().ok()?;
+        self.state.lock().unwrap().seqs.last(&gid)
+    }
+
+    /// Undeclare every subscription and close the session. Idempotent.
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        let subs: Vec<Subscriber<()>> = self.subscribers.lock().unwrap().drain().map(|(_, s)| s).collect();
+        let session = self.session.lock().unwrap().take();
+        py.detach(|| {
+            for sub in subs {
+                let _ = sub.undeclare().wait();
+            }
+            if let Some(s) = session {
+                let _ = s.close().wait();
+            }
+        });
+        self.wake();
+        Ok(())
+    }
+}
+
+impl DataPlane {
+    fn wait_and_drain(&self, max: usize, timeout_s: f64) -> Vec<Raw> {
+        let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
+        let mut q = self.shared.queue.lock().unwrap();
+        while q.items.is_empty() && !q.woken {
+            let now = Instant::now();
+            if now >= deadline {
+                break;
+            }
+            q = self.shared.ready.wait_timeout(q, deadline - now).unwrap().0;
+        }
+        q.woken = false;
+        let n = q.items.len().min(max);
+        let raws: Vec<Raw> = q.items.drain(..n).collect();
+        let freed: usize = raws.iter().map(Raw::size).sum();
+        q.bytes -= freed;
+        drop(q);
+        self.shared.taken.fetch_add(raws.len() as u64, Ordering::Relaxed);
+        raws
+    }
+
+    fn process(&self, raws: Vec<Raw>, max_value_bytes: usize) -> Taken {
+        let mut taken = Taken {
+            groups: [(0, Vec::new()), (0, Vec::new())],
+            slow: Vec::new(),
+            lanes: HashMap::new(),
+            samples: raws.len(),
+            oldest_ns: raws.first().map_or(0, |r| r.received_ns),
+        };
+        let mut state = self.state.lock().unwrap();
+        let mut bodies: Vec<Vec<u8>> = Vec::new();
+        for raw in raws {
+            let parsed = raw.attachment.as_deref().and_then(attachment::parse);
+            let Some(att) = parsed else {
+                taken.slow.push(raw); // no or a broken attachment: the Python path says why
+                continue;
+            };
+            let seen = state.seqs.observe(&att.gid, att.seq);
+            if !matches!(seen, Seen::First | Seen::Next) {
+                let counts = state.counts.entry(raw.sub).or_default();
+                match seen {
+                    Seen::Gap(missing) => {
+                        counts.gaps += 1;
+                        counts.missing += missing;
+                    }
+                    Seen::Duplicate => counts.duplicates += 1,
+                    _ => {}
+                }
+            }
+            let Some(plan) = state.plans.get(&raw.key).cloned() else {
+                taken.slow.push(raw);
+                continue;
+            };
+            if att.seq < 0 || !convert_all(&plan, &raw.payload, max_value_bytes, &mut bodies) {
+                taken.slow.push(raw);
+                continue;
+            }
+            let stamp = if att.source_ts_ns != 0 { att.source_ts_ns } else { raw.received_ns };
+            let ts_ms = stamp.div_euclid(1_000_000);
+            for (lane, body) in plan.lanes.iter().zip(bodies.iter()) {
+                let entry = taken.lanes.entry(lane.id).or_insert((0, 0));
+                entry.0 += 1;
+                if lane.program.is_none() {
+                    continue;
+                }
+                entry.1 += 1;
+                let (count, blob) = &mut taken.groups[lane.delivery as usize];
+                let value_len = lane.head.len() + body.len();
+                let payload_len = 13 + value_len + 8 + lane.tail.len();
+                blob.reserve(4 + payload_len);
+                blob.extend_from_slice(&(payload_len as u32).to_le_bytes());
+                blob.push(lane.flags | FLAG_SOURCE_SEQ);
+                blob.extend_from_slice(&ts_ms.to_le_bytes());
+                blob.extend_from_slice(&(value_len as u32).to_le_bytes());
+                blob.extend_from_slice(&lane.head);
+                blob.extend_from_slice(body);
+                blob.extend_from_slice(&(att.seq as u64).to_le_bytes());
+                blob.extend_from_slice(&lane.tail);
+                *count += 1;
+            }
+        }
+        taken
+    }
+}
+
+/// Each lane's Avro body into `bodies` (one per lane, in order); false when one does not convert
+/// or is too large (then the whole sample takes the Python path, so no lane emits twice).
+fn convert_all(plan: &Plan, payload: &[u8], max_value_bytes: usize, bodies: &mut Vec<Vec<u8>>) -> bool {
+    bodies.resize_with(plan.lanes.len(), Vec::new);
+    let mut previous: Option<(&Arc<Program>, usize)> = None;
+    for (i, lane) in plan.lanes.iter().enumerate() {
+        bodies[i].clear();
+        let Some(program) = &lane.program else { continue };
+        if let Some((p, j)) = previous {
+            if Arc::ptr_eq(p, program) {
+                let (done, rest) = bodies.split_at_mut(i);
+                rest[0].extend_from_slice(&done[j]);
+                continue;
+            }
+        }
+        if program.convert(payload, &mut bodies[i]).is_err() || lane.head.len() + bodies[i].len() > max_value_bytes {
+            return false;
+        }
+        previous = Some((program, i));
+    }
+    true
+}
