@@ -92,9 +92,11 @@ class Scenario:
             for name, flag in (("listen", "-l"), ("connect", "-e")):
                 for endpoint in self.zenoh_endpoints(router).get(name, []):
                     argv += [flag, with_ports(endpoint, self.ports)]
-        if argv[:3] == ["fleetlink", "stack", "up"] and "--dir" in argv:
-            folder = argv[argv.index("--dir") + 1]
-            self.stack.callback(self.stack_down, folder)
+        if argv[:2] == ["fleetlink", "stack"] and "--dir" in argv:
+            at = argv.index("--dir") + 1  # a state folder: the test's, so no earlier run's records
+            argv[at] = str(self.folder / "stack" / Path(argv[at]).name)
+            if argv[2] == "up":
+                self.stack.callback(self.stack_down, argv[at])
         return argv, env
 
     def zenoh_endpoints(self, file: str | None) -> dict[str, list[str]]:
