@@ -150,9 +150,18 @@ class EdgeAgent:
         spool_dir = Path(config.spool.dir)
         self._book = book = SchemaBook(spool_dir / "schemas").load()
         book.add(EVENT_FINGERPRINT, EVENT_SCHEMA_JSON)
-        self._spool = Spool(spool_dir / "durable", config.spool.options(), stream="durable").open()
+        # records are kept and sent in groups that fill a WAN batch without passing its limits
+        group_records, group_bytes = config.wan.batch_max_records, int(config.wan.batch_max_bytes)
+        spool_options = dataclasses.replace(
+            config.spool.options(), group_records=group_records, group_bytes=group_bytes
+        )
+        self._spool = Spool(spool_dir / "durable", spool_options, stream="durable").open()
         self._memory = MemoryBuffer(
-            stream="memory", max_bytes=int(config.memory.max_bytes), max_records=config.memory.max_records
+            stream="memory",
+            max_bytes=int(config.memory.max_bytes),
+            max_records=config.memory.max_records,
+            group_records=group_records,
+            group_bytes=group_bytes,
         )
         buffers: dict[Delivery, RecordBuffer] = {"at_least_once": self._spool, "best_effort": self._memory}
         limit = (
@@ -180,6 +189,8 @@ class EdgeAgent:
             max_items=self.intake_items,
             max_bytes=self.intake_bytes,
             max_value_bytes=self._maker.max_value_bytes,
+            group_records=group_records,
+            group_bytes=group_bytes,
         )
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)

@@ -24,9 +24,14 @@ class DataPlane:
     def plans(self) -> int: ...
     def wake(self) -> None: ...
     def take(
-        self, max_samples: int, timeout_s: float, max_value_bytes: int
+        self,
+        max_samples: int,
+        timeout_s: float,
+        max_value_bytes: int,
+        group_records: int = 2000,
+        group_bytes: int = 1048576,
     ) -> tuple[
-        list[tuple[int, int, bytes]],
+        list[tuple[int, bytes]],
         list[tuple[int, str, bytes, bytes | None, int]],
         list[tuple[int, int, int]],
         int,

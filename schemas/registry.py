@@ -149,6 +149,22 @@ class SchemaRegistry:
             self._schemas[schema_id] = schema
         return schema
 
+    def latest(self, subject: str) -> tuple[int, int, dict[str, Any]]:
+        """(schema id, version, schema) of the newest version registered under ``subject``."""
+        try:
+            registered = self._sr().get_latest_version(subject)
+        except SchemaRegistryError as exc:
+            if exc.http_status_code == _NOT_FOUND:
+                raise RegistryError(subject, "no schema registered under this subject") from exc
+            raise self._error(subject, exc) from exc
+        except (httpx.HTTPError, OSError) as exc:
+            raise RegistryUnavailableError(subject, f"cannot reach {self.url}: {exc}") from exc
+        schema: dict[str, Any] = json.loads(registered.schema.schema_str)
+        schema_id = int(registered.schema_id)
+        with self._lock:
+            self._schemas.setdefault(schema_id, schema)
+        return schema_id, int(registered.version), schema
+
     def set_compatibility(self, subject: str, level: str) -> None:
         """Set the compatibility level (``BACKWARD``, ``FULL``, ``NONE`` ...) of ``subject``."""
         try:

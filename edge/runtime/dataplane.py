@@ -117,7 +117,14 @@ class NativeSource:
     from the processing thread only; ``subscribe``/``unsubscribe``/``wake``/stats from any."""
 
     def __init__(
-        self, python_config: dict[str, Any], *, max_items: int, max_bytes: int, max_value_bytes: int
+        self,
+        python_config: dict[str, Any],
+        *,
+        max_items: int,
+        max_bytes: int,
+        max_value_bytes: int,
+        group_records: int = 2000,
+        group_bytes: int = 1 << 20,
     ) -> None:
         config = dataplane_config(python_config)
         try:
@@ -127,6 +134,8 @@ class NativeSource:
         except (ValueError, RuntimeError) as exc:
             raise RuntimeSetupError(f"zenoh: the edge's receive path cannot start: {exc}") from None
         self.max_value_bytes = max_value_bytes
+        self.group_records = group_records
+        self.group_bytes = group_bytes
         self._subs: dict[int, _Subscription] = {}
         self._next_sub = 1
         self._programs: dict[int, int] = {}  # id(codec) -> program id
@@ -157,10 +166,12 @@ class NativeSource:
 
     # -- the processing thread --------------------------------------------------------------------
     def take(self, max_samples: int, timeout_s: float) -> Taken:
-        groups, slow, lanes, count, oldest = self.plane.take(max_samples, timeout_s, self.max_value_bytes)
+        groups, slow, lanes, count, oldest = self.plane.take(
+            max_samples, timeout_s, self.max_value_bytes, self.group_records, self.group_bytes
+        )
         taken = Taken(count=count, oldest_received_ns=oldest)
-        for code, n, blob in groups:
-            taken.groups[DELIVERIES[code]] = (n, blob)
+        for code, group in groups:
+            taken.groups.setdefault(DELIVERIES[code], []).append(group)
         infos = self._lanes
         for lane_id, received, emitted in lanes:
             info = infos[lane_id]

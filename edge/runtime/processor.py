@@ -28,6 +28,7 @@ from fleetlink.edge.runtime.records import RecordMaker
 from fleetlink.edge.spool import RecordBuffer
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.subscriber import RosSample
+from fleetlink.wire.groups import group_count
 
 log = logging.getLogger(__name__)
 
@@ -54,10 +55,10 @@ Item = RosSample | Rejected | Emit
 @dataclass(slots=True)
 class Taken:
     """What one ``SampleSource.take`` brought: record groups made natively per delivery class
-    (``(count, blob)``, blob = ``{u32 length | payload}*``), samples for the general path, the
-    shortest linger of each group's records (``None``: the default), samples taken in all."""
+    (``fleetlink.wire.groups``), samples for the general path, the shortest linger of each
+    class's records (``None``: the default), samples taken in all."""
 
-    groups: dict[Delivery, tuple[int, bytes]] = field(default_factory=dict)
+    groups: dict[Delivery, list[bytes]] = field(default_factory=dict)
     samples: list[RosSample | Rejected] = field(default_factory=list)
     lingers: dict[Delivery, float | None] = field(default_factory=dict)
     count: int = 0
@@ -75,20 +76,6 @@ class SampleSource(Protocol):
     def sync(self, table_version: int) -> None: ...
 
     def install(self, maker: RecordMaker, keys: Iterable[str]) -> None: ...
-
-
-def split_group(blob: bytes) -> list[bytes]:
-    """The record payloads of a group blob (``{u32 length | payload}*``)."""
-    out: list[bytes] = []
-    pos, end = 0, len(blob)
-    view = memoryview(blob)
-    from_bytes = int.from_bytes
-    while pos < end:
-        size = from_bytes(view[pos : pos + 4], "little")
-        pos += 4
-        out.append(bytes(view[pos : pos + size]))
-        pos += size
-    return out
 
 
 @dataclass(slots=True)
@@ -234,28 +221,48 @@ class Processor:
         return out
 
     def _append(self, out: list[Outgoing], taken: Taken) -> None:
-        groups: dict[Delivery, list[bytes]] = {}
+        payloads: dict[Delivery, list[bytes]] = {}
         lingers: dict[Delivery, float] = {}  # per buffer, the shortest linger of what it got
         default = self.default_linger_s
-        for delivery, (_count, blob) in taken.groups.items():
-            groups[delivery] = split_group(blob)
-            own = taken.lingers.get(delivery)
+        for delivery, own in taken.lingers.items():
             lingers[delivery] = default if own is None else own
         for delivery, payload, own in out:
             linger = default if own is None else own
-            group = groups.get(delivery)
-            if group is None:
-                group = groups[delivery] = []
+            pending = payloads.get(delivery)
+            if pending is None:
+                pending = payloads[delivery] = []
+            if linger < lingers.get(delivery, linger + 1):
                 lingers[delivery] = linger
-            elif linger < lingers[delivery]:
-                lingers[delivery] = linger
-            group.append(payload)
-        if not groups:
+            pending.append(payload)
+        for delivery in {*taken.groups, *payloads}:
+            buffer = self.buffers[delivery]
+            for group in taken.groups.get(delivery, ()):
+                self._append_group(delivery, buffer, group)
+            if delivery in payloads:
+                self.stats.records += len(payloads[delivery])
+                self._append_to(delivery, buffer, payloads[delivery])
+            self._on_appended(delivery, lingers.get(delivery, default))
+
+    def _append_group(self, delivery: Delivery, buffer: RecordBuffer, group: bytes) -> None:
+        stats = self.stats
+        count = group_count(group)
+        stats.records += count
+        try:
+            taken = buffer.append_group(group)
+        except SpoolFullError as exc:
+            stats.appended += exc.taken
+            stats.spool_refused += count - exc.taken
+            self._limiter.log(
+                logging.WARNING,
+                f"full-{delivery}",
+                "%s buffer full: %d record(s) refused (%s)",
+                delivery,
+                count - exc.taken,
+                exc,
+            )
             return
-        self.stats.records += sum(len(g) for g in groups.values())
-        for delivery, payloads in groups.items():
-            self._append_to(delivery, self.buffers[delivery], payloads)
-            self._on_appended(delivery, lingers[delivery])
+        stats.appended += taken
+        stats.spool_dropped += count - taken
 
     def _append_to(self, delivery: Delivery, buffer: RecordBuffer, payloads: list[bytes]) -> None:
         stats = self.stats

@@ -37,7 +37,8 @@ from fleetlink.edge.runtime.backoff import Backoff
 from fleetlink.edge.runtime.schema_book import SchemaBook
 from fleetlink.edge.runtime.transport import Transport
 from fleetlink.edge.spool import RecordBuffer, SpoolBatch
-from fleetlink.wire import Codec, WireError, decode_ack, encode_batch_payloads, payload_fingerprints
+from fleetlink.wire import Codec, WireError, decode_ack, encode_batch_groups
+from fleetlink.wire.groups import group_head
 
 log = logging.getLogger(__name__)
 _NS = 1_000_000_000
@@ -308,8 +309,9 @@ class WanSender:
     # -- one batch -------------------------------------------------------------------------------
     def _send(self, batch: SpoolBatch) -> None:
         self._due = None
-        payloads = [record.payload for record in batch.records]
-        fps = payload_fingerprints(payloads)
+        fps: set[bytes] = set()
+        for group in batch.groups:
+            fps.update(group_head(group.group)[1])
         elided = fps & self._known
         schemas, missing = self.schemas.lookup(fps - elided if elided else fps)
         if missing:
@@ -322,11 +324,11 @@ class WanSender:
                 ", ".join(m.hex() for m in missing),
             )
         try:
-            data = encode_batch_payloads(
+            data = encode_batch_groups(
                 site=self.site,
                 edge_id=self.edge_id,
                 stream=self.stream,
-                items=[(r.seq, r.payload) for r in batch.records],
+                groups=[(g.first_seq, g.group) for g in batch.groups],
                 schemas=schemas,
                 elided=elided,
                 codec=self.options.codec,
@@ -341,7 +343,7 @@ class WanSender:
         self._in_flight[batch.first_seq] = _Flight(
             batch.first_seq,
             batch.last_seq,
-            len(batch.records),
+            batch.count,
             self._clock(),
             frozenset(schemas),
             frozenset(elided),
@@ -349,7 +351,7 @@ class WanSender:
         stats = self.stats
         stats.schemas_elided += len(elided)
         stats.batches_sent += 1
-        stats.records_sent += len(batch.records)
+        stats.records_sent += batch.count
         stats.bytes_sent += len(data)
         stats.in_flight = len(self._in_flight)
         first = batch.first_seq

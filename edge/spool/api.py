@@ -4,9 +4,12 @@ Two buffers implement ``RecordBuffer``: the durable ``Spool`` (``at_least_once``
 the bounded ``MemoryBuffer`` (``best_effort``). Each is one *stream*: one ordered log with its
 own sequence numbers, so ``(edge_id, stream, seq)`` names a record uniquely.
 
+Records come and go in *groups* (``fleetlink.wire.groups``): consecutive records appended
+together, kept, read back and sent as one unit, so the cost is per group, not per record.
+
 The sender's loop, identical for both::
 
-    batch = buffer.read_unacked(max_records=500, max_bytes=1 << 20)   # marks it in flight
+    batch = buffer.read_unacked(max_records=500, max_bytes=1 << 20)   # whole groups, in flight
     ... send it; on an ok ack:  buffer.ack(batch.first_seq)
     ... on an error ack or a timeout:  buffer.release(batch.first_seq)  # re-read first, same range
     ... on reconnect: buffer.release_all()
@@ -19,6 +22,7 @@ from dataclasses import dataclass
 from typing import Literal, NamedTuple, Protocol, get_args
 
 from fleetlink.edge.errors import SpoolError
+from fleetlink.wire.groups import group_payloads
 
 FullPolicy = Literal["block", "drop_oldest", "drop_newest"]
 FsyncPolicy = Literal["always", "batch", "interval"]
@@ -35,19 +39,50 @@ class SpoolRecord(NamedTuple):
     payload: bytes
 
 
+class SpoolGroup(NamedTuple):
+    """Records appended together: seqs ``first_seq .. first_seq + records - 1``, as one group."""
+
+    first_seq: int
+    records: int
+    """How many records the group holds."""
+    timestamp_ms: int
+    """When the group was appended (wall clock, ms)."""
+    group: bytes
+    """The group payload (``fleetlink.wire.groups``)."""
+
+    @property
+    def last_seq(self) -> int:
+        return self.first_seq + self.records - 1
+
+
 @dataclass(frozen=True, slots=True)
 class SpoolBatch:
-    """Consecutive unacked records handed to the sender; acked or released as a whole by
+    """Whole groups of unacked records handed to the sender; acked or released as a whole by
     ``first_seq``. Seqs increase but may have gaps (records lost to corruption, seq jumps)."""
 
     stream: str
     first_seq: int
     last_seq: int
-    records: tuple[SpoolRecord, ...]
+    groups: tuple[SpoolGroup, ...]
+
+    @property
+    def count(self) -> int:
+        return sum(g.records for g in self.groups)
 
     @property
     def nbytes(self) -> int:
-        return sum(len(r.payload) for r in self.records)
+        return sum(len(g.group) for g in self.groups)
+
+    @property
+    def records(self) -> tuple[SpoolRecord, ...]:
+        """Every record of the batch (unpacked: for inspection and tests, not the send path)."""
+        out: list[SpoolRecord] = []
+        for g in self.groups:
+            out.extend(
+                SpoolRecord(seq, g.timestamp_ms, payload)
+                for seq, payload in enumerate(group_payloads(g.group), g.first_seq)
+            )
+        return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +126,11 @@ class SpoolOptions:
     fsync_interval_ms: int = 100
     fsync_batch: int = 1000
     """``batch`` policy: fsync after this many records (and at least every interval)."""
+    group_records: int = 2000
+    """A group (one frame, one unit of a WAN batch) holds at most this many records: the edge
+    sets its ``wan.batch_max_records``, so that whole groups fill a batch without passing it."""
+    group_bytes: int = 1 << 20
+    """... and at most this many bytes of record payloads (``wan.batch_max_bytes``)."""
 
     def __post_init__(self) -> None:
         if self.policy not in FULL_POLICIES:
@@ -104,6 +144,8 @@ class SpoolOptions:
                 f"max_bytes ({self.max_bytes}) must be at least twice segment_bytes "
                 f"({self.segment_bytes}) so that acked segments can free room"
             )
+        if self.group_records < 1 or self.group_bytes < 1:
+            raise SpoolError("group_records and group_bytes must be positive")
         if self.fsync_interval_ms <= 0 or self.fsync_batch <= 0 or self.block_timeout_s < 0:
             raise SpoolError("fsync_interval_ms and fsync_batch must be positive, block_timeout_s >= 0")
 
@@ -121,6 +163,13 @@ class RecordBuffer(Protocol):
 
     def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
         """``append`` for several records at once (one write, one fsync)."""
+        ...
+
+    def append_group(self, group: bytes) -> int:
+        """Take a group of records made elsewhere (the native data plane); returns how many
+        records were taken (the rest dropped by ``drop_newest``, counted). Under ``block`` raises
+        ``SpoolFullError`` (``taken`` set) after the timeout. A group above the buffer's group
+        limits is split."""
         ...
 
     def read_unacked(

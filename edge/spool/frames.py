@@ -2,10 +2,14 @@
 
 A segment file is a 16-byte header (``FLSPOOL1`` + first seq, u64 LE) then frames::
 
-    magic u16 (0x5BF1) | flags u16 (0) | length u32 | seq u64 | append time ms i64 | crc u32 | payload
+    magic u16 (0x5BF1) | flags u16 | length u32 | seq u64 | append time ms i64 | crc u32 | payload
 
-all little-endian. ``crc`` is CRC-32 (zlib's, the IEEE polynomial: C-fast everywhere; CRC-32C
-would need an extra package) over the payload followed by the 24 header bytes before it, so
+all little-endian. With flag bit 0 (``FLAG_GROUP``, what the spool writes) the payload is a record
+group (``fleetlink.wire.groups``: ``count`` records with seqs ``seq .. seq + count - 1``); without
+it, one record payload with seq ``seq`` (read, never written).
+
+``crc`` is CRC-32 (zlib's, the IEEE polynomial: C-fast everywhere; CRC-32C would need an extra
+package) over the payload followed by the 24 header bytes before it, so
 any flipped bit in the length, seq, time or payload is caught. A frame that fails is damage:
 the scanner looks for the next magic whose frame checks out and resumes there.
 """
@@ -17,19 +21,26 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from fleetlink.wire.groups import HEAD_SIZE as GROUP_HEAD_SIZE
+from fleetlink.wire.groups import encode_group, group_count
+
 FRAME_MAGIC = 0x5BF1
+FLAG_GROUP = 0x0001
 MAGIC_BYTES = struct.pack("<H", FRAME_MAGIC)
 _PREFIX = struct.Struct("<HHIQq")
 _FRAME = struct.Struct("<HHIQqI")
+FRAME_HEADER = _FRAME
 HEADER_SIZE = _FRAME.size  # 28
 SEGMENT_MAGIC = b"FLSPOOL1"
 _SEGMENT_HEAD = struct.Struct("<8sQ")
 SEGMENT_HEADER_SIZE = _SEGMENT_HEAD.size  # 16
 
 
-def encode_frame(seq: int, timestamp_ms: int, payload: bytes, payload_crc: int | None = None) -> bytes:
+def encode_frame(
+    seq: int, timestamp_ms: int, payload: bytes, payload_crc: int | None = None, *, flags: int = 0
+) -> bytes:
     """One frame; pass ``payload_crc = zlib.crc32(payload)`` if already computed."""
-    prefix = _PREFIX.pack(FRAME_MAGIC, 0, len(payload), seq, timestamp_ms)
+    prefix = _PREFIX.pack(FRAME_MAGIC, flags, len(payload), seq, timestamp_ms)
     crc = zlib.crc32(prefix, zlib.crc32(payload) if payload_crc is None else payload_crc)
     return prefix + crc.to_bytes(4, "little") + payload
 
@@ -54,13 +65,30 @@ def peek_timestamp(header: bytes) -> int | None:
     return int(ts) if magic == FRAME_MAGIC else None
 
 
+def encode_group_frame(first_seq: int, timestamp_ms: int, group: bytes) -> bytes:
+    """The frame of a record group whose first record has seq ``first_seq``."""
+    return encode_frame(first_seq, timestamp_ms, group, flags=FLAG_GROUP)
+
+
 @dataclass(frozen=True, slots=True)
 class Frame:
     offset: int
     end: int
     seq: int
+    """The seq of its (first) record."""
     timestamp_ms: int
     payload: bytes
+    count: int = 1
+    """Records in the frame (a group frame holds one or more)."""
+    grouped: bool = False
+
+    @property
+    def last_seq(self) -> int:
+        return self.seq + self.count - 1
+
+    def group(self) -> bytes:
+        """The frame's records as a group (a single-record frame is wrapped in one)."""
+        return self.payload if self.grouped else encode_group([self.payload])
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,8 +112,10 @@ class _NeedMore:
 def _header_problem(magic: int, flags: int, length: int, max_len: int) -> str | None:
     if magic != FRAME_MAGIC:
         return "bad frame magic"
-    if flags != 0:
+    if flags & ~FLAG_GROUP:
         return f"unknown frame flags 0x{flags:04x}"
+    if flags & FLAG_GROUP and length < GROUP_HEAD_SIZE:
+        return f"group frame of {length} bytes is shorter than a group header"
     if length > max_len:
         return f"frame length {length} exceeds the {max_len}-byte limit"
     return None
@@ -106,7 +136,19 @@ def frame_at(buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True)
     payload = view[off + HEADER_SIZE : stop]
     if zlib.crc32(view[off : off + 24], zlib.crc32(payload)) != crc:
         return "checksum mismatch"
-    return Frame(offset=off, end=stop, seq=seq, timestamp_ms=ts, payload=bytes(payload) if copy else b"")
+    grouped = bool(flags & FLAG_GROUP)
+    count = group_count(payload) if grouped else 1
+    if count < 1:
+        return "empty record group"
+    return Frame(
+        offset=off,
+        end=stop,
+        seq=seq,
+        timestamp_ms=ts,
+        payload=bytes(payload) if copy else b"",
+        count=count,
+        grouped=grouped,
+    )
 
 
 def _resync(buf: bytes, start: int, end: int, max_len: int, after_seq: int) -> int:
@@ -139,7 +181,7 @@ def scan(
             found = f"seq {found.seq} does not follow {last_seq}"
         if isinstance(found, Frame):
             yield found
-            last_seq = found.seq
+            last_seq = found.last_seq
             off = found.end
             continue
         if isinstance(found, _NeedMore):

@@ -1,8 +1,8 @@
 """The memory buffer for ``best_effort`` mappings: the spool's interface, in RAM, bounded.
 
 Nothing survives a restart. When full it drops the oldest records that are not in flight
-(released batches first, whole, then unread records one by one), counting each in
-``dropped_oldest``; if everything held is in flight, the new record is dropped
+(released batches first, whole, then unread groups one by one), counting each record in
+``dropped_oldest``; if everything held is in flight, the new group is dropped
 (``dropped_newest``). Seqs start at the wall clock in microseconds, so a restarted edge never
 re-uses a seq of this stream while it stays under a million records a second.
 """
@@ -15,12 +15,14 @@ from collections import deque
 from collections.abc import Callable, Sequence
 
 from fleetlink.edge.errors import SpoolClosedError, SpoolError
-from fleetlink.edge.spool.api import SpoolBatch, SpoolRecord, SpoolStats
+from fleetlink.edge.spool.api import SpoolBatch, SpoolGroup, SpoolStats
+from fleetlink.edge.spool.grouping import pack_groups
 from fleetlink.edge.spool.spool import wall_ms
+from fleetlink.wire.groups import group_count, split_group
 
 
 class MemoryBuffer:
-    """A ``RecordBuffer`` in memory. Thread-safe."""
+    """A ``RecordBuffer`` in memory, holding groups of records. Thread-safe."""
 
     def __init__(
         self,
@@ -30,18 +32,22 @@ class MemoryBuffer:
         max_records: int = 100_000,
         clock: Callable[[], int] = wall_ms,
         first_seq: int | None = None,
+        group_records: int = 2000,
+        group_bytes: int = 1 << 20,
     ) -> None:
-        if max_bytes < 1 or max_records < 1:
-            raise SpoolError("max_bytes and max_records must be positive")
+        if max_bytes < 1 or max_records < 1 or group_records < 1 or group_bytes < 1:
+            raise SpoolError("max_bytes, max_records and the group limits must be positive")
         self._stream = stream
         self._max_bytes = max_bytes
         self._max_records = max_records
+        self._group_records = group_records
+        self._group_bytes = group_bytes
         self._clock = clock
         self._lock = threading.Lock()
         self._next_seq = time.time_ns() // 1000 if first_seq is None else first_seq
-        self._pending: deque[SpoolRecord] = deque()
-        self._in_flight: dict[int, tuple[SpoolRecord, ...]] = {}
-        self._retry: dict[int, tuple[SpoolRecord, ...]] = {}
+        self._pending: deque[SpoolGroup] = deque()
+        self._in_flight: dict[int, tuple[SpoolGroup, ...]] = {}
+        self._retry: dict[int, tuple[SpoolGroup, ...]] = {}
         self._bytes = 0
         self._records = 0
         self._closed = False
@@ -77,24 +83,38 @@ class MemoryBuffer:
                     f"record of {len(payload)} bytes exceeds the buffer ({self._max_bytes} bytes)"
                 )
         out: list[int | None] = []
-        with self._lock:
-            self._check_open()
-            for payload in payloads:
-                if not self._make_room(len(payload)):
-                    self._c["dropped_newest"] += 1
-                    out.append(None)
-                    continue
-                seq = self._next_seq
-                self._next_seq += 1
-                self._pending.append(SpoolRecord(seq, self._clock(), payload))
-                self._bytes += len(payload)
-                self._records += 1
-                self._c["appended"] += 1
-                out.append(seq)
+        for group, count in pack_groups(payloads, self._group_records, self._group_bytes):
+            first = self._take(group, count)
+            out.extend([None] * count if first is None else range(first, first + count))
         return out
 
-    def _make_room(self, size: int) -> bool:
-        while self._bytes + size > self._max_bytes or self._records + 1 > self._max_records:
+    def append_group(self, group: bytes) -> int:
+        taken = 0
+        for part in split_group(group, self._group_records, self._group_bytes):
+            if len(part) > self._max_bytes:
+                raise SpoolError(f"group of {len(part)} bytes exceeds the buffer ({self._max_bytes} bytes)")
+            count = group_count(part)
+            if self._take(part, count) is not None:
+                taken += count
+        return taken
+
+    def _take(self, group: bytes, count: int) -> int | None:
+        """Keep one group; its first seq, or None when it was dropped (counted)."""
+        with self._lock:
+            self._check_open()
+            if not self._make_room(len(group), count):
+                self._c["dropped_newest"] += count
+                return None
+            first = self._next_seq
+            self._next_seq += count
+            self._pending.append(SpoolGroup(first, count, self._clock(), group))
+            self._bytes += len(group)
+            self._records += count
+            self._c["appended"] += count
+            return first
+
+    def _make_room(self, size: int, count: int) -> bool:
+        while self._bytes + size > self._max_bytes or self._records + count > self._max_records:
             if self._retry:
                 self._forget(self._retry.pop(min(self._retry)), "dropped_oldest")
             elif self._pending:
@@ -103,10 +123,11 @@ class MemoryBuffer:
                 return False
         return True
 
-    def _forget(self, records: tuple[SpoolRecord, ...], counter: str) -> None:
-        self._bytes -= sum(len(r.payload) for r in records)
-        self._records -= len(records)
-        self._c[counter] += len(records)
+    def _forget(self, groups: tuple[SpoolGroup, ...], counter: str) -> None:
+        self._bytes -= sum(len(g.group) for g in groups)
+        records = sum(g.records for g in groups)
+        self._records -= records
+        self._c[counter] += records
 
     def read_unacked(
         self, max_records: int = 500, max_bytes: int = 1 << 20, *, skip_in_flight: bool = True
@@ -119,39 +140,42 @@ class MemoryBuffer:
                 self._retry.update(self._in_flight)
                 self._in_flight.clear()
             if self._retry:
-                records = self._retry.pop(min(self._retry))
+                groups = self._retry.pop(min(self._retry))
             else:
-                taken: list[SpoolRecord] = []
-                total = 0
-                while self._pending and len(taken) < max_records:
-                    size = len(self._pending[0].payload)
-                    if taken and total + size > max_bytes:
+                taken: list[SpoolGroup] = []
+                total = records = 0
+                while self._pending:
+                    head = self._pending[0]
+                    if taken and (
+                        records + head.records > max_records or total + len(head.group) > max_bytes
+                    ):
                         break
                     taken.append(self._pending.popleft())
-                    total += size
+                    total += len(head.group)
+                    records += head.records
                 if not taken:
                     return None
-                records = tuple(taken)
-            self._in_flight[records[0].seq] = records
-            return SpoolBatch(self._stream, records[0].seq, records[-1].seq, records)
+                groups = tuple(taken)
+            self._in_flight[groups[0].first_seq] = groups
+            return SpoolBatch(self._stream, groups[0].first_seq, groups[-1].last_seq, groups)
 
     def ack(self, first_seq: int) -> bool:
         with self._lock:
             self._check_open()
-            records = self._in_flight.pop(first_seq, None) or self._retry.pop(first_seq, None)
-            if records is None:
+            groups = self._in_flight.pop(first_seq, None) or self._retry.pop(first_seq, None)
+            if groups is None:
                 self._c["stale_acks"] += 1
                 return False
-            self._forget(records, "acked")
+            self._forget(groups, "acked")
             return True
 
     def release(self, first_seq: int) -> bool:
         with self._lock:
             self._check_open()
-            records = self._in_flight.pop(first_seq, None)
-            if records is None:
+            groups = self._in_flight.pop(first_seq, None)
+            if groups is None:
                 return False
-            self._retry[first_seq] = records
+            self._retry[first_seq] = groups
             return True
 
     def release_all(self) -> int:
@@ -164,7 +188,7 @@ class MemoryBuffer:
 
     def stats(self) -> SpoolStats:
         with self._lock:
-            heads = [r[0].timestamp_ms for r in (*self._in_flight.values(), *self._retry.values())]
+            heads = [g[0].timestamp_ms for g in (*self._in_flight.values(), *self._retry.values())]
             if self._pending:
                 heads.append(self._pending[0].timestamp_ms)
             return SpoolStats(
@@ -176,7 +200,7 @@ class MemoryBuffer:
                 **self._c,
                 bytes=self._bytes,
                 depth=self._records,
-                in_flight=sum(len(r) for r in self._in_flight.values()),
+                in_flight=sum(g.records for groups in self._in_flight.values() for g in groups),
                 oldest_append_ms=min(heads, default=None),
                 segments=0,
                 next_seq=self._next_seq,

@@ -42,14 +42,16 @@ def read_frames(
     max_len: int,
 ) -> ReadResult:
     """Frames from ``start`` up to ``limit`` (the segment's valid end), at least one if any, at
-    most ``max_records`` and, beyond the first, ``max_bytes`` of payload. Known damage is skipped
-    silently; new damage is logged, recorded on the segment and counted in ``lost``."""
+    most ``max_records`` records and, beyond the first frame, ``max_bytes`` of payload. Known
+    damage is skipped silently; new damage is logged, recorded on the segment and counted in
+    ``lost``."""
     size = min(limit - start, max_bytes + max_records * HEADER_SIZE + READ_SLACK)
     while True:
         data = _pread(segment.path, size, start)
         final = start + len(data) >= limit
         result = ReadResult(frames=[], end=start)
         total = 0
+        records = 0
         pending: Damage | None = None
         for event in scan(data, 0, len(data), max_len=max_len, final=final, after_seq=after_seq):
             if isinstance(event, Damage):
@@ -58,17 +60,26 @@ def read_frames(
                 pending = _note_damage(segment, start, event, result, pending)
                 result.end = start + event.end
                 continue
-            full = len(result.frames) >= max_records or total + len(event.payload) > max_bytes
+            full = records + event.count > max_records or total + len(event.payload) > max_bytes
             if result.frames and full:
                 break
             if pending is not None:
                 result.lost += max(1, event.seq - after_seq - 1) - 1  # refine the gap estimate
                 pending = None
             result.frames.append(
-                Frame(start + event.offset, start + event.end, event.seq, event.timestamp_ms, event.payload)
+                Frame(
+                    start + event.offset,
+                    start + event.end,
+                    event.seq,
+                    event.timestamp_ms,
+                    event.payload,
+                    event.count,
+                    event.grouped,
+                )
             )
             total += len(event.payload)
-            after_seq = event.seq
+            records += event.count
+            after_seq = event.last_seq
             result.end = start + event.end
         if result.frames or result.end > start or final:
             return result

@@ -14,12 +14,12 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 
-from fleetlink.edge.spool.api import SpoolRecord
+from fleetlink.edge.spool.api import SpoolGroup
 from fleetlink.edge.spool.frames import HEADER_SIZE
 from fleetlink.edge.spool.segments import Segment
 
-Item = tuple[int, int, bytes]
-"""``(seq, append time ms, frame)``, as the spool writes them."""
+Item = tuple[int, int, int, bytes]
+"""``(first seq, records, append time ms, group frame)``, as the spool writes them."""
 
 
 class _Chunk:
@@ -54,41 +54,42 @@ class RecentFrames:
 
     def read(
         self, segment: Segment, offset: int, next_seq: int, *, max_records: int, max_bytes: int
-    ) -> tuple[list[SpoolRecord], int] | None:
-        """The records at ``offset`` of ``segment`` on (at least one, at most ``max_records`` and,
-        beyond the first, ``max_bytes`` of payload) and the offset after them; ``None`` if the
-        frame there is not kept. Frames below ``next_seq`` (read already: seqs grow along the
-        log) are forgotten."""
+    ) -> tuple[list[SpoolGroup], int] | None:
+        """The groups at ``offset`` of ``segment`` on (at least one, at most ``max_records``
+        records and, beyond the first, ``max_bytes`` of payload) and the offset after them;
+        ``None`` if the frame there is not kept. Frames below ``next_seq`` (read already: seqs
+        grow along the log) are forgotten."""
         kept = self._kept
         while kept:
             chunk = kept[0]
             items = chunk.items
             while chunk.index < len(items) and items[chunk.index][0] < next_seq:
-                chunk.offset += len(items[chunk.index][2])
+                chunk.offset += len(items[chunk.index][3])
                 chunk.index += 1
             if chunk.index < len(items):
                 break
             self._bytes -= kept.popleft().nbytes
         if not kept or kept[0].segment is not segment or kept[0].offset != offset:
             return None
-        records: list[SpoolRecord] = []
-        total = 0
+        groups: list[SpoolGroup] = []
+        total = records = 0
         end = offset
         for chunk in kept:
             if chunk.segment is not segment or chunk.offset != end:  # chunks follow each other
                 break
             items = chunk.items
             for i in range(chunk.index, len(items)):
-                seq, ts, frame = items[i]
+                first, count, ts, frame = items[i]
                 size = len(frame) - HEADER_SIZE
-                if records and (len(records) >= max_records or total + size > max_bytes):
+                if groups and (records + count > max_records or total + size > max_bytes):
                     self.hits += 1
-                    return records, end
-                records.append(SpoolRecord(seq, ts, frame[HEADER_SIZE:]))
+                    return groups, end
+                groups.append(SpoolGroup(first, count, ts, frame[HEADER_SIZE:]))
                 total += size
+                records += count
                 end += len(frame)
         self.hits += 1
-        return records, end
+        return groups, end
 
     def forget(self, segment: Segment) -> None:
         """``segment`` left the spool: drop its frames."""
@@ -97,4 +98,5 @@ class RecentFrames:
             self._bytes = sum(chunk.nbytes for chunk in self._kept)
 
     def __len__(self) -> int:
-        return sum(len(chunk.items) - chunk.index for chunk in self._kept)
+        """Records kept and not yet read."""
+        return sum(item[1] for chunk in self._kept for item in chunk.items[chunk.index :])

@@ -15,7 +15,17 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleetlink.edge.spool.frames import SEGMENT_HEADER_SIZE, Damage, Frame, decode_segment_header, scan
+from fleetlink.edge.spool.frames import (
+    FLAG_GROUP,
+    FRAME_HEADER,
+    FRAME_MAGIC,
+    HEADER_SIZE,
+    SEGMENT_HEADER_SIZE,
+    Damage,
+    Frame,
+    decode_segment_header,
+    scan,
+)
 
 log = logging.getLogger(__name__)
 
@@ -78,10 +88,28 @@ def _lost_between(before: int, after: int | None) -> int:
     return max(1, after - before - 1)
 
 
+def _torn_records(data: bytes, offset: int, before: int) -> int | None:
+    """The records of a frame torn at the end of the data, read from what is left of its header
+    (a seq that follows ``before``, a group's count): ``None`` when that is not readable."""
+    if len(data) - offset < HEADER_SIZE:
+        return None
+    magic, flags, _length, seq, _ts, _crc = FRAME_HEADER.unpack_from(data, offset)
+    if magic != FRAME_MAGIC or seq <= before or before < 0:
+        return None
+    if not flags & FLAG_GROUP:
+        return int(seq - before)
+    if len(data) - offset < HEADER_SIZE + 4:
+        return None
+    count = int.from_bytes(data[offset + HEADER_SIZE : offset + HEADER_SIZE + 4], "little")
+    return seq - before - 1 + count if count > 0 else None
+
+
 def _scan_file(
-    path: Path, first_seq: int, after_seq: int, max_len: int, *, newest: bool
+    path: Path, first_seq: int, after_seq: int, max_len: int, *, newest: bool, next_first: int | None = None
 ) -> tuple[Segment, int]:
-    """Scan one file; returns its segment and the records lost to damage in it."""
+    """Scan one file; returns its segment and the records lost to damage in it. Losses come from
+    the seqs around the damage (the next frame's, else ``next_first``: the next segment's first
+    seq, else what is left of a torn frame's header)."""
     data = path.read_bytes()
     segment = Segment(path=path, first_seq=first_seq, size=len(data))
     events: list[Frame | Damage] = []
@@ -100,16 +128,21 @@ def _scan_file(
     )
     lost = 0
     logged = 0
-    previous = after_seq
+    previous = max(after_seq, first_seq - 1)
     for i, event in enumerate(events):
         if isinstance(event, Frame):
-            segment.count += 1
-            segment.last_seq = previous = event.seq
+            segment.count += event.count
+            segment.last_seq = previous = event.last_seq
             if segment.first_ts is None:
                 segment.first_ts = event.timestamp_ms
             continue
-        after = next((e.seq for e in events[i + 1 :] if isinstance(e, Frame)), None)
-        records = 0 if event.offset == 0 else _lost_between(previous, after)  # a bad header loses no record
+        after = next((e.seq for e in events[i + 1 :] if isinstance(e, Frame)), next_first)
+        if event.offset == 0:
+            records = 0  # a bad segment header loses no record
+        elif after is None:
+            records = _torn_records(data, event.offset, previous) or 1
+        else:
+            records = _lost_between(previous, after)
         lost += records
         at_end = event.end == len(data) and after is None
         torn_tail = newest and at_end and event.offset >= SEGMENT_HEADER_SIZE
@@ -144,7 +177,10 @@ def recover(directory: Path, ack_mark: int, max_len: int) -> Recovery:
     last_seq = -1
     for n, path in enumerate(names):
         first_seq = int(path.name[:20])
-        segment, lost = _scan_file(path, first_seq, last_seq, max_len, newest=n == len(names) - 1)
+        next_first = int(names[n + 1].name[:20]) if n + 1 < len(names) else None
+        segment, lost = _scan_file(
+            path, first_seq, last_seq, max_len, newest=n == len(names) - 1, next_first=next_first
+        )
         corrupt += lost
         last_seq = max(last_seq, segment.last_seq)
         if segment.count == 0 or segment.last_seq <= ack_mark:
@@ -167,7 +203,7 @@ def _position(segments: list[Segment], ack_mark: int, max_len: int) -> tuple[Cur
     consumed = 0
     for event in scan(data, SEGMENT_HEADER_SIZE, first.size, max_len=max_len, final=True, copy=False):
         if isinstance(event, Frame):
-            if event.seq > ack_mark:
-                return Cursor(0, event.offset, consumed, ack_mark + 1), depth - consumed
-            consumed += 1
+            if event.last_seq > ack_mark:  # (a group the mark falls inside is sent again whole)
+                return Cursor(0, event.offset, consumed, event.seq), depth - consumed
+            consumed += event.count
     return Cursor(0, first.size, consumed, ack_mark + 1), depth - consumed  # pragma: no cover

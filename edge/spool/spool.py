@@ -21,14 +21,23 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from fleetlink.edge.errors import SpoolClosedError, SpoolError, SpoolFullError, SpoolLockedError
-from fleetlink.edge.spool.api import SpoolBatch, SpoolOptions, SpoolRecord, SpoolStats, check_payloads
-from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, Frame, encode_frame, peek_timestamp
+from fleetlink.edge.spool.api import SpoolBatch, SpoolGroup, SpoolOptions, SpoolStats, check_payloads
+from fleetlink.edge.spool.frames import (
+    FLAG_GROUP,
+    HEADER_SIZE,
+    SEGMENT_HEADER_SIZE,
+    Frame,
+    encode_frame,
+    peek_timestamp,
+)
+from fleetlink.edge.spool.grouping import pack_groups
 from fleetlink.edge.spool.ledger import Ledger
 from fleetlink.edge.spool.reading import read_frames
 from fleetlink.edge.spool.recent import RecentFrames
 from fleetlink.edge.spool.segments import Cursor, Segment, recover
 from fleetlink.edge.spool.tracking import SendTracker, Slice
 from fleetlink.edge.spool.writer import DiskFull, SegmentWriter
+from fleetlink.wire.groups import group_count, split_group
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +58,7 @@ COUNTERS = (
     "fsyncs",
 )
 
-Item = tuple[int, int, bytes]  # seq, append time ms, frame
+Item = tuple[int, int, int, bytes]  # first seq, records, append time ms, frame
 
 
 def wall_ms() -> int:
@@ -172,39 +181,63 @@ class Spool:
         return self.append_many((payload,))[0]
 
     def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
-        """Take records in order (one write, one fsync when due). Under ``block`` a timeout
-        raises ``SpoolFullError`` whose ``taken`` counts the leading records that were taken."""
+        """Take records in order (as groups: one write, one fsync when due). Under ``block`` a
+        timeout raises ``SpoolFullError`` whose ``taken`` counts the leading records taken."""
         check_payloads(payloads, self._max_len)
-        crcs = [zlib.crc32(p) for p in payloads]
+        groups = pack_groups(payloads, self.options.group_records, self.options.group_bytes)
         results: list[int | None] = []
+        try:
+            self._append_groups(groups, results)
+        except SpoolFullError as exc:
+            exc.taken = sum(1 for r in results if r is not None)
+            raise
+        return results
+
+    def append_group(self, group: bytes) -> int:
+        """Take a group made elsewhere (split when above the group limits); returns the records
+        taken. Under ``block`` a timeout raises ``SpoolFullError`` with ``taken`` set."""
+        groups = [
+            (g, group_count(g))
+            for g in split_group(group, self.options.group_records, self.options.group_bytes)
+        ]
+        for g, _count in groups:
+            if len(g) > self._max_len:
+                raise SpoolError(f"record of {len(g)} bytes exceeds the {self._max_len}-byte record limit")
+        results: list[int | None] = []
+        try:
+            self._append_groups(groups, results)
+        except SpoolFullError as exc:
+            exc.taken = sum(1 for r in results if r is not None)
+            raise
+        return sum(1 for r in results if r is not None)
+
+    def _append_groups(self, groups: Sequence[tuple[bytes, int]], results: list[int | None]) -> None:
+        """Frame and write ``(group, count)`` in order; ``results`` gets each record's seq or None."""
+        crcs = [zlib.crc32(g) for g, _count in groups]
         with self._appending, self._lock:
             self._check_open()
             chunk: list[Item] = []
             size_in_chunk = 0
             try:
-                for payload, crc in zip(payloads, crcs, strict=True):
-                    size = HEADER_SIZE + len(payload)
+                for (group, count), crc in zip(groups, crcs, strict=True):
+                    size = HEADER_SIZE + len(group)
                     if not self._fits(size_in_chunk + size):
                         self._write_chunk(chunk, results)
                         chunk, size_in_chunk = [], 0
-                        if not self._prepare(size):
-                            results.append(None)
+                        if not self._prepare(size, count):
+                            results.extend([None] * count)
                             continue
-                    seq = self._take_seq()
+                    first = self._take_seqs(count)
                     ts = self._clock()
-                    chunk.append((seq, ts, encode_frame(seq, ts, payload, crc)))
+                    chunk.append((first, count, ts, encode_frame(first, ts, group, crc, flags=FLAG_GROUP)))
                     size_in_chunk += size
-                    results.append(seq)
+                    results.extend(range(first, first + count))
                 self._write_chunk(chunk, results)
-            except SpoolFullError as exc:
-                exc.taken = sum(1 for r in results if r is not None)
-                raise
             finally:
                 if self.options.fsync == "always" or (
                     self.options.fsync == "batch" and self._writer.unsynced >= self.options.fsync_batch
                 ):
                     self._sync_locked()
-        return results
 
     def _fits(self, size: int) -> bool:
         active = self._writer.segment
@@ -213,24 +246,26 @@ class Spool:
         within_segment = used + size <= self.options.segment_bytes
         return within_segment and self._bytes + header + size <= self.options.max_bytes
 
-    def _take_seq(self) -> int:
+    def _take_seqs(self, count: int) -> int:
+        """The first of ``count`` consecutive new seqs."""
         seq = self._next_seq
-        self._next_seq += 1
+        self._next_seq += count
         if self._next_seq > self._reserved:
             self._reserved = self._next_seq + RESERVE_BLOCK
             if not self._ledger.record_reserve(self._reserved):
                 self._warn("reserve", "spool %s: cannot persist the seq reservation", self.directory)
         return seq
 
-    def _prepare(self, size: int) -> bool:
-        """Room for one more frame, per the policy: True = go ahead, False = dropped (counted)."""
+    def _prepare(self, size: int, count: int) -> bool:
+        """Room for one more frame of ``count`` records, per the policy: True = go ahead, False
+        = dropped (counted)."""
         deadline = time.monotonic() + self.options.block_timeout_s
         while True:
             active = self._writer.segment
             need = size + (0 if active is not None else SEGMENT_HEADER_SIZE)
             if self._bytes + need > self.options.max_bytes:
                 self._reclaim(force_active=True)
-                if self._bytes + need > self.options.max_bytes and not self._full(deadline):
+                if self._bytes + need > self.options.max_bytes and not self._full(deadline, count=count):
                     return False
                 continue
             if active is not None and active.size + size > self.options.segment_bytes:
@@ -238,7 +273,7 @@ class Spool:
                 continue
             return True
 
-    def _full(self, deadline: float, *, disk: bool = False) -> bool:
+    def _full(self, deadline: float, *, disk: bool = False, count: int = 1) -> bool:
         """Apply the policy once. True: retry (room may have been made). False: drop the new
         record (counted). ``block`` waits for acks until ``deadline``, then raises."""
         if disk:
@@ -270,11 +305,14 @@ class Spool:
                 self.options.block_timeout_s,
             )
             raise SpoolFullError("the spool is full", path=self.directory)
-        self._c["dropped_newest"] += 1
+        self._c["dropped_newest"] += count
         self._warn("drop_newest", "spool %s: full; dropping new records (counted)", self.directory)
         return False
 
     def _write_chunk(self, chunk: list[Item], results: list[int | None]) -> None:
+        """Write ``chunk``, whose records are the last entries of ``results``; on a full disk
+        one frame at a time, the policy applied to each (its records' results set to None when
+        dropped, cut off from ``results`` when ``block`` gives up)."""
         if not chunk:
             return
         try:
@@ -283,7 +321,9 @@ class Spool:
         except DiskFull:
             pass
         deadline = time.monotonic() + self.options.block_timeout_s
-        for n, item in enumerate(chunk):  # one frame at a time, the policy applied to each
+        at = len(results) - sum(item[1] for item in chunk)  # where the chunk's records start
+        for item in chunk:
+            count = item[1]
             while True:
                 try:
                     self._write([item])
@@ -294,13 +334,14 @@ class Spool:
                         self._writer.seal()  # a per-file size limit: a fresh segment may take it
                         continue
                     try:
-                        retry = self._full(deadline, disk=True)
+                        retry = self._full(deadline, disk=True, count=count)
                     except SpoolFullError:
-                        del results[len(results) - len(chunk) + n :]
+                        del results[at:]
                         raise
                     if not retry:
-                        results[len(results) - len(chunk) + n] = None
+                        results[at : at + count] = [None] * count
                         break
+            at += count
 
     def _write(self, items: list[Item]) -> None:
         segment = self._writer.segment
@@ -308,13 +349,14 @@ class Spool:
             segment = self._writer.create(items[0][0])
             self._segments.append(segment)
             self._bytes += SEGMENT_HEADER_SIZE
-        data = b"".join(frame for _, _, frame in items)
+        data = b"".join(item[3] for item in items)
         offset = segment.size
-        self._writer.write(data, [(seq, ts, len(frame)) for seq, ts, frame in items])
+        self._writer.write(data, [(first, count, ts, len(frame)) for first, count, ts, frame in items])
         self._recent.add(segment, offset, items, len(data))
+        records = sum(item[1] for item in items)
         self._bytes += len(data)
-        self._depth += len(items)
-        self._c["appended"] += len(items)
+        self._depth += records
+        self._c["appended"] += records
         self._evicting_helps = True
 
     # -- leaving the spool -----------------------------------------------------------------------
@@ -380,14 +422,18 @@ class Spool:
                     segment, cursor.offset, cursor.next_seq, max_records=max_records, max_bytes=max_bytes
                 )
                 if recent is not None:  # appended lately: from memory, as written
-                    records, end = recent
-                    head, tail = records[0], records[-1]
+                    groups, end = recent
+                    head, tail = groups[0], groups[-1]
+                    count = sum(g.records for g in groups)
                     piece = Slice(
-                        head.seq, tail.seq, len(records), segment, cursor.offset, end, head.timestamp_ms
+                        head.first_seq, tail.last_seq, count, segment, cursor.offset, end, head.timestamp_ms
                     )
-                    self._tracker.start(piece, len(records))
+                    self._tracker.start(piece, count)
                     return SpoolBatch(
-                        stream=self._stream, first_seq=head.seq, last_seq=tail.seq, records=tuple(records)
+                        stream=self._stream,
+                        first_seq=head.first_seq,
+                        last_seq=tail.last_seq,
+                        groups=tuple(groups),
                     )
                 found = read_frames(
                     segment,
@@ -404,23 +450,24 @@ class Spool:
                     cursor.offset = found.end
                     continue
                 first, last = found.frames[0], found.frames[-1]
+                count = sum(f.count for f in found.frames)
                 piece = Slice(
                     first.seq,
-                    last.seq,
-                    len(found.frames),
+                    last.last_seq,
+                    count,
                     segment,
                     cursor.offset,
                     found.end,
                     first.timestamp_ms,
                 )
-                self._tracker.start(piece, len(found.frames))
+                self._tracker.start(piece, count)
                 return self._batch(piece, found.frames)
             return None
 
     def _batch(self, piece: Slice, frames: Sequence[Frame]) -> SpoolBatch:
-        records = tuple(SpoolRecord(f.seq, f.timestamp_ms, f.payload) for f in frames)
+        groups = tuple(SpoolGroup(f.seq, f.count, f.timestamp_ms, f.group()) for f in frames)
         return SpoolBatch(
-            stream=self._stream, first_seq=piece.first_seq, last_seq=piece.last_seq, records=records
+            stream=self._stream, first_seq=piece.first_seq, last_seq=piece.last_seq, groups=groups
         )
 
     def ack(self, first_seq: int) -> bool:

@@ -57,8 +57,8 @@ class SegmentWriter:
         self.segment = Segment(path=path, first_seq=first_seq, size=len(header), sealed=False)
         return self.segment
 
-    def write(self, data: bytes, items: Sequence[tuple[int, int, int]]) -> None:
-        """Append ``data`` holding frames ``items`` = ``(seq, append_ms, frame_len)``."""
+    def write(self, data: bytes, items: Sequence[tuple[int, int, int, int]]) -> None:
+        """Append ``data`` holding frames ``items`` = ``(first seq, records, append_ms, frame_len)``."""
         segment = self.segment
         if segment is None:
             raise SpoolError("internal: no active segment", path=self.directory)
@@ -80,13 +80,13 @@ class SegmentWriter:
                     offset=segment.size,
                 ) from exc
             raise DiskFull
-        for seq, ts, length in items:
+        for seq, count, ts, length in items:
             if segment.first_ts is None:
                 segment.first_ts = ts
-            segment.count += 1
-            segment.last_seq = seq
+            segment.count += count
+            segment.last_seq = seq + count - 1
             segment.size += length
-        self.unsynced += len(items)
+            self.unsynced += count
 
     def sync(self) -> bool:
         """fdatasync the active segment if anything is unsynced; True if it did."""

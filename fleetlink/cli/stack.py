@@ -11,7 +11,9 @@ from typing import Any
 
 from fleetlink.localstack.artifacts import cache_root, fetch_all
 from fleetlink.localstack.process import alive
+from fleetlink.localstack.registry import registry_url_lines
 from fleetlink.localstack.stack import LocalStack, StackInfo, stop_recorded
+from fleetlink.schemas.registry_urls import apicurio_native_url
 
 DEFAULT_DIR = Path("var/stack")
 
@@ -48,13 +50,15 @@ def register(sub: Any) -> None:
 def _up(args: argparse.Namespace) -> int:
     existing = StackInfo.load(args.dir)
     if existing and alive(existing.kafka_pid) and alive(existing.registry_pid):
-        print(f"already running: Kafka {existing.bootstrap}, registry {existing.registry_url}")
+        print(f"already running: Kafka {existing.bootstrap}")
+        _print_registry(existing.registry_url)
         return 0
     stack = LocalStack(args.dir, kafka_port=args.kafka_port, registry_port=args.registry_port)
     print("starting Apache Kafka (KRaft) and Apicurio Registry ...", flush=True)
     info = stack.start()
     print(f"Kafka     {info.bootstrap}   (up in {info.kafka_seconds:.1f} s, pid {info.kafka_pid})")
-    print(f"Registry  {info.registry_url}   (up in {info.registry_seconds:.1f} s, pid {info.registry_pid})")
+    print(f"Registry  up in {info.registry_seconds:.1f} s, pid {info.registry_pid}")
+    _print_registry(info.registry_url)
     if not args.foreground:
         print(f"stop with: fleetlink stack down --dir {args.dir}")
         return 0
@@ -80,13 +84,20 @@ def _status(args: argparse.Namespace) -> int:
     info = StackInfo.load(args.dir)
     running = info is not None and alive(info.kafka_pid) and alive(info.registry_pid)
     if args.json:
-        print(json.dumps({"running": running, **(info.__dict__ if info else {})}))
+        native = {"registry_native_url": apicurio_native_url(info.registry_url)} if info else {}
+        print(json.dumps({"running": running, **(info.__dict__ if info else {}), **native}))
     elif info is None:
         print(f"no stack under {args.dir}")
     else:
         state = "running" if running else "not running (stale state)"
-        print(f"{state}: Kafka {info.bootstrap}, registry {info.registry_url}")
+        print(f"{state}: Kafka {info.bootstrap}")
+        _print_registry(info.registry_url)
     return 0 if running else 3
+
+
+def _print_registry(url: str) -> None:
+    for line in registry_url_lines(url):
+        print(f"Registry  {line}")
 
 
 def _fetch(_args: argparse.Namespace) -> int:

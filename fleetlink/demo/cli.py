@@ -21,6 +21,14 @@ def register(sub: Any) -> None:
     parser.add_argument("--rate", type=float, default=10.0, help="sensor rate in Hz (default %(default)s)")
     parser.add_argument("--window", default="2s", help="fault-detection window (default %(default)s)")
     parser.add_argument(
+        "--app",
+        choices=("python", "java"),
+        default="python",
+        help="the fault-detection app: python (Quix Streams, examples/fault_detection) or java (Kafka "
+        "Streams, examples/kafka-streams-fault-detection, built with Maven on first use; "
+        "default %(default)s)",
+    )
+    parser.add_argument(
         "--workdir",
         type=Path,
         default=Path("var/demo"),
@@ -70,6 +78,7 @@ def _run(args: argparse.Namespace) -> int:
             registry_url=args.registry,
             keep_running=args.keep_running,
             duration_s=args.duration,
+            app=args.app,
         )
     )
     with interrupted_on_sigint(demo):

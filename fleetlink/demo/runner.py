@@ -19,7 +19,7 @@ import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Literal, TextIO
 
 import yaml
 
@@ -35,8 +35,9 @@ from fleetlink.demo.configs import (
     uplink_config,
 )
 from fleetlink.demo.story import Story, led_colour
-from fleetlink.demo.watch import TopicWatcher, app_has_committed
+from fleetlink.demo.watch import LogFollower, TopicWatcher, app_has_committed
 from fleetlink.localstack.process import ServerProcess, free_port, log_tail, port_in_use
+from fleetlink.localstack.registry import registry_url_lines
 from fleetlink.localstack.stack import LocalStack
 from fleetlink.localstack.zenoh_router import ZenohRouter
 
@@ -56,6 +57,7 @@ class DemoOptions:
     keep_running: bool = False
     duration_s: float | None = None
     step_timeout_s: float = 90.0
+    app: Literal["python", "java"] = "python"
     out: TextIO = field(default=sys.stdout)
 
 
@@ -123,6 +125,8 @@ class Demo:
                 f"Kafka up in {info.kafka_seconds:.1f} s at {bootstrap}; "
                 f"registry up in {info.registry_seconds:.1f} s at {registry}"
             )
+        for line in registry_url_lines(registry):
+            self.say(f"registry {line}")
         cloud = self._exit.enter_context(ZenohRouter())
         site = self._exit.enter_context(ZenohRouter(connect=(cloud.endpoint,)))
         self.say(f"Zenoh routers: cloud {cloud.endpoint}, site warehouse-a {site.endpoint} (linked)")
@@ -140,10 +144,13 @@ class Demo:
         )
 
     def _process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
+        self._start_process(name, [sys.executable, "-m", "fleetlink", *argv], ready)
+
+    def _start_process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
         log = self.o.workdir / "logs" / f"{name}.log"
         proc = ServerProcess(
             name=name,
-            argv=[sys.executable, "-m", "fleetlink", *argv],
+            argv=argv,
             log_path=log,
             pid_path=self.o.workdir / f"{name}.pid",
             ready=ready,
@@ -242,6 +249,9 @@ class Demo:
                 self.say("records/s in Kafka: " + ", ".join(f"{t} {r:.0f}" for t, r in rates.items()))
 
     def _start_app(self, places: DemoPlaces) -> None:
+        if self.o.app == "java":
+            self._start_java_app(places)
+            return
         from fleetlink.examples.fault_detection.app import run as run_app
         from fleetlink.examples.fault_detection.rules import LightCommand
         from fleetlink.examples.fault_detection.settings import FaultDetectionSettings, parse_duration_ms
@@ -273,6 +283,42 @@ class Demo:
 
         self._exit.callback(stop_app)
         self.say(f"fault-detection app running (Quix Streams; sliding window {self.o.window} per robot)")
+
+    def _start_java_app(self, places: DemoPlaces) -> None:
+        from fleetlink.examples import kafka_streams
+        from fleetlink.localstack.java import find_java
+        from fleetlink.schemas.registry_urls import apicurio_native_url
+
+        native = apicurio_native_url(places.registry_url)
+        if native is None:
+            raise DemoError(
+                f"--app java needs an Apicurio Registry (its Java serde speaks the native API); "
+                f"{places.registry_url} is not an Apicurio ccompat URL (…/apis/ccompat/v7)"
+            )
+        if kafka_streams.needs_build():
+            self.say("building the Kafka Streams app with Maven (the first build downloads its jars) ...")
+            took = kafka_streams.build(tests=False)
+            self.say(f"built {kafka_streams.JAR.name} in {took:.1f} s")
+        argv = kafka_streams.command(
+            find_java(17, "the Kafka Streams app"),
+            bootstrap=places.bootstrap,
+            registry_native_url=native,
+            window_ms=parse_duration_ms(self.o.window),
+            group=self._app_group,
+            state_dir=places.workdir / "app-state",
+        )
+        log = self.o.workdir / "logs" / "fault-detection.log"
+
+        def decided(line: str) -> None:
+            change = kafka_streams.parse_state_change(line)
+            if change is not None:
+                robot, state = change.robot, change.after
+                self.say(f"fault detection: {robot} is now {state} (every event in its window agreed)")
+
+        self._start_process("fault-detection", argv, lambda: kafka_streams.READY_LINE in _read(log))
+        follower = LogFollower(log, decided).start()
+        self._exit.callback(follower.stop)
+        self.say(f"fault-detection app: Kafka Streams (Java), sliding window {self.o.window} per robot")
 
     # -- the scenario ----------------------------------------------------------------------
 

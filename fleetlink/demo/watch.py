@@ -6,6 +6,7 @@ import threading
 import uuid
 from collections import Counter
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from confluent_kafka import Consumer, ConsumerGroupTopicPartitions, KafkaException, Message
@@ -89,3 +90,36 @@ def app_has_committed(bootstrap: str, group: str, topics: Sequence[str]) -> bool
         return False
     committed = {tp.topic for tp in partitions if tp.offset >= 0 and tp.error is None}
     return set(topics) <= committed
+
+
+class LogFollower:
+    """Reads the lines a process appends to its log file, in a thread, and hands each to ``on_line``."""
+
+    def __init__(self, path: Path, on_line: Callable[[str], None], *, every_s: float = 0.1) -> None:
+        self._path = path
+        self._on_line = on_line
+        self._every_s = every_s
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> LogFollower:
+        self._thread = threading.Thread(target=self._run, name="demo-log-follower", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5)
+
+    def _run(self) -> None:
+        with self._path.open("rb") as log:
+            pending = b""
+            while True:
+                chunk = log.read()
+                pending += chunk
+                *lines, pending = pending.split(b"\n")
+                for line in lines:
+                    self._on_line(line.decode(errors="replace"))
+                if not chunk and self._stop.wait(self._every_s):
+                    return

@@ -13,8 +13,7 @@ from pathlib import Path
 import httpx
 
 from fleetlink.localstack.process import ServerProcess, ensure_port_free, free_port, log_tail
-
-CCOMPAT_PATH = "/apis/ccompat/v7"
+from fleetlink.schemas.registry_urls import APICURIO_CCOMPAT_PATH, APICURIO_NATIVE_PATH, apicurio_native_url
 
 
 @dataclass(frozen=True)
@@ -26,8 +25,13 @@ class RegistrySettings:
 
     @property
     def url(self) -> str:
-        """The URL Confluent clients take (``schema.registry.url``)."""
-        return f"http://{self.host}:{self.port}{CCOMPAT_PATH}"
+        """The URL Confluent clients take (``schema.registry.url``): fleetlink, confluent-kafka, Quix."""
+        return f"http://{self.host}:{self.port}{APICURIO_CCOMPAT_PATH}"
+
+    @property
+    def native_url(self) -> str:
+        """The registry's own API, which Apicurio's Java serdes take (``apicurio.registry.url``)."""
+        return f"http://{self.host}:{self.port}{APICURIO_NATIVE_PATH}"
 
 
 class SchemaRegistry:
@@ -82,3 +86,15 @@ class SchemaRegistry:
 
     def log_tail(self) -> str:
         return log_tail(self.process.log_path)
+
+
+def registry_url_lines(url: str) -> list[str]:
+    """The registry's URLs, each labelled with what it is for (``stack up``/``status``, the demo).
+
+    ``url`` is the Confluent-compatible one; an Apicurio Registry also has its native API.
+    """
+    lines = [f"{url}   Confluent-compatible API: fleetlink, confluent-kafka, Quix Streams, fleetlink kafka"]
+    native = apicurio_native_url(url)
+    if native is not None:
+        lines.append(f"{native}   Apicurio native API: Apicurio's Java serdes (apicurio.registry.url)")
+    return lines

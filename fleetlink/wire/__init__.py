@@ -4,10 +4,16 @@ Pure: bytes in, bytes out. Both sides import this one package, so the format has
 
 Batch (edge -> uplink, one Zenoh payload; little-endian throughout)::
 
-    "FLB" | version u8 (=3) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
+    "FLB" | version u8 (=4) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
     body:  site str16 | edge_id str16 | stream str16 | first_seq u64
            | n_schemas u16 | { fingerprint 8 bytes | schema JSON str32, or u32 0xFFFFFFFF } * n_schemas
-           | n_records u32 | { seq u64 | payload_len u32 | payload } * n_records
+           | n_groups u32 | { first_seq u64 | group_len u32 | group } * n_groups
+    group: count u32 | n_fingerprints u16 | { fingerprint 8 bytes } * n
+           | { payload_len u32 | payload } * count          (seqs first_seq, first_seq + 1, ...)
+
+A group is what the edge's spool stores and reads back as one frame (``fleetlink.wire.groups``),
+so a batch is built from whole groups without touching a record; seqs increase across groups
+and may jump between them.
 
 Record payload (what the edge spool stores, so a batch is built without re-encoding)::
 
@@ -18,7 +24,7 @@ Record payload (what the edge spool stores, so a batch is built without re-encod
 With bit 2 the record has one more header, ``fleetlink.seq`` = the decimal source seq (the ROS
 publication sequence number), after the others. It keeps the rest of the payload (the *tail*:
 topic, key, headers) the same for every record of one robot and mapping, so the edge encodes it
-once and the uplink parses it once per batch. The edge writes version 3 and the uplink reads
+once and the uplink parses it once per batch. The edge writes version 4 and the uplink reads
 only that (another version is refused with "unsupported batch version N"; the edge keeps such a
 batch in its spool).
 
@@ -56,6 +62,7 @@ from fleetlink.wire.batch import (
     Codec,
     decode_batch,
     encode_batch,
+    encode_batch_groups,
     encode_batch_payloads,
     zstd_available,
 )
@@ -116,6 +123,7 @@ __all__ = [
     "decode_payload",
     "encode_ack",
     "encode_batch",
+    "encode_batch_groups",
     "encode_batch_payloads",
     "encode_payload",
     "events_key",

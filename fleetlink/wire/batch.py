@@ -10,6 +10,7 @@ from typing import Literal
 
 from fleetlink.wire.errors import WireError
 from fleetlink.wire.framing import U16, U32, U64, Reader, str16
+from fleetlink.wire.groups import encode_group, group_count, group_head, record_spans
 from fleetlink.wire.records import Record, Tails, decode_record, encode_payload
 
 try:  # zstd is in the standard library from Python 3.14; the backport is a rosbags dependency
@@ -29,7 +30,7 @@ _CODECS: dict[str, int] = {"none": 0, "zlib": 1, "zstd": 2}
 _CODEC_NAMES = {v: k for k, v in _CODECS.items()}
 
 BATCH_MAGIC = b"FLB"
-BATCH_VERSION = 3
+BATCH_VERSION = 4
 """The only version written and read (fleetlink 0.1.0 is the first release; others are refused)."""
 _ELIDED = 0xFFFFFFFF
 """A schema entry's length that says "text left out" (``Batch.elided``)."""
@@ -74,20 +75,20 @@ def _compress(body: bytes, codec: Codec, level: int | None) -> bytes:
     return bytes(_zstd.compress(body, 1 if level is None else level))
 
 
-def encode_batch_payloads(
+def encode_batch_groups(
     *,
     site: str,
     edge_id: str,
     stream: str,
-    items: Sequence[tuple[int, bytes]],
+    groups: Sequence[tuple[int, bytes]],
     schemas: Mapping[bytes, str],
     elided: Collection[bytes] = (),
     codec: Codec = "zlib",
     level: int | None = None,
 ) -> bytes:
-    """A batch from spool payloads ``(seq, payload)`` as stored (no per-record re-encoding);
-    ``elided``: fingerprints used without their text (see ``Batch``)."""
-    if not items:
+    """A batch from record groups ``(first_seq, group)`` as the spool keeps them (no per-record
+    work); ``elided``: fingerprints used without their text (see ``Batch``)."""
+    if not groups:
         raise WireError("a batch needs at least one record")
     if codec not in _CODECS:
         raise WireError(f"unknown codec {codec!r}")
@@ -97,7 +98,7 @@ def encode_batch_payloads(
         str16(site),
         str16(edge_id),
         str16(stream),
-        U64.pack(items[0][0]),
+        U64.pack(groups[0][0]),
         U16.pack(len(schemas) + len(elided)),
     ]
     for fingerprint in elided:
@@ -113,15 +114,54 @@ def encode_batch_payloads(
         if len(data) >= _ELIDED:
             raise WireError(f"schema {fingerprint.hex()} of {len(data)} bytes is too long")
         parts += (fingerprint, U32.pack(len(data)), data)
-    parts.append(U32.pack(len(items)))
-    previous = -1
+    parts.append(U32.pack(len(groups)))
+    following = 0
+    for first_seq, group in groups:
+        if first_seq < following:
+            raise WireError(f"record seqs must increase: a group starts at {first_seq}, below {following}")
+        following = first_seq + group_count(group)
+        parts += (_SEQ_LEN.pack(first_seq, len(group)), group)
+    body = b"".join(parts)
+    return _HEAD.pack(BATCH_MAGIC, BATCH_VERSION, _CODECS[codec], len(body)) + _compress(body, codec, level)
+
+
+def encode_batch_payloads(
+    *,
+    site: str,
+    edge_id: str,
+    stream: str,
+    items: Sequence[tuple[int, bytes]],
+    schemas: Mapping[bytes, str],
+    elided: Collection[bytes] = (),
+    codec: Codec = "zlib",
+    level: int | None = None,
+) -> bytes:
+    """A batch from record payloads ``(seq, payload)``: runs of consecutive seqs become groups."""
+    groups: list[tuple[int, bytes]] = []
+    run: list[bytes] = []
+    first = previous = -1
     for seq, payload in items:
         if seq <= previous:
             raise WireError(f"record seqs must increase: {seq} after {previous}")
+        if run and seq != previous + 1:
+            groups.append((first, encode_group(run)))
+            run = []
+        if not run:
+            first = seq
+        run.append(payload)
         previous = seq
-        parts += (_SEQ_LEN.pack(seq, len(payload)), payload)
-    body = b"".join(parts)
-    return _HEAD.pack(BATCH_MAGIC, BATCH_VERSION, _CODECS[codec], len(body)) + _compress(body, codec, level)
+    if run:
+        groups.append((first, encode_group(run)))
+    return encode_batch_groups(
+        site=site,
+        edge_id=edge_id,
+        stream=stream,
+        groups=groups,
+        schemas=schemas,
+        elided=elided,
+        codec=codec,
+        level=level,
+    )
 
 
 def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = None) -> bytes:
@@ -174,6 +214,30 @@ def _read_schemas(r: Reader) -> tuple[dict[bytes, str], frozenset[bytes]]:
     return schemas, frozenset(elided)
 
 
+def _read_group(
+    body: bytes, pos: int, end: int, following: int, *, records: list[Record], tails: Tails
+) -> tuple[int, int]:
+    """Decode the group at ``pos`` into ``records``; returns where the next group starts and the
+    seq after its last record."""
+    if end - pos < _SEQ_LEN.size:
+        raise WireError("truncated group seq/length", offset=pos)
+    seq, length = _SEQ_LEN.unpack_from(body, pos)
+    if seq < following:
+        raise WireError(f"record seqs must increase: a group starts at {seq}, below {following}", offset=pos)
+    pos += _SEQ_LEN.size
+    if length > end - pos:
+        raise WireError(f"truncated group at seq {seq}", offset=pos)
+    append = records.append
+    try:
+        count, _fps, start = group_head(memoryview(body)[pos : pos + length])
+        for a, b in record_spans(body, pos + start, pos + length, count):
+            append(decode_record(body, a, b, seq, tails=tails))
+            seq += 1
+    except WireError as exc:
+        raise WireError(f"group at byte {pos}: {exc.reason}", offset=exc.offset) from None
+    return pos + length, seq
+
+
 def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     """Parse and check a batch; raises ``WireError`` naming what is wrong and where."""
     view = memoryview(data)
@@ -193,27 +257,14 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
     (first_seq,) = r.unpack(U64, "first_seq")
     schemas, elided = _read_schemas(r)
-    (n_records,) = r.unpack(U32, "record count")
-    if n_records == 0:
+    (n_groups,) = r.unpack(U32, "group count")
+    if n_groups == 0:
         raise WireError("a batch needs at least one record", offset=r.pos - 4)
     records: list[Record] = []
-    append = records.append
-    unpack = _SEQ_LEN.unpack_from
     tails: Tails = {}
-    pos, end = r.pos, r.end
-    previous = -1
-    for _ in range(n_records):
-        if end - pos < _SEQ_LEN.size:
-            raise WireError("truncated record seq/length", offset=pos)
-        seq, length = unpack(body, pos)
-        if seq <= previous:
-            raise WireError(f"record seqs must increase: {seq} after {previous}", offset=pos)
-        previous = seq
-        pos += _SEQ_LEN.size
-        if length > end - pos:
-            raise WireError(f"truncated record {seq}", offset=pos)
-        append(decode_record(body, pos, pos + length, seq, tails=tails))
-        pos += length
+    pos, following = r.pos, 0
+    for _ in range(n_groups):
+        pos, following = _read_group(body, pos, r.end, following, records=records, tails=tails)
     r.pos = pos
     r.done("the batch")
     if records[0].seq != first_seq:

@@ -130,9 +130,60 @@ struct State {
     topics: HashMap<u32, String>,
 }
 
+/// Records of one delivery class being gathered into groups (`fleetlink.wire.groups`):
+/// `count u32 | n_fingerprints u16 | fingerprint[8]* | {length u32 | payload}*`.
+struct Grouper {
+    max_records: u32,
+    max_bytes: usize,
+    count: u32,
+    fingerprints: Vec<[u8; 8]>,
+    body: Vec<u8>,
+    done: Vec<Vec<u8>>,
+}
+
+impl Grouper {
+    fn new(max_records: u32, max_bytes: usize) -> Grouper {
+        Grouper { max_records: max_records.max(1), max_bytes: max_bytes.max(1), count: 0, fingerprints: vec![], body: vec![], done: vec![] }
+    }
+
+    /// Room for a record of `payload_len` bytes, closing the current group if it is full.
+    fn reserve(&mut self, payload_len: usize) {
+        if self.count > 0 && (self.count >= self.max_records || self.body.len() + payload_len + 4 > self.max_bytes) {
+            self.close();
+        }
+        self.body.reserve(4 + payload_len);
+    }
+
+    fn note(&mut self, fingerprint: &[u8]) {
+        let fp: [u8; 8] = fingerprint.try_into().unwrap_or([0; 8]);
+        if !self.fingerprints.contains(&fp) {
+            self.fingerprints.push(fp);
+        }
+        self.count += 1;
+    }
+
+    fn close(&mut self) {
+        if self.count == 0 {
+            return;
+        }
+        let mut group = Vec::with_capacity(6 + 8 * self.fingerprints.len() + self.body.len());
+        group.extend_from_slice(&self.count.to_le_bytes());
+        group.extend_from_slice(&(self.fingerprints.len() as u16).to_le_bytes());
+        self.fingerprints.sort_unstable();
+        for fp in &self.fingerprints {
+            group.extend_from_slice(fp);
+        }
+        group.extend_from_slice(&self.body);
+        self.done.push(group);
+        self.count = 0;
+        self.fingerprints.clear();
+        self.body.clear();
+    }
+}
+
 /// What one `take()` made, before it becomes Python objects.
 struct Taken {
-    groups: [(u64, Vec<u8>); 2],
+    groups: [Grouper; 2],
     slow: Vec<Raw>,
     lanes: HashMap<u32, (u64, u64)>,
     samples: usize,
@@ -268,6 +319,9 @@ impl DataPlane {
             if delivery > 1 {
                 return Err(PyValueError::new_err(format!("delivery class {delivery} is not 0 or 1")));
             }
+            if program_id != MISMATCH && head.len() != 10 {
+                return Err(PyValueError::new_err("a lane's head is C3 01 and an 8-byte fingerprint"));
+            }
             let program = if program_id == MISMATCH {
                 None
             } else {
@@ -304,28 +358,31 @@ impl DataPlane {
 
     /// Up to `max_samples` samples, waiting at most `timeout_s` for the first. Returns
     /// `(groups, slow, lanes, samples, oldest_received_ns)`: `groups` a list of
-    /// `(delivery, count, blob)` (`blob` = `{u32 length | record payload}*`), `slow` the raw
-    /// samples for the Python path `(sub_id, key, payload, attachment | None, received_ns)`,
-    /// `lanes` the `(lane_id, received, emitted)` counts of this call.
-    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes))]
+    /// `(delivery, group)` (`fleetlink.wire.groups`; at most `group_records` records and, beyond
+    /// one, `group_bytes` bytes each), `slow` the raw samples for the Python path
+    /// `(sub_id, key, payload, attachment | None, received_ns)`, `lanes` the
+    /// `(lane_id, received, emitted)` counts of this call.
+    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576))]
     fn take<'py>(
         &self,
         py: Python<'py>,
         max_samples: usize,
         timeout_s: f64,
         max_value_bytes: usize,
+        group_records: u32,
+        group_bytes: usize,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let taken = py.detach(|| {
+        let mut taken = py.detach(|| {
             let raws = self.wait_and_drain(max_samples.max(1), timeout_s);
-            self.process(raws, max_value_bytes)
+            self.process(raws, max_value_bytes, group_records, group_bytes)
         });
-        let groups: Vec<(u8, u64, Bound<'py, PyBytes>)> = taken
-            .groups
-            .iter()
-            .enumerate()
-            .filter(|(_, (n, _))| *n > 0)
-            .map(|(d, (n, blob))| (d as u8, *n, PyBytes::new(py, blob)))
-            .collect();
+        let mut groups: Vec<(u8, Bound<'py, PyBytes>)> = Vec::new();
+        for (delivery, grouper) in taken.groups.iter_mut().enumerate() {
+            grouper.close();
+            for group in &grouper.done {
+                groups.push((delivery as u8, PyBytes::new(py, group)));
+            }
+        }
         let slow: Vec<(u32, String, Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, i64)> = taken
             .slow
             .into_iter()
@@ -418,9 +475,9 @@ impl DataPlane {
         raws
     }
 
-    fn process(&self, raws: Vec<Raw>, max_value_bytes: usize) -> Taken {
+    fn process(&self, raws: Vec<Raw>, max_value_bytes: usize, group_records: u32, group_bytes: usize) -> Taken {
         let mut taken = Taken {
-            groups: [(0, Vec::new()), (0, Vec::new())],
+            groups: [Grouper::new(group_records, group_bytes), Grouper::new(group_records, group_bytes)],
             slow: Vec::new(),
             lanes: HashMap::new(),
             samples: raws.len(),
@@ -463,10 +520,12 @@ impl DataPlane {
                     continue;
                 }
                 entry.1 += 1;
-                let (count, blob) = &mut taken.groups[lane.delivery as usize];
+                let grouper = &mut taken.groups[lane.delivery as usize];
                 let value_len = lane.head.len() + body.len();
                 let payload_len = 13 + value_len + 8 + lane.tail.len();
-                blob.reserve(4 + payload_len);
+                grouper.reserve(payload_len);
+                grouper.note(&lane.head[2..]);
+                let blob = &mut grouper.body;
                 blob.extend_from_slice(&(payload_len as u32).to_le_bytes());
                 blob.push(lane.flags | FLAG_SOURCE_SEQ);
                 blob.extend_from_slice(&ts_ms.to_le_bytes());
@@ -475,7 +534,6 @@ impl DataPlane {
                 blob.extend_from_slice(body);
                 blob.extend_from_slice(&(att.seq as u64).to_le_bytes());
                 blob.extend_from_slice(&lane.tail);
-                *count += 1;
             }
         }
         taken

@@ -236,11 +236,11 @@ def test_row8_kill9_while_appending_and_acking_loses_nothing_taken(
 FILL_OPTIONS: dict[str, Any] = {"segment_bytes": 8192, "max_bytes": 64 << 20}
 
 
-def frames_of(path: Path) -> list[tuple[int, int, int]]:
-    """``(offset, end, seq)`` of every frame in a segment file."""
+def frames_of(path: Path) -> list[tuple[int, int, range]]:
+    """``(offset, end, seqs)`` of every frame (a group of records) in a segment file."""
     data = path.read_bytes()
     return [
-        (f.offset, f.end, f.seq)
+        (f.offset, f.end, range(f.seq, f.last_seq + 1))
         for f in scan(data, SEGMENT_HEADER_SIZE, len(data), max_len=1 << 24, final=True, copy=False)
         if not isinstance(f, Damage)
     ]
@@ -257,17 +257,17 @@ def test_row10_torn_tail_and_flipped_bit_are_counted_skipped_and_named(
     segments = sorted(tmp_path.glob("*.seg"))
     assert len(segments) >= 3
     first, last = segments[0], segments[-1]
-    offset, end, flipped_seq = frames_of(first)[5]
+    offset, end, flipped = frames_of(first)[1]
     data = bytearray(first.read_bytes())
-    data[end - 3] ^= 0x10  # a payload bit of the sixth record
+    data[end - 3] ^= 0x10  # a payload bit of the second group
     first.write_bytes(bytes(data))
-    tail_offset, tail_end, torn_seq = frames_of(last)[-1]
+    tail_offset, tail_end, torn = frames_of(last)[-1]
     with last.open("r+b") as handle:
-        handle.truncate(tail_end - 7)  # the last record loses its end, as in a torn write
+        handle.truncate(tail_end - 7)  # the last group loses its end, as in a torn write
     caplog.set_level(logging.ERROR)
     records, stats = drain(tmp_path, SpoolOptions(**FILL_OPTIONS))
-    assert sorted(records) == [s for s in taken if s not in (flipped_seq, torn_seq)]
-    assert stats["corrupt_skipped"] == 2
+    assert sorted(records) == [s for s in taken if s not in flipped and s not in torn]
+    assert stats["corrupt_skipped"] == len(flipped) + len(torn)  # every record of both groups, exactly
     size = end - offset
     assert f"corrupt data in {first} at offset {offset} ({size} bytes: checksum mismatch)" in caplog.text
     assert f"torn tail in {last} at offset {tail_offset}" in caplog.text

@@ -13,7 +13,7 @@ Addresses are the only thing the test changes: the docs use the usual ports (744
 7448 cloud router, 9092 Kafka, 8081 registry, 8480 edge admin, 8490 fleet console, 9464 uplink
 metrics); the test puts each on a free port, in commands and saved files by text, in the configs
 a service loads by ``$FLEETLINK_SET`` (the product's own override), and in ``$KAFKA_BOOTSTRAP`` /
-``$SCHEMA_REGISTRY_URL`` (the defaults of ``fleetlink kafka read``). State folders — those a
+``$SCHEMA_REGISTRY_URL`` (the defaults of ``fleetlink kafka echo``). State folders — those a
 service config names, and ``fleetlink stack --dir`` — go to the test's folder, so a run never
 reads an earlier run's records. This module's parsing and rewriting are pure.
 """

@@ -1,4 +1,8 @@
-"""The warehouse demo end to end (issue 8): fault → one red command, heal → one green, nothing else."""
+"""The warehouse demo end to end (issue 8): fault → one red command, heal → one green, nothing else.
+
+The same loop, judged the same way, with either fault-detection app: the Quix Streams one
+(Python, in the demo's process) and the Kafka Streams one (Java, built with Maven, its own process).
+"""
 
 from __future__ import annotations
 
@@ -6,15 +10,25 @@ import io
 import re
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import httpx
+import pytest
 
 from fleetlink.demo.runner import Demo, DemoOptions
 from tests.helpers import wait_until
 
 
-def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize("app", ["python", "java"])
+def test_demo_closes_the_loop(
+    app: Literal["python", "java"],
+    kafka_bootstrap: str,
+    schema_registry_url: str,
+    tmp_path: Path,
+    request: pytest.FixtureRequest,
+) -> None:
+    if app == "java":
+        request.getfixturevalue("kafka_streams_jar")  # built here with Maven, so the demo need not
     out = io.StringIO()
     demo = Demo(
         DemoOptions(
@@ -24,6 +38,7 @@ def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tm
             registry_url=schema_registry_url,
             out=out,
             step_timeout_s=60,
+            app=app,
         )
     )
     result: dict[str, Any] = {}
@@ -54,6 +69,15 @@ def test_demo_closes_the_loop(kafka_bootstrap: str, schema_registry_url: str, tm
     assert lines[-2].endswith("stopping everything the demo started ...")
     assert lines[-1].endswith("] stopped")  # nothing told after it, nothing between
     assert "summary written to" in lines[-3]
+
+    # both registry URLs are told, each with what it is for
+    native = schema_registry_url.replace("/apis/ccompat/v7", "/apis/registry/v3")
+    assert f"registry {schema_registry_url}   Confluent-compatible API" in told
+    assert f"registry {native}   Apicurio native API" in told
+    if app == "java":
+        assert "fault-detection app: Kafka Streams (Java)" in told
+        assert f"fault detection: {faulted} is now failed" in told
+        assert f"fault detection: {faulted} is now running" in told
 
 
 def _consoles_and_metrics_answer(told: str, token: str) -> None:

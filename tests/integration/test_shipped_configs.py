@@ -6,7 +6,7 @@ rendered by ``fleetlink zenoh render`` and run by ``fleetlink zenoh router``.
 
 Each fleet is checked end to end: the health endpoints answer (through ``fleetlink probe``,
 the containers' healthcheck), simulated robots' records are read back from Kafka with
-``fleetlink kafka read``, and a light-ring command produced to Kafka turns a robot's ring red
+``fleetlink kafka echo``, and a light-ring command produced to Kafka turns a robot's ring red
 (uplink -> WAN -> repeater -> robot).
 """
 
@@ -65,14 +65,21 @@ def _settle(check: Any, seconds: float) -> bool:
 
 
 def _records_arrive(bed: Bed, topic: str, robot: str, kafka: tuple[str, str]) -> dict[str, Any]:
-    read = bed.run(
-        "kafka", "read", topic, "--key", robot, "--count", "1", "--timeout", "90",
-        "--bootstrap", kafka[0], "--registry", kafka[1],
-    )  # fmt: skip
-    assert read.returncode == 0, f"{read.stderr}\n{bed.tails()}"
-    record: dict[str, Any] = json.loads(read.stdout.splitlines()[0])
+    """The first record of ``robot`` in ``topic``, read with ``fleetlink kafka echo`` (the topic
+    is shared with other tests, so it is read to its end until one of ``robot``'s is there)."""
+    found: list[dict[str, Any]] = []
+
+    def arrived() -> bool:
+        echo = bed.run("kafka", "echo", topic, "--from-beginning", "-b", kafka[0], "--registry", kafka[1])
+        records = [json.loads(line) for line in echo.stdout.splitlines()] if echo.returncode == 0 else []
+        found.extend(r for r in records if r["key"] == robot)
+        return bool(found)
+
+    bed.wait(arrived, 90, f"a record of {robot} in {topic}")
+    record = found[0]
     assert record["topic"] == topic
-    assert record["key"] == robot
+    assert "error" not in record, record  # decoded with its schema from the registry
+    assert record["value"] is not None
     return record
 
 

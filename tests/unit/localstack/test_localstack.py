@@ -12,6 +12,7 @@ import pytest
 from fleetlink.localstack import java
 from fleetlink.localstack.errors import StackError
 from fleetlink.localstack.kafka import KafkaSettings, server_properties
+from fleetlink.localstack.registry import RegistrySettings, registry_url_lines
 from tests.paths import ROOT
 
 
@@ -105,3 +106,17 @@ def test_sigterm_runs_the_cleanup_of_a_script_that_asked_for_it(tmp_path: Path) 
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 128 + signal.SIGTERM
     assert marker.read_text() == "stopped what it started"
+
+
+def test_both_registry_urls_are_labelled_with_what_they_are_for(tmp_path: Path) -> None:
+    settings = RegistrySettings(port=8081, data_dir=tmp_path)
+    assert settings.url == "http://127.0.0.1:8081/apis/ccompat/v7"
+    assert settings.native_url == "http://127.0.0.1:8081/apis/registry/v3"
+    ccompat, native = registry_url_lines(settings.url)
+    assert ccompat.startswith(f"{settings.url}   Confluent-compatible API: ")
+    assert "fleetlink kafka" in ccompat
+    assert native.startswith(f"{settings.native_url}   Apicurio native API: ")
+    assert "Java" in native
+    # another registry has one API only
+    [only] = registry_url_lines("http://confluent:8081")
+    assert only.startswith("http://confluent:8081   Confluent-compatible API: ")

@@ -155,11 +155,11 @@ def test_template_refuses_a_source_seq_beyond_u64(source_seq: int) -> None:
         PayloadTemplate("t", b"k").payload(b"v", 0, source_seq)
 
 
-def test_version_3_is_the_only_one_written_and_read() -> None:
+def test_version_4_is_the_only_one_written_and_read() -> None:
     record = rec(1)
-    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 3
+    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 4
     assert decode_batch(_raw(_body([(1, encode_payload(record))]))).records == (record,)
-    for version in (1, 2):
+    for version in (1, 2, 3):
         with pytest.raises(WireError, match=f"unsupported batch version {version}"):
             decode_batch(_raw(_body([(1, encode_payload(record))]), version=version))
     seq_payload = PayloadTemplate("t", b"k").payload(b"v", 0, 5)
@@ -198,7 +198,7 @@ def test_single_object_helpers() -> None:
 
 
 def _raw(
-    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 3
+    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 4
 ) -> bytes:
     header = struct.pack("<3sBBI", magic, version, codec, len(body) if size is None else size)
     return header + (zlib.compress(body) if codec == 1 else body)
@@ -208,8 +208,9 @@ def _body(records: list[tuple[int, bytes]], first_seq: int | None = None, traili
     first = records[0][0] if first_seq is None else first_seq
     out = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QH", first, 0)
     out += struct.pack("<I", len(records))
-    for seq, payload in records:
-        out += struct.pack("<QI", seq, len(payload)) + payload
+    for seq, payload in records:  # each record a group of its own
+        group = struct.pack("<IHI", 1, 0, len(payload)) + payload
+        out += struct.pack("<QI", seq, len(group)) + group
     return out + trailing
 
 
@@ -219,14 +220,14 @@ BAD_BATCHES: list[tuple[bytes, str]] = [
     (b"", "at least 9 bytes"),
     (b"FLB\x01\x00", "at least 9 bytes"),
     (_raw(_body([(1, GOOD)]), magic=b"XYZ"), "not a fleetlink batch"),
-    (_raw(_body([(1, GOOD)]), version=4), "unsupported batch version 4"),
+    (_raw(_body([(1, GOOD)]), version=3), "unsupported batch version 3"),
     (_raw(_body([(1, GOOD)]), version=0), "unsupported batch version 0"),
     (_raw(_body([(1, GOOD)]), codec=7), "unknown codec 7"),
     (_raw(_body([(1, GOOD)]), size=10), "header says 10"),
     (_raw(_body([(1, GOOD)]), size=2**31), "exceeds the"),
     (_raw(b"garbage", codec=1, size=7)[:-3] + b"zzz", "corrupt zlib data"),
     (_raw(_body([(1, GOOD)], trailing=b"x")), "1 unexpected trailing bytes after the batch"),
-    (_raw(_body([(2, GOOD), (2, GOOD)])), "seqs must increase: 2 after 2"),
+    (_raw(_body([(2, GOOD), (2, GOOD)])), "seqs must increase: a group starts at 2, below 3"),
     (_raw(_body([(1, GOOD)], first_seq=0)), "first_seq 0 is not the first record's seq 1"),
     (_raw(b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QHI", 1, 0, 0)), "at least one record"),
     (_raw(_body([(1, GOOD[:-1])])), "truncated"),

@@ -107,7 +107,7 @@ def drained(buffer: MemoryBuffer) -> Callable[[], bool]:
 
 
 def test_everything_is_delivered_in_batches_with_their_schemas() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(25)] + [payload(99, SCHEMA_B.fingerprint)])
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
     with running(uplink, buffer) as sender:
@@ -152,7 +152,7 @@ def test_failed_batches_are_resent_until_acknowledged(
             return encode_ack(Ack("e1", batch.stream, batch.first_seq, batch.last_seq + 1, "ok")), None
         return (reply if isinstance(reply, bytes) else None), error
 
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(5)])
     uplink = ScriptedUplink(policy)
     caplog.set_level(logging.WARNING, logger="fleetlink.edge.runtime.sender")
@@ -174,7 +174,7 @@ def test_dead_lettered_records_are_counted_and_acked() -> None:
         failures = (RecordFailure(batch.first_seq, "MSG_SIZE_TOO_LARGE", dead_lettered=True),)
         return ok(batch, failures)
 
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(3)])
     uplink = ScriptedUplink(policy)
     with running(uplink, buffer) as sender:
@@ -185,7 +185,7 @@ def test_dead_lettered_records_are_counted_and_acked() -> None:
 
 
 def test_window_of_batches_in_flight() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(100)])
     uplink = ScriptedUplink(lambda batch, attempt: None)  # hold every batch
     with running(uplink, buffer) as sender:
@@ -200,7 +200,7 @@ def test_window_of_batches_in_flight() -> None:
 
 
 def test_after_a_failure_one_batch_probes_before_the_window_opens() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(60)])
     uplink = ScriptedUplink(lambda batch, attempt: None)
     with running(uplink, buffer):
@@ -219,7 +219,7 @@ def test_after_a_failure_one_batch_probes_before_the_window_opens() -> None:
 
 
 def test_linger_fills_a_batch_after_the_previous_one_and_a_quiet_stream_sends_at_once() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
     options = SenderOptions(batch_max_records=10, linger_s=30.0, backoff_min_s=0.001, backoff_max_s=0.01)
     sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=options).start()
@@ -234,7 +234,7 @@ def test_linger_fills_a_batch_after_the_previous_one_and_a_quiet_stream_sends_at
 
 
 def test_pump_sends_full_batches_from_the_calling_thread_and_leaves_the_rest() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(25)])
     threads: list[str] = []
 
@@ -258,7 +258,7 @@ def test_pump_sends_full_batches_from_the_calling_thread_and_leaves_the_rest() -
 
 
 def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     buffer.append_many([payload(i) for i in range(30)])
     uplink = ScriptedUplink(lambda batch, attempt: None)  # the uplink never answers
     sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=FAST).start()
@@ -273,7 +273,7 @@ def test_stop_is_bounded_and_leaves_unacked_records_in_the_buffer() -> None:
 
 
 def test_stop_drains_what_can_be_sent() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
     sender = WanSender(
         buffer,
@@ -313,7 +313,7 @@ def send_and_drain(sender: WanSender, buffer: MemoryBuffer, payloads: list[bytes
 
 
 def test_a_schema_travels_until_a_batch_carrying_it_is_acknowledged_then_its_fingerprint_alone() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
     with running(uplink, buffer) as sender:
         send_and_drain(sender, buffer, [payload(i) for i in range(3)])
@@ -328,7 +328,7 @@ def test_a_schema_travels_until_a_batch_carrying_it_is_acknowledged_then_its_fin
 
 
 def test_an_uplink_without_a_left_out_schema_gets_the_batch_again_at_once_with_it() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     learned: set[bytes] = set()  # the texts the uplink has read
 
     def policy(batch: Batch, attempt: int) -> Answer:
@@ -363,7 +363,7 @@ def test_an_uplink_without_a_left_out_schema_gets_the_batch_again_at_once_with_i
 
 
 def test_a_request_for_a_schema_the_batch_carried_is_a_failure_retried_with_backoff() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
 
     def policy(batch: Batch, attempt: int) -> Answer:
         if attempt == 0:
@@ -388,7 +388,7 @@ def test_a_request_for_a_schema_the_batch_carried_is_a_failure_retried_with_back
 
 
 def test_records_may_bring_their_own_linger_and_the_shortest_waiting_one_counts() -> None:
-    buffer = MemoryBuffer(first_seq=1)
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
     uplink = ScriptedUplink(lambda batch, attempt: ok(batch))
     options = SenderOptions(batch_max_records=10, linger_s=0.0, backoff_min_s=0.001, backoff_max_s=0.01)
     sender = WanSender(buffer, uplink, SchemaBook(), site="s1", edge_id="e1", options=options).start()

@@ -15,7 +15,7 @@ from fleetlink.edge.spool.ledger import RESERVE, encode_entry
 from fleetlink.edge.spool.spool import RESERVE_BLOCK
 from tests.helpers import wait_until
 
-SMALL = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20)
+SMALL = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)  # a frame per record
 
 
 def crash(spool: Spool) -> None:
@@ -62,7 +62,7 @@ def test_append_returns_increasing_seqs_and_records_come_back_in_order(spool: Sp
     assert batch is not None
     assert (batch.stream, batch.first_seq, batch.last_seq) == ("durable", 1, 100)
     assert [r.payload for r in batch.records] == [payload(i) for i in range(100)]
-    assert batch.nbytes == sum(len(payload(i)) for i in range(100))
+    assert batch.nbytes == sum(len(payload(i)) + 10 for i in range(100))  # + a group header and length each
 
 
 def test_batches_respect_max_records_and_max_bytes_and_segment_ends(spool: Spool) -> None:

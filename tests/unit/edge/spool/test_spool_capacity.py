@@ -15,7 +15,9 @@ RECORD = b"r" * 100  # a 128-byte frame; 4 KiB segments hold 31 of them
 
 
 def options(policy: FullPolicy, timeout: float = 0.2) -> SpoolOptions:
-    return SpoolOptions(segment_bytes=4096, max_bytes=16384, policy=policy, block_timeout_s=timeout)
+    return SpoolOptions(
+        segment_bytes=4096, max_bytes=16384, policy=policy, block_timeout_s=timeout, group_records=1
+    )
 
 
 def read_all(spool: Spool, *, ack: bool = True) -> list[int]:

@@ -13,7 +13,7 @@ def balanced(stats: SpoolStats) -> bool:
 
 
 def test_same_loop_as_the_spool() -> None:
-    buffer: RecordBuffer = MemoryBuffer(first_seq=1, clock=lambda: 77)
+    buffer: RecordBuffer = MemoryBuffer(first_seq=1, group_records=1, clock=lambda: 77)
     assert buffer.append_many([b"a", b"b", b"c"]) == [1, 2, 3]
     batch = buffer.read_unacked(2, 1 << 20)
     assert batch is not None
@@ -35,22 +35,22 @@ def test_same_loop_as_the_spool() -> None:
 
 
 def test_drop_oldest_by_records_and_bytes() -> None:
-    buffer = MemoryBuffer(first_seq=1, max_records=10, max_bytes=1 << 20)
+    buffer = MemoryBuffer(first_seq=1, group_records=1, max_records=10, max_bytes=1 << 20)
     buffer.append_many([b"x"] * 25)
     stats = buffer.stats()
     assert (stats.dropped_oldest, stats.depth) == (15, 10)
     batch = buffer.read_unacked(100, 1 << 20)
     assert batch is not None
     assert [r.seq for r in batch.records] == list(range(16, 26))
-    small = MemoryBuffer(first_seq=1, max_bytes=100)
-    small.append_many([b"y" * 30] * 5)
-    assert small.stats().bytes == 90
-    assert small.stats().dropped_oldest == 2
+    small = MemoryBuffer(first_seq=1, group_records=1, max_bytes=100)
+    small.append_many([b"y" * 30] * 5)  # 40 bytes each as a group of one
+    assert small.stats().bytes == 80
+    assert small.stats().dropped_oldest == 3
     assert balanced(small.stats())
 
 
 def test_released_batches_go_first_and_in_flight_ones_never() -> None:
-    buffer = MemoryBuffer(first_seq=1, max_records=6)
+    buffer = MemoryBuffer(first_seq=1, group_records=1, max_records=6)
     buffer.append_many([b"x"] * 6)
     flying = buffer.read_unacked(3, 1 << 20)
     queued = buffer.read_unacked(2, 1 << 20)
@@ -63,7 +63,7 @@ def test_released_batches_go_first_and_in_flight_ones_never() -> None:
     assert buffer.stats().dropped_oldest == 3
     assert buffer.append_many([b"m"] * 3) == [10, 11, 12]  # evicts 7, 8, 9
     assert buffer.stats().depth == 6
-    buffer2 = MemoryBuffer(first_seq=1, max_records=2)
+    buffer2 = MemoryBuffer(first_seq=1, group_records=1, max_records=2)
     buffer2.append_many([b"a", b"b"])
     assert buffer2.read_unacked(5, 1 << 20) is not None
     assert buffer2.append(b"c") is None  # everything held is in flight: the newest is dropped

@@ -14,7 +14,7 @@ from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, 
 
 from fleetlink.edge.spool import Spool, SpoolOptions
 
-OPTIONS = SpoolOptions(segment_bytes=4096, max_bytes=64 << 20, fsync="batch", fsync_batch=7)
+OPTIONS = SpoolOptions(segment_bytes=4096, max_bytes=64 << 20, fsync="batch", fsync_batch=7, group_records=1)
 
 
 def crash(spool: Spool) -> None:

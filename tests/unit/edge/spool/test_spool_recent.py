@@ -1,4 +1,4 @@
-"""Frames appended lately, read from memory: the same records as from the file, or none."""
+"""Frames appended lately, read from memory: the same groups as from the file, or none."""
 
 from __future__ import annotations
 
@@ -6,26 +6,33 @@ from pathlib import Path
 
 import pytest
 
-from fleetlink.edge.spool import Spool, SpoolOptions, SpoolRecord
-from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, encode_frame
+from fleetlink.edge.spool import Spool, SpoolGroup, SpoolOptions
+from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE, encode_group_frame
 from fleetlink.edge.spool.recent import Item, RecentFrames
 from fleetlink.edge.spool.segments import Segment
+from fleetlink.wire.groups import encode_group
 
 
-def items(first_seq: int, n: int, size: int = 10) -> list[Item]:
+def group(seq: int, size: int = 10) -> bytes:
+    return encode_group([bytes([seq % 256]) * size])
+
+
+def items(first_seq: int, n: int) -> list[Item]:
+    """Frames of one record each."""
     return [
-        (seq, 1000 + seq, encode_frame(seq, 1000 + seq, bytes([seq % 256]) * size))
+        (seq, 1, 1000 + seq, encode_group_frame(seq, 1000 + seq, group(seq)))
         for seq in range(first_seq, first_seq + n)
     ]
 
 
 def nbytes(chunk: list[Item]) -> int:
-    return sum(len(frame) for _, _, frame in chunk)
+    return sum(len(item[3]) for item in chunk)
 
 
 SEG_A = Segment(path=Path("a.seg"), first_seq=1, size=SEGMENT_HEADER_SIZE)
 SEG_B = Segment(path=Path("b.seg"), first_seq=100, size=SEGMENT_HEADER_SIZE)
-FRAME = HEADER_SIZE + 10
+GROUP = len(group(1))
+FRAME = HEADER_SIZE + GROUP
 
 
 def filled(max_bytes: int = 1 << 20) -> RecentFrames:
@@ -45,7 +52,7 @@ def filled(max_bytes: int = 1 << 20) -> RecentFrames:
     [
         (SEG_A, 16, 1, 100, 1 << 20, [1, 2, 3, 4, 5, 6, 7, 8], 16 + 8 * FRAME),  # across writes, not segments
         (SEG_A, 16, 1, 3, 1 << 20, [1, 2, 3], 16 + 3 * FRAME),
-        (SEG_A, 16, 1, 100, 25, [1, 2], 16 + 2 * FRAME),
+        (SEG_A, 16, 1, 100, 2 * GROUP + 5, [1, 2], 16 + 2 * FRAME),
         (SEG_A, 16, 1, 100, 1, [1], 16 + FRAME),  # at least one
         (SEG_A, 16 + 3 * FRAME, 4, 100, 1 << 20, [4, 5, 6, 7, 8], 16 + 8 * FRAME),
         (SEG_A, 16 + 6 * FRAME, 7, 1, 1 << 20, [7], 16 + 7 * FRAME),
@@ -57,9 +64,9 @@ def test_reads_at_the_cursor(
 ) -> None:
     found = filled().read(segment, offset, next_seq, max_records=max_records, max_bytes=max_bytes)
     assert found is not None
-    records, got_end = found
-    assert [r.seq for r in records] == seqs
-    assert records[0] == SpoolRecord(seqs[0], 1000 + seqs[0], bytes([seqs[0]]) * 10)
+    groups, got_end = found
+    assert [g.first_seq for g in groups] == seqs
+    assert groups[0] == SpoolGroup(seqs[0], 1, 1000 + seqs[0], group(seqs[0]))
     assert got_end == end
 
 
@@ -92,7 +99,7 @@ def test_oldest_writes_go_beyond_max_bytes_and_forget_drops_a_segment() -> None:
     assert recent.read(SEG_A, 16, 1, max_records=10, max_bytes=1 << 20) is None
     kept = recent.read(SEG_A, 16 + 5 * FRAME, 6, max_records=10, max_bytes=1 << 20)
     assert kept is not None
-    assert [r.seq for r in kept[0]] == [6, 7, 8]
+    assert [g.first_seq for g in kept[0]] == [6, 7, 8]
     recent.forget(SEG_B)
     assert recent.read(SEG_B, 16, 9, max_records=10, max_bytes=1 << 20) is None
     assert len(recent) == 0
@@ -100,7 +107,7 @@ def test_oldest_writes_go_beyond_max_bytes_and_forget_drops_a_segment() -> None:
 
 def test_spool_reads_lately_appended_records_from_memory_and_the_same_from_disk(tmp_path: Path) -> None:
     payloads = [f"record-{i}".encode() * 5 for i in range(50)]
-    with Spool(tmp_path, SpoolOptions(segment_bytes=4096, max_bytes=1 << 20)) as spool:
+    with Spool(tmp_path, SpoolOptions(segment_bytes=4096, max_bytes=1 << 20, group_records=7)) as spool:
         spool.append_many(payloads)
         memory = []
         while (batch := spool.read_unacked(7, 1 << 20)) is not None:

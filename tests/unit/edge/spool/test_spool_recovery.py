@@ -10,10 +10,13 @@ import pytest
 from fleetlink.edge.spool import Spool, SpoolOptions
 from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
 from fleetlink.edge.spool.ledger import ENTRY_SIZE
+from fleetlink.wire.groups import HEAD_SIZE
 
-OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20)
+GROUP_OVERHEAD = HEAD_SIZE + 4  # the group header and the record's length
+
+OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)  # a frame per record
 RECORD = b"p" * 100
-FRAME = HEADER_SIZE + len(RECORD)
+FRAME = HEADER_SIZE + GROUP_OVERHEAD + len(RECORD)  # a group of one record per frame
 
 
 def fill(directory: Path, count: int, *, ack_first: int = 0) -> list[Path]:
