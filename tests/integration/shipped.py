@@ -8,12 +8,15 @@ the test's folder; a process that does not come up fails the test with the tail 
 from __future__ import annotations
 
 import contextlib
+import json
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 from fleetlink.localstack.process import ServerProcess, log_tail
 from tests.helpers import free_port
@@ -86,6 +89,13 @@ class Bed:
             fleetlink(*args), cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False
         )
 
+    def follow(self, topic: str, bootstrap: str, registry: str) -> Records:
+        """``fleetlink kafka echo TOPIC`` in the background: the records that arrive from now on."""
+        argv = fleetlink("kafka", "echo", topic, "-b", bootstrap, "--registry", registry)
+        records = Records(subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, text=True))
+        self._stack.callback(records.stop)
+        return records
+
     def tails(self) -> str:
         return "\n".join(f"--- {name}\n{log_tail(path, 15)}" for name, path in self.logs.items())
 
@@ -103,3 +113,33 @@ class Bed:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self._stack.close()
+
+
+class Records:
+    """The JSON lines a ``fleetlink kafka echo`` process prints, collected by a thread."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self._lock = threading.Lock()
+        self._records: list[dict[str, Any]] = []
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._lock:
+                self._records.append(json.loads(line))
+
+    def of(self, key: str) -> list[dict[str, Any]]:
+        with self._lock:
+            return [r for r in self._records if r["key"] == key]
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(5)
+        self._thread.join(5)

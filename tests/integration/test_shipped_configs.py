@@ -12,7 +12,6 @@ the containers' healthcheck), simulated robots' records are read back from Kafka
 
 from __future__ import annotations
 
-import json
 import time
 import uuid
 from pathlib import Path
@@ -22,7 +21,7 @@ import pytest
 import yaml
 
 from fleetlink.schemas.typestore import load_typestore
-from tests.integration.shipped import Bed, address, answers, endpoint, in_log
+from tests.integration.shipped import Bed, Records, address, answers, endpoint, in_log
 from tests.integration.test_commands_harness import RED, CommandProducer
 from tests.integration.zenoh_topology import (
     Collector,
@@ -64,20 +63,10 @@ def _settle(check: Any, seconds: float) -> bool:
     return False
 
 
-def _records_arrive(bed: Bed, topic: str, robot: str, kafka: tuple[str, str]) -> dict[str, Any]:
-    """The first record of ``robot`` in ``topic``, read with ``fleetlink kafka echo`` (the topic
-    is shared with other tests, so it is read to its end until one of ``robot``'s is there)."""
-    found: list[dict[str, Any]] = []
-
-    def arrived() -> bool:
-        echo = bed.run("kafka", "echo", topic, "--from-beginning", "-b", kafka[0], "--registry", kafka[1])
-        records = [json.loads(line) for line in echo.stdout.splitlines()] if echo.returncode == 0 else []
-        found.extend(r for r in records if r["key"] == robot)
-        return bool(found)
-
-    bed.wait(arrived, 90, f"a record of {robot} in {topic}")
-    record = found[0]
-    assert record["topic"] == topic
+def _records_arrive(bed: Bed, records: Records, robot: str) -> dict[str, Any]:
+    """The first record of ``robot`` that ``fleetlink kafka echo`` prints, decoded."""
+    bed.wait(lambda: bool(records.of(robot)), 90, f"a record of {robot} read by fleetlink kafka echo")
+    record = records.of(robot)[0]
     assert "error" not in record, record  # decoded with its schema from the registry
     assert record["value"] is not None
     return record
@@ -119,6 +108,8 @@ def test_the_example_configs_run_as_shipped(tmp_path: Path, kafka: tuple[str, st
     admin, metrics, console = address(), address(), address()
     prefix = f"tb4_{uuid.uuid4().hex[:6]}_"
     with Bed(tmp_path) as bed:
+        ir = bed.follow("fleet.ir_intensity", *kafka)  # from now on, before any robot
+        imu = bed.follow("fleet.imu", *kafka)
         bed.start(
             "cloud-router",
             ["zenoh", "router", "-c", "deploy/zenoh/local/cloud-router.json5", "-l", cloud],
@@ -163,9 +154,9 @@ def test_the_example_configs_run_as_shipped(tmp_path: Path, kafka: tuple[str, st
             in_log(tmp_path / "robots.log", "simulating"),
         )
         robot = f"{prefix}01"
-        record = _records_arrive(bed, "fleet.ir_intensity", robot, kafka)
+        record = _records_arrive(bed, ir, robot)
         assert len(record["value"]["readings"]) == 7  # the Create 3's seven IR sensors, Avro decoded
-        _records_arrive(bed, "fleet.kidnap", robot, kafka)
+        assert "linear_acceleration" in _records_arrive(bed, imu, robot)["value"]
         assert answers(f"http://{console}/console/login")()  # the fleet console is served
         assert answers(f"http://{admin}/console/login")()  # and the site's
         assert answers(f"http://{admin}/metrics")()
@@ -192,6 +183,8 @@ def test_the_compose_configs_run_with_their_commands(tmp_path: Path, kafka: tupl
     config = router["command"][router["command"].index("-c") + 1]
     mount = next(v.split(":")[0] for v in router["volumes"] if v.split(":")[1] == config)
     with Bed(tmp_path) as bed:
+        kidnap = bed.follow("fleet.kidnap_status", *kafka)  # from now on, before any robot
+        hazards = bed.follow("fleet.hazard_detection", *kafka)
         bed.start(
             "cloud-router",
             ["zenoh", "router", "-c", str((DEPLOY / mount).relative_to(DEPLOY.parent)), "-l", cloud],
@@ -217,9 +210,9 @@ def test_the_compose_configs_run_with_their_commands(tmp_path: Path, kafka: tupl
             "robots", [*robots, "--prefix", prefix], in_log(tmp_path / "robots.log", "simulating")
         )
         robot = f"{prefix}05"  # the compose file asks for five robots
-        record = _records_arrive(bed, "fleet.kidnap_status", robot, kafka)
+        record = _records_arrive(bed, kidnap, robot)
         assert record["value"]["is_kidnapped"] is False
-        _records_arrive(bed, "fleet.hazard_detection", robot, kafka)
+        _records_arrive(bed, hazards, robot)
         _ring_turns_red(bed, sim, robot, kafka)
 
 
