@@ -12,6 +12,7 @@ from __future__ import annotations
 import configparser
 import re
 import shlex
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -201,6 +202,20 @@ def test_containerfile_installs_every_package() -> None:
     packages = [p.strip(' "*') for p in include.group(1).split(",")]
     for package in packages:
         assert f"COPY {package} ./{package}" in text, f"Containerfile misses {package}"
+
+
+def test_containerfile_can_build_the_native_extensions() -> None:
+    text = _containerfile()
+    build = text.split("\nFROM ", 2)[1]  # the build stage, up to the runtime image
+    extensions = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools-rust"][
+        "ext-modules"
+    ]
+    assert extensions, "no native extension declared"
+    for extension in extensions:
+        folder = Path(extension["path"]).parts[0]
+        assert f"COPY {folder} ./{folder}" in build, f"the build stage misses {folder}/"
+    assert "rustup" in build, "the build stage has no Rust toolchain for setuptools-rust"
+    assert "build-essential" in build, "the build stage has no C toolchain (linker)"
 
 
 @pytest.mark.parametrize("unit", sorted((DEPLOY / "systemd").glob("*.service")), ids=lambda p: p.name)
