@@ -278,9 +278,14 @@ def test_best_effort_publisher_token_and_sensor_qos(node: RosNode, raw: zenoh.Se
         keys = [str(r.ok.key_expr) for r in replies if r.ok is not None]
         return [k for k in keys if "/MP/" in k]
 
-    wait_until(lambda: len(publisher_tokens()) == 1, timeout=5, message="MP token answers a liveliness get")
-    eps = [parse_token(k) for k in publisher_tokens()]
-    ep = eps[0]
+    seen: list[str] = []
+
+    def one_token() -> bool:
+        seen[:] = publisher_tokens()  # judge the answer that was waited for, not a second query
+        return len(seen) == 1
+
+    wait_until(one_token, timeout=5, message="MP token answers a liveliness get")
+    ep = parse_token(seen[0])
     assert isinstance(ep, EndpointInfo)
     assert ep.qos == SENSOR_DATA
     assert ep.type_hash == "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
