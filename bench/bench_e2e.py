@@ -197,7 +197,8 @@ def run_robots(site_port: int, robots: int, count: int, rate: float) -> tuple[su
     pub = subprocess.Popen(
         [
             sys.executable,
-            str(ROOT / "bench" / "e2e_publisher.py"),
+            "-m",
+            "bench.e2e_publisher",
             "--connect",
             f"tcp/127.0.0.1:{site_port}",
             "--robots",
@@ -210,6 +211,7 @@ def run_robots(site_port: int, robots: int, count: int, rate: float) -> tuple[su
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
+        cwd=ROOT,
     )
     if pub.stdout is None or pub.stdin is None:
         raise SystemExit("publisher has no pipes")

@@ -110,7 +110,8 @@ class Result:
     gaps: int = 0
     missing: int = 0
     behind: int = 0
-    lag_ms: float = 0.0
+    batches: int = 0
+    batch_records: int = 0
 
     def line(self) -> str:
         s = self.shape
@@ -142,7 +143,15 @@ class Result:
                 f"edge threads {max(x.edge_threads for x in self.samples)}, RSS {rss[0]:.0f} -> "
                 f"{statistics.mean(rss[third : 2 * third] or rss):.0f} -> {rss[-1]:.0f} MB"
             )
+        others = ", ".join(
+            f"{k} {100 * v / max(self.window_s, 1e-9):.0f} %"
+            for k, v in self.cpu_s.items()
+            if k not in ("edge", "uplink")
+        )
+        parts.append(f"CPU of the others: {others}")
         parts.append(f"intake drops {self.dropped}, sequence gaps {self.gaps} ({self.missing} missing)")
+        if self.batches:
+            parts.append(f"WAN batches of {self.batch_records / self.batches:.0f} records on average")
         if self.behind:
             parts.append(f"publishers behind schedule {self.behind}")
         return "; ".join(parts)
@@ -223,6 +232,7 @@ def run_shape(
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
+            cwd=ROOT,
         )
         stack.callback(router.wait, 30)
         stack.callback(router.stdin.close)  # type: ignore[union-attr]
@@ -260,7 +270,8 @@ def run_shape(
             pub = subprocess.Popen(
                 [
                     sys.executable,
-                    str(ROOT / "bench" / "fleet_publisher.py"),
+                    "-m",
+                    "bench.fleet_publisher",
                     "--connect",
                     f"tcp/127.0.0.1:{site_port}",
                     "--first",
@@ -277,6 +288,7 @@ def run_shape(
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 text=True,
+                cwd=ROOT,
             )
             pubs.append(pub)
             stack.callback(pub.kill)
@@ -348,6 +360,13 @@ def run_shape(
     result.cpu_s = {k: cpu1[k] - cpu0[k] for k in cpu1}
     result.samples = samples
     result.dropped = int(stats.get("intake", {}).get("dropped", 0))
+    sender = stats.get("streams", {}).get("durable", {}).get("sender", {})
+    if os.environ.get("BENCH_DEBUG"):
+        print(
+            "edge sender:", json.dumps(sender), "processor:", json.dumps(stats.get("processor")), flush=True
+        )
+    result.batches = int(sender.get("batches_sent", 0))
+    result.batch_records = int(sender.get("records_sent", 0))
     subs = stats.get("subscriptions", {})
     result.gaps = sum(int(s.get("gaps", 0)) for s in subs.values())
     result.missing = sum(int(s.get("missing", 0)) for s in subs.values())

@@ -88,19 +88,15 @@ class EdgeAgent:
         config: EdgeConfig,
         zenoh_options: ZenohOptions | None = None,
         *,
-        intake_items: int = 100_000,
-        intake_bytes: int = 64 << 20,
         stop_timeout_s: float = 5.0,
     ) -> None:
         self.config = config
         self.zenoh_options = config.zenoh.merged_with(zenoh_options or ZenohOptions())
         self.table: MappingTable = config.mapping_table()
         self.stop_timeout_s = stop_timeout_s
-        self.intake_items = intake_items
-        self.intake_bytes = intake_bytes
         self.intake: Intake[Item] = Intake()
         """Control items for the processing thread (registration events); samples go through the
-        data plane's intake (``intake_items`` samples, ``intake_bytes`` bytes)."""
+        data plane's intake (the config's ``intake`` section)."""
         self._lock = threading.Lock()
         self._started = False
         self._session: zenoh.Session | None = None
@@ -186,8 +182,8 @@ class EdgeAgent:
         self._session = session = open_session(session_config)
         self._source = source = NativeSource(
             plane_config,
-            max_items=self.intake_items,
-            max_bytes=self.intake_bytes,
+            max_items=config.intake.max_samples,
+            max_bytes=int(config.intake.max_bytes),
             max_value_bytes=self._maker.max_value_bytes,
             group_records=group_records,
             group_bytes=group_bytes,
@@ -372,6 +368,8 @@ class EdgeAgent:
         }
         if self._processor is not None:
             out.update(self._processor.counters())
+            out["intake"]["lag_ms"] = self._processor.lag_ns // 1_000_000
+        out["memory"] = {"rss_bytes": resident_bytes(), "bound_bytes": self.config.memory_bound()}
         if self._subscriptions is not None:
             out["subscriptions"] = self._subscriptions.snapshot()
         if self._registrar is not None:
@@ -423,6 +421,17 @@ def gc_restore(threshold: tuple[int, int, int]) -> None:
     """Undo ``gc_for_throughput`` (an embedding process, or a test, may start agents again)."""
     gc.set_threshold(*threshold)
     gc.unfreeze()
+
+
+def resident_bytes() -> int:
+    """This process's resident memory (0 where /proc is not there)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
 
 
 def _stats_dict(buffer: RecordBuffer) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from confluent_kafka import KafkaError, Message
 
 from fleetlink.schemas.single_object import confluent_frame
 from fleetlink.uplink.dead_letter import dead_letter
+from fleetlink.uplink.diversion import Diversion
 from fleetlink.uplink.errors import ProduceError
 from fleetlink.uplink.producer import Delivery, RawCallback
 from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
@@ -93,8 +94,11 @@ class BatchJob:
         stats: IngestStats,
         dead_letter_max_bytes: int = 900_000,
         on_delivery: Callable[[str, bool, float], None] | None = None,
+        diversion: Diversion | None = None,
     ) -> None:
         self._batch = batch
+        self._diversion = diversion
+        """Records of topics the policy does not let out as they are (``uplink.diversion``)."""
         self._sink = sink
         self._ids = schema_ids
         self._dlq = dead_letter_topic
@@ -121,8 +125,12 @@ class BatchJob:
         report = self._report
         heads: dict[tuple[str, bytes], bytes] = {}
         unavailable: dict[tuple[str, bytes], str] = {}  # the registry failed once: not again per record
+        diverted = self._diversion.routes if self._diversion is not None else None
         for index, record in enumerate(records):
             topic, value = record.kafka_topic, record.value
+            if diverted and topic in diverted:
+                self._divert(record)
+                continue
             if not record.raw_value:
                 head = heads.get((topic, value[2:10])) if value[:2] == SINGLE_OBJECT_MAGIC else None
                 if head is None:
@@ -158,9 +166,14 @@ class BatchJob:
 
     # -- per record ------------------------------------------------------------------------
 
+    def _divert(self, record: Record) -> None:
+        if self._diversion is not None:
+            self._diversion.handle(record, self._settle)
+
     def _kafka_value(self, record: Record) -> bytes:
         fingerprint, body = split_single_object(record.value)
-        schema_id = self._ids.id_for(record.kafka_topic, fingerprint, self._batch.schemas)
+        batch = self._batch
+        schema_id = self._ids.id_for(batch.site, record.kafka_topic, fingerprint, batch.schemas)
         return confluent_frame(schema_id, bytes(body))
 
     def _report(self, index: int, error: KafkaError | None, _msg: Message) -> None:

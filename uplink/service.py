@@ -25,12 +25,22 @@ from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.schemas.registry import SchemaRegistry
+from fleetlink.uplink.admission import Admission, Refused
+from fleetlink.uplink.commands.decode import CommandDecoder
+from fleetlink.uplink.commands.directory import RobotDirectory
+from fleetlink.uplink.commands.registrations import RegistrationsReader
 from fleetlink.uplink.commands.router import CommandRouter
 from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.diversion import Diversion
+from fleetlink.uplink.identity import source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats
+from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
 from fleetlink.uplink.ordered import KeyedSerialExecutor
+from fleetlink.uplink.policy import InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
+from fleetlink.uplink.refusals import Refusals
+from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.topics import ensure_topics
 from fleetlink.wire import Ack, WireError, decode_batch, encode_ack
@@ -77,6 +87,11 @@ class Uplink:
         self._pool: ThreadPoolExecutor | None = None
         self._serial: KeyedSerialExecutor | None = None
         self._commands: CommandRouter | None = None
+        self._admission: Admission | None = None
+        self._registrations: RegistrationWriter | None = None
+        self._reader: RegistrationsReader | None = None
+        self.directory = RobotDirectory(release_after_ms=round(config.ownership.release_after * 1000))
+        """Which site holds each robot: read from the registrations topic, claimed at ingest."""
         self.delivery_latency = DeliveryLatency()
         """Per site: from a batch's arrival to Kafka's last delivery report (shown by the console)."""
         self.extension_factories = tuple(extensions)
@@ -86,15 +101,25 @@ class Uplink:
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
         self._dlq_max = max(1_000, config.kafka.message_max_bytes - 64 * 1024)
+        self.refusals = Refusals(
+            self.metrics, refused_topic=config.topics.refused, max_value_bytes=self._dlq_max
+        )
+        """What was refused from each source (batches whole, records to the refused topic)."""
 
     # -- lifecycle -------------------------------------------------------------------------
 
     def start(self) -> Uplink:
         cfg = self.config
+        check_kafka_access(cfg.kafka)
         ensure_topics(cfg.kafka, cfg.topics)
         self._registry = SchemaRegistry(cfg.registry.url)
         self._registry.start()
         self._ids = SchemaIds(self._registry, compatibility=cfg.registry.compatibility)
+        self._admission = Admission(_policy(cfg), self._ids)
+        self._reader = RegistrationsReader(
+            cfg.kafka, cfg.topics.registrations, CommandDecoder(self._registry), self.directory
+        ).start()
+        self._registrations = RegistrationWriter(self._registry, cfg.topics.registrations, self.directory)
         self._sink = KafkaSink(cfg.kafka).start()
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uplink-batch")
         self._serial = KeyedSerialExecutor(self._pool)
@@ -105,7 +130,7 @@ class Uplink:
             log.info("serving edge batches on %s", key)
         if cfg.commands:
             self._commands = CommandRouter(
-                cfg, session=self._session, sink=self._sink, registry=self._registry
+                cfg, session=self._session, sink=self._sink, registry=self._registry, directory=self.directory
             ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
@@ -138,6 +163,9 @@ class Uplink:
         if self._commands is not None:
             self._commands.stop()
             self._commands = None
+        if self._reader is not None:
+            self._reader.stop()
+            self._reader = None
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=False)
             self._pool = None
@@ -213,12 +241,30 @@ class Uplink:
             self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
             self._finish(query, error=f"malformed batch: {exc}")
             return
-        sink, ids = self._sink, self._ids
-        if sink is None or ids is None:
+        sink, ids, admission, registrations = self._sink, self._ids, self._admission, self._registrations
+        if sink is None or ids is None or admission is None or registrations is None:
             self._finish(query, error="uplink stopping")
             return
-        ids.learn(batch.schemas)
-        missing = ids.unknown(batch.elided) if batch.elided else ()
+        # -- who sent it, what it may write (uplink.admission): per batch, per distinct topic --
+        key = str(query.key_expr)
+        source = source_of(key)
+        verdict = (
+            Refused("identity", "not an ingest key") if source is None else admission.check(source, batch)
+        )
+        if isinstance(verdict, Refused):
+            self.refusals.batch(source, key, verdict.reason, verdict.detail)
+            self.metrics.on_ingested(site_of(key), "refused", 0)
+            self._finish(query, error=f"refused ({verdict.reason}): {verdict.detail}")
+            return
+        diversion = (
+            Diversion(
+                verdict.source, verdict.routes, sink=sink, refusals=self.refusals, registrations=registrations
+            )
+            if verdict.routes
+            else None
+        )
+        # ---------------------------------------------------------------------------------------
+        missing = ids.unknown(batch.site, batch.elided) if batch.elided else ()
         if missing:  # before anything is produced: the edge sends the batch again, with them
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
             log.info(
@@ -272,6 +318,7 @@ class Uplink:
             stats=self.stats,
             dead_letter_max_bytes=self._dlq_max,
             on_delivery=self.metrics.on_delivered if metered else None,
+            diversion=diversion,
         ).run()
 
     def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:
@@ -288,5 +335,13 @@ class Uplink:
 
 def site_of(key: str) -> str:
     """The site of an ingest key ``fleetlink/<site>/ingest/<edge_id>`` (``?`` if it is not one)."""
-    parts = key.split("/")
-    return parts[1] if len(parts) == 4 and parts[0] == "fleetlink" and parts[2] == "ingest" else "?"
+    source = source_of(key)
+    return source.site if source is not None else "?"
+
+
+def _policy(cfg: UplinkConfig) -> TopicPolicy:
+    topics = cfg.topics
+    owned = {topics.command_dead_letter, topics.command_status, topics.refused}
+    owned.update(mapping.from_ for mapping in cfg.commands)
+    internal = InternalTopics(topics.registrations, topics.dead_letter, frozenset(owned))
+    return TopicPolicy(cfg.policy.patterns(), cfg.policy.default.topics, internal)

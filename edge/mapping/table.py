@@ -246,6 +246,14 @@ class MappingTable:
             return True
 
     # -- robots ----------------------------------------------------------------------------------
+    def robot_globs(self) -> dict[str, str]:
+        """Robot type -> the ``match`` glob of its robots' namespaces (``/tb4_*``)."""
+        with self._lock:
+            return {
+                name: spec.match if spec.match.startswith("/") else "/" + spec.match
+                for name, spec in self._types.items()
+            }
+
     def robot_type_for(self, robot: str) -> str | None:
         """The first robot type (declaration order) whose ``match`` glob matches the namespace."""
         namespace = "/" + robot.strip("/")

@@ -36,12 +36,18 @@ from fleetlink.edge.runtime.outgoing import MappingCounters
 from fleetlink.edge.runtime.processor import Rejected, Taken
 from fleetlink.edge.runtime.records import RecordMaker
 from fleetlink.roswire.acceptance import SampleAcceptor
-from fleetlink.roswire.errors import RoswireError
+from fleetlink.roswire.errors import KeyParseError, RoswireError
+from fleetlink.roswire.names import parse_data_key
 from fleetlink.schemas.codec import Codec
 from fleetlink.schemas.layout_program import layout_program
 
 log = logging.getLogger(__name__)
 
+COLLECT_S = 0.002
+"""After a first sample, how long ``take`` waits for more (at 10,000 samples/s some 20 come
+together, so the per-take work is shared; a sample waits at most this long for it)."""
+MAX_TOPICS = 65536
+"""Data keys whose topic is remembered (a peer inventing keys is parsed every time)."""
 DELIVERY_CODES: dict[Delivery, int] = {"at_least_once": 0, "best_effort": 1}
 DELIVERIES: tuple[Delivery, ...] = ("at_least_once", "best_effort")
 _ANY_HOST = re.compile(r"^(tcp|tls|udp|quic)/(0\.0\.0\.0|\[::\])(:\d+)$")
@@ -105,13 +111,6 @@ class _LaneInfo:
     mismatch: bool
 
 
-@dataclass(slots=True)
-class _Subscription:
-    topic: str
-    acceptor: SampleAcceptor
-    rejected: int = 0
-
-
 class NativeSource:
     """The data plane as the processor sees it. Thread-safety: ``take``, ``install`` and ``sync``
     from the processing thread only; ``subscribe``/``unsubscribe``/``wake``/stats from any."""
@@ -136,27 +135,29 @@ class NativeSource:
         self.max_value_bytes = max_value_bytes
         self.group_records = group_records
         self.group_bytes = group_bytes
-        self._subs: dict[int, _Subscription] = {}
+        self._receivers: dict[int, str] = {}  # sub id -> key expression
         self._next_sub = 1
+        self._acceptor = SampleAcceptor(track_sequences=False)  # the sequences are followed natively
+        self._rejected: dict[str, int] = {}  # topic -> samples refused on the general path
+        self._topics: dict[str, str] = {}  # data key -> topic (parsed once)
         self._programs: dict[int, int] = {}  # id(codec) -> program id
         self._codecs: list[Codec] = []  # keeps the codecs (and so their ids) alive
         self._lanes: list[_LaneInfo] = []
         self._installed: dict[str, FastPlan] = {}
         self._table_version: int | None = None
-        self._orphans = _Subscription("", SampleAcceptor(track_sequences=False))
-        """For samples of a subscription already forgotten (made into records all the same)."""
 
     # -- subscriptions (any thread) ---------------------------------------------------------------
-    def subscribe(self, topic: str, key_expr: str) -> int:
+    def subscribe(self, key_expr: str) -> int:
+        """Receive every sample on ``key_expr`` (wildcards welcome: one key for a whole fleet)."""
         sub_id = self._next_sub
         self._next_sub += 1
-        self._subs[sub_id] = _Subscription(topic, SampleAcceptor(track_sequences=False))
-        self.plane.subscribe(sub_id, key_expr, topic)
+        self._receivers[sub_id] = key_expr
+        self.plane.subscribe(sub_id, key_expr, key_expr)
         return sub_id
 
     def unsubscribe(self, sub_id: int) -> None:
         self.plane.unsubscribe(sub_id)
-        self._subs.pop(sub_id, None)
+        self._receivers.pop(sub_id, None)
 
     def wake(self) -> None:
         self.plane.wake()
@@ -166,10 +167,10 @@ class NativeSource:
 
     # -- the processing thread --------------------------------------------------------------------
     def take(self, max_samples: int, timeout_s: float) -> Taken:
-        groups, slow, lanes, count, oldest = self.plane.take(
-            max_samples, timeout_s, self.max_value_bytes, self.group_records, self.group_bytes
+        groups, slow, lanes, count, oldest, marks = self.plane.take(
+            max_samples, timeout_s, self.max_value_bytes, self.group_records, self.group_bytes, COLLECT_S
         )
-        taken = Taken(count=count, oldest_received_ns=oldest)
+        taken = Taken(count=count, oldest_received_ns=oldest, marks=marks)
         for code, group in groups:
             taken.groups.setdefault(DELIVERIES[code], []).append(group)
         infos = self._lanes
@@ -184,14 +185,31 @@ class NativeSource:
             if info.linger_s is not None and (shortest is None or info.linger_s < shortest):
                 shortest = info.linger_s
             taken.lingers[info.delivery] = shortest
+        accept = self._acceptor.accept
         for sub_id, key, payload, attachment, received_ns in slow:
-            sub = self._subs.get(sub_id) or self._orphans
             try:
-                taken.samples.append(sub.acceptor.accept(key, payload, attachment, received_ns))
+                taken.samples.append(accept(key, payload, attachment, received_ns))
             except RoswireError as exc:
-                sub.rejected += 1
-                taken.samples.append(Rejected(sub.topic, exc, received_ns))
+                topic = self.topic_of(key) or self._receivers.get(sub_id, "")
+                self._rejected[topic] = self._rejected.get(topic, 0) + 1
+                taken.samples.append(Rejected(topic, exc, received_ns))
         return taken
+
+    def topic_of(self, key: str) -> str | None:
+        """The ROS topic of a data key (``None`` when it is not one)."""
+        topic = self._topics.get(key)
+        if topic is None:
+            try:
+                topic = parse_data_key(key).topic
+            except KeyParseError:
+                return None
+            if len(self._topics) < MAX_TOPICS:
+                self._topics[key] = topic
+        return topic
+
+    def seed(self, marks: Iterable[tuple[bytes, int]]) -> None:
+        """What a previous run spooled last per publisher GID (see ``DataPlane.seed``)."""
+        self.plane.seed(list(marks))
 
     def sync(self, table_version: int) -> None:
         """Forget every plan when the mapping table changed since the last call."""
@@ -205,7 +223,7 @@ class NativeSource:
     def install(self, maker: RecordMaker, keys: Iterable[str]) -> None:
         """Hand the fast plans the general path made for ``keys`` to the data plane."""
         for key in keys:
-            plan = maker.plan_for(key)
+            plan = maker.plan_for(key)  # lanes () when no mapping takes the key: dropped natively
             if plan is None or plan.lanes is None or self._installed.get(key) is plan:
                 continue
             lanes: list[tuple[int, int, bytes, bytes, int, int]] = []
@@ -225,8 +243,8 @@ class NativeSource:
                         DELIVERY_CODES[lane.delivery],
                     )
                 )
-            self.plane.set_plan(key, lanes)
-            self._installed[key] = plan
+            if self.plane.set_plan(key, lanes):
+                self._installed[key] = plan
 
     def _lane(self, info: _LaneInfo) -> int:
         self._lanes.append(info)
@@ -245,8 +263,7 @@ class NativeSource:
     def intake_stats(self) -> dict[str, int]:
         """The intake's counters, in the shape the edge has always reported (``offered`` …)."""
         stats = self.plane.stats()
-        per_sub = self.plane.sub_stats()
-        offered = sum(received for received, *_ in per_sub.values())
+        offered = sum(received for received, _dropped in self.plane.sub_stats().values())
         return {
             "offered": offered,
             "taken": int(stats["taken"]),
@@ -260,19 +277,29 @@ class NativeSource:
             "oldest_queued_ns": int(stats["oldest_ns"]),
         }
 
-    def subscription_stats(self, sub_id: int) -> dict[str, int]:
-        received, dropped, gaps, missing, duplicates = self.plane.sub_stats().get(sub_id, (0, 0, 0, 0, 0))
-        sub = self._subs.get(sub_id)
-        rejected = sub.rejected if sub is not None else 0
+    def receiver_stats(self) -> dict[str, dict[str, int]]:
+        """Per key expression received on: samples that arrived, and those dropped at the intake."""
+        native = self.plane.sub_stats()
         return {
-            "received": received,
-            "delivered": received - dropped - rejected,
-            "rejected": rejected,
-            "dropped": dropped,
-            "gaps": gaps,
-            "missing": missing,
-            "duplicates": duplicates,
+            key_expr: dict(zip(("received", "dropped"), native.get(sub_id, (0, 0)), strict=True))
+            for sub_id, key_expr in sorted(self._receivers.items(), key=lambda item: item[1])
         }
+
+    def topic_stats(self) -> dict[str, dict[str, int]]:
+        """Per ROS topic that sent anything: samples taken, refused, and what the publishers'
+        sequence numbers say (gaps, missing: lost before the edge saw them; duplicates)."""
+        out: dict[str, dict[str, int]] = {}
+        names = ("received", "gaps", "missing", "duplicates", "lost_at_restart")
+        for key, counts in self.plane.key_stats().items():
+            topic = self.topic_of(key) or key
+            entry = out.setdefault(topic, dict.fromkeys(names, 0))
+            for name, value in zip(names, counts, strict=True):
+                entry[name] += value
+        for entry_topic, entry in out.items():
+            rejected = self._rejected.get(entry_topic, 0)
+            entry["rejected"] = rejected
+            entry["delivered"] = entry["received"] - rejected
+        return out
 
 
 def python_config_json(config: zenoh.Config) -> dict[str, Any]:

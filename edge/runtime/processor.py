@@ -64,6 +64,8 @@ class Taken:
     count: int = 0
     oldest_received_ns: int = 0
     """When the oldest sample of this take arrived (0: none): the lag behind the robots."""
+    marks: list[tuple[bytes, int]] = field(default_factory=list)
+    """The last ``(publisher GID, seq)`` of each publisher whose samples the groups hold."""
 
 
 class SampleSource(Protocol):

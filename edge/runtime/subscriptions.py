@@ -1,4 +1,4 @@
-"""Discovered publishers -> one ``RosSubscriber`` per topic that feeds at least one mapping.
+"""What the edge receives: a few wildcard key expressions for the data, a token per mapped topic.
 
 A ``GraphWatcher`` reports every publisher (``MP`` token) with its topic and type. Whenever the
 graph or the mapping table changes, the wanted subscriptions are recomputed (``plan``, pure)
@@ -10,15 +10,19 @@ different definition is still received, and the hash each sample really carried 
 record's headers. A mapping that declares its type subscribes as soon as its topic is known
 (a robot registered), before any publisher shows up.
 
-Every subscription is a key expression of the edge's native data plane
-(``dataplane.NativeSource``): one bounded intake for all of them, no thread per subscription, so
-an idle subscription costs nothing but its entry in the router. The liveliness token of a
-subscription (``MS``, so that ``ros2 topic info`` counts the edge) is declared on the edge's
-Python session, as its node is.
+The data arrives through the edge's native data plane (``dataplane.NativeSource``), on one key
+expression per mapping source pattern (``receive_keys``): ``/{robot}/imu`` of robot type
+``/tb4_*`` is received as ``<domain>/tb4_$*/imu/<type>/*``, so the receive path costs the same for
+ten robots or a thousand (a Zenoh session matches each sample against all of its subscriptions:
+a thousand exact ones cost some 50 µs a sample more than one wildcard). What arrives for a robot
+or topic no mapping takes is recognised once per data key and then dropped natively. The topics
+that do feed a mapping (``plan``) get a subscription liveliness token (``MS``, so that ``ros2
+topic info`` counts the edge), declared on the edge's Python session as its node is.
 """
 
 from __future__ import annotations
 
+import fnmatch
 import logging
 import threading
 from collections.abc import Callable, Collection, Mapping
@@ -33,7 +37,7 @@ from fleetlink.edge.runtime.dataplane import NativeSource
 from fleetlink.roswire.discovery import GraphWatcher
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.graph import EventKind, GraphEvent
-from fleetlink.roswire.names import data_key_expr
+from fleetlink.roswire.names import dds_type_name
 from fleetlink.roswire.node import RosNode, next_entity_id
 from fleetlink.roswire.qos import DEFAULT
 from fleetlink.roswire.tokens import EndpointInfo, EntityKind, endpoint_token
@@ -83,10 +87,53 @@ def plan(
     return wanted
 
 
+def _chunk_of_glob(glob_segment: str) -> str:
+    """A Zenoh key chunk matching (at least) the names an fnmatch segment matches."""
+    if glob_segment == "*" or any(c in glob_segment for c in "?[]"):
+        return "*"
+    return glob_segment.replace("*", "$*")
+
+
+def _chunks(pattern: TopicPattern, robot_chunk: str | None) -> list[str]:
+    out = []
+    for segment in pattern.segments:
+        if isinstance(segment, str):
+            out.append(segment)
+        elif segment.name == "robot" and robot_chunk is not None:
+            out.append(robot_chunk)
+        else:
+            out.append("**" if segment.multi else "*")
+    return out
+
+
+def receive_keys(table: MappingTable, domain: int) -> set[str]:
+    """The key expressions that receive every topic a mapping of ``table`` may take: per mapping,
+    its source pattern with captures as wildcards (a robot type's ``{robot}`` as its ``match``
+    glob), the declared type or any, any hash; plus exact keys for registered robots that do
+    not match their type's glob (registered explicitly)."""
+    globs = table.robot_globs()
+    keys: set[str] = set()
+    for info in table.list():
+        pattern = TopicPattern.parse(info.source)
+        dds = dds_type_name(info.ros_type) if info.ros_type is not None else "*"
+        patterns: list[tuple[TopicPattern, str | None]] = [(pattern, None)]
+        if info.robot_type is not None:
+            glob = globs.get(info.robot_type, "/*")
+            patterns = [(pattern, _chunk_of_glob(glob.strip("/")))]
+            for robot in info.robots:
+                if not fnmatch.fnmatchcase("/" + robot.strip("/"), glob):
+                    patterns.append((pattern.bind({"robot": robot.strip("/")}), None))
+        for bound, robot_chunk in patterns:
+            key = f"{domain}/{'/'.join(_chunks(bound, robot_chunk))}/{dds}/*"
+            keys.add(str(zenoh.KeyExpr.autocanonize(key)))
+    return keys
+
+
 @dataclass
 class _Active:
+    """A topic that feeds a mapping: the type it is taken as, and its subscription token."""
+
     typename: str | None
-    sub_id: int
     token: zenoh.LivelinessToken | None
 
 
@@ -107,6 +154,7 @@ class SubscriptionManager:
         self._known_type = known_type or _any_type
         self._publishers: dict[str, dict[str, str]] = {}  # topic -> token key -> type
         self._active: dict[str, _Active] = {}
+        self._receivers: dict[str, int] = {}  # key expression -> data plane subscription
         self._lock = threading.Lock()
         self._dirty = threading.Event()
         self._stop = threading.Event()
@@ -139,8 +187,11 @@ class SubscriptionManager:
             self._thread = None
         with self._lock:
             active, self._active = self._active, {}
+            receivers, self._receivers = self._receivers, {}
         for entry in active.values():
             self._close(entry)
+        for sub_id in receivers.values():
+            self._unreceive(sub_id)
 
     def __enter__(self) -> SubscriptionManager:
         return self.start()
@@ -155,8 +206,13 @@ class SubscriptionManager:
         self._dirty.set()
 
     # -- state -----------------------------------------------------------------------------------
+    def receivers(self) -> list[str]:
+        """The key expressions the data plane receives on."""
+        with self._lock:
+            return sorted(self._receivers)
+
     def topics(self) -> dict[str, str | None]:
-        """Subscribed topic -> the type subscribed with."""
+        """Topic feeding a mapping -> the type it is taken as (``None``: any)."""
         with self._lock:
             return {topic: entry.typename for topic, entry in self._active.items()}
 
@@ -165,11 +221,16 @@ class SubscriptionManager:
             return {topic: sorted(set(types.values())) for topic, types in self._publishers.items()}
 
     def snapshot(self) -> dict[str, dict[str, object]]:
+        """Per topic feeding a mapping (and any other that sent something): its type and counters."""
         with self._lock:
-            active = dict(self._active)
+            types = {topic: entry.typename for topic, entry in self._active.items()}
+        stats = self.source.topic_stats()
+        empty = dict.fromkeys(
+            ("received", "delivered", "rejected", "gaps", "missing", "duplicates", "lost_at_restart"), 0
+        )
         return {
-            topic: {"type": entry.typename, **self.source.subscription_stats(entry.sub_id)}
-            for topic, entry in sorted(active.items())
+            topic: {"type": types.get(topic), **stats.get(topic, empty)}
+            for topic in sorted(set(types) | set(stats))
         }
 
     # -- discovery -------------------------------------------------------------------------------
@@ -195,7 +256,7 @@ class SubscriptionManager:
             self._dirty.clear()
             try:
                 self._reconcile()
-            except (RoswireError, SchemaError, MappingError, OSError) as exc:
+            except (RoswireError, SchemaError, MappingError, OSError, RuntimeError, zenoh.ZError) as exc:
                 self.errors += 1
                 log.warning("subscriptions: reconciliation failed (retrying): %s", exc)
                 self._stop.wait(0.5)
@@ -205,13 +266,25 @@ class SubscriptionManager:
         with self._lock:
             publishers = {topic: set(types.values()) for topic, types in self._publishers.items()}
             current = {topic: entry.typename for topic, entry in self._active.items()}
+            receiving = set(self._receivers)
+        keys = receive_keys(self.table, self.node.domain_id)
+        for key in sorted(receiving - keys):
+            with self._lock:
+                sub_id = self._receivers.pop(key)
+            self._unreceive(sub_id)
+            log.info("stopped receiving %s", key)
+        for key in sorted(keys - receiving):
+            sub_id = self.source.subscribe(key)
+            with self._lock:
+                self._receivers[key] = sub_id
+            log.info("receiving %s", key)
         wanted = plan(publishers, self.table)
         for topic, typename in current.items():
             if wanted.get(topic, "\0") != typename:
                 with self._lock:
                     entry = self._active.pop(topic)
                 self._close(entry)
-                log.info("unsubscribed %s", topic)
+                log.debug("unsubscribed %s", topic)
         for topic, typename in wanted.items():
             with self._lock:
                 present = topic in self._active
@@ -220,13 +293,11 @@ class SubscriptionManager:
             active = self._open(topic, typename)
             with self._lock:
                 self._active[topic] = active
-            log.info("subscribed %s (type %s)", topic, typename or "any")
+            log.debug("subscribed %s (type %s)", topic, typename or "any")
         self.generation += 1
 
     def _open(self, topic: str, typename: str | None) -> _Active:
         node = self.node
-        # any type hash: a robot built against another revision of the type is still received
-        sub_id = self.source.subscribe(topic, data_key_expr(node.domain_id, topic, typename, None))
         token: zenoh.LivelinessToken | None = None
         if typename is not None and self._known_type(typename):
             key = endpoint_token(
@@ -244,15 +315,20 @@ class SubscriptionManager:
                 enclave=node.enclave,
             )
             token = node.session.liveliness().declare_token(key)
-        return _Active(typename, sub_id, token)
+        return _Active(typename, token)
 
     def _close(self, entry: _Active) -> None:
         try:
             if entry.token is not None:
                 entry.token.undeclare()
-            self.source.unsubscribe(entry.sub_id)
-        except Exception as exc:  # noqa: BLE001 - a closed session must not stop the rest of the cleanup
-            log.debug("closing subscription %d failed: %r", entry.sub_id, exc)
+        except zenoh.ZError as exc:  # a closed session must not stop the rest of the cleanup
+            log.debug("undeclaring a subscription token failed: %s", exc)
+
+    def _unreceive(self, sub_id: int) -> None:
+        try:
+            self.source.unsubscribe(sub_id)
+        except RuntimeError as exc:  # a closed data plane must not stop the rest of the cleanup
+            log.debug("closing receiver %d failed: %s", sub_id, exc)
 
 
 def _any_type(_typename: str) -> bool:

@@ -86,9 +86,11 @@ def load_service_config(
     return kind, config
 
 
-def load_service(model: type[ModelT], kind: str, args: argparse.Namespace) -> ModelT:
-    """The config of ``fleetlink KIND run -c FILE --set ...``."""
-    _kind, config = load_service_config(args.config, args.set, kind=kind)
+def load_service(
+    model: type[ModelT], kind: str, args: argparse.Namespace, *, host_checks: bool = True
+) -> ModelT:
+    """The config of ``fleetlink KIND run -c FILE --set ...`` (and of KIND's other actions)."""
+    _kind, config = load_service_config(args.config, args.set, kind=kind, host_checks=host_checks)
     if not isinstance(config, model):
         raise ConfigError(f"{args.config}: not a {kind} config")
     return config

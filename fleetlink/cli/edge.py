@@ -83,7 +83,14 @@ def console_extensions(token: SecretStr | None, edge_id: str) -> list[ExtensionF
     return [console_extension(token, edge_id)]
 
 
+ZENOH_RUNTIME = "(rx: (worker_threads: 1))"
+"""The edge's default Zenoh runtime (``ZENOH_RUNTIME`` wins): one receive worker. At 10,000 samples/s
+from a thousand publishers, two workers handing each sample's wake-up between them cost the
+edge's data plane some 4 µs a sample more (bench/bench_fleet.py)."""
+
+
 def run_command(args: argparse.Namespace) -> int:
+    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)  # before the first session opens
     from fleetlink.edge.admin import EdgeAdmin, load_token
     from fleetlink.edge.agent import EdgeAgent
     from fleetlink.edge.config import EdgeConfig

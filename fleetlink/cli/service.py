@@ -25,8 +25,10 @@ def add_service_command(
     help_text: str,
     description: str,
     handler: Callable[[argparse.Namespace], int],
+    more: Callable[[Any], None] | None = None,
 ) -> argparse.ArgumentParser:
-    """``fleetlink NAME run -c FILE [zenoh options]``; returns the ``run`` parser."""
+    """``fleetlink NAME run -c FILE [zenoh options]``; returns the ``run`` parser. ``more`` may
+    add other actions to the command's subparsers."""
     parser: argparse.ArgumentParser = sub.add_parser(name, help=help_text, description=description)
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     run = actions.add_parser("run", help=f"run the {name} until SIGINT/SIGTERM")
@@ -34,6 +36,8 @@ def add_service_command(
     add_set_argument(run)
     add_zenoh_arguments(run, ros=False)
     run.set_defaults(handler=handler, log_verbosity=SERVICE_VERBOSITY)
+    if more is not None:
+        more(actions)
     return run
 
 

@@ -3,8 +3,8 @@
 ``fleetlink validate`` and ``fleetlink edge|uplink|repeater run`` run the same checks, so a config
 that validates also starts: folders exist or can be made by this user, message packages load,
 every mapping's ROS type is known, Zenoh config files are concrete and Zenoh's own parser takes
-them, files the config names (secrets, certificates) are there. Each problem carries the YAML
-path it is about. No socket is opened.
+them, files the config names (secrets, certificates, command signing keys) are there. Each
+problem carries the YAML path it is about. No socket is opened.
 """
 
 from __future__ import annotations
@@ -69,12 +69,15 @@ def message_path_problems(
         return [(at, f"cannot load the message packages: {exc}")], None
 
 
-def file_problems(files: Sequence[tuple[tuple[PathPart, ...], Path | None]]) -> list[Problem]:
+def file_problems(files: Sequence[tuple[tuple[PathPart, ...], Path | None]], hint: str = "") -> list[Problem]:
     return [
-        (at, f"{path} is not a readable file")
+        (at, f"{path} is not a readable file{hint}")
         for at, path in files
         if path is not None and not (path.is_file() and os.access(path, os.R_OK))
     ]
+
+
+KEY_HINT = " (make the key pair with `fleetlink certs command-key DIR`)"
 
 
 def edge_problems(config: EdgeConfig) -> list[Problem]:
@@ -120,7 +123,11 @@ def uplink_problems(config: UplinkConfig) -> list[Problem]:
         ]
     if config.console is not None:
         files.append((("console", "token_file"), config.console.token_file))
-    return problems + file_problems(files)
+    problems += file_problems(files)
+    if config.command_signing is not None:
+        key = [(("command_signing", "key_file"), config.command_signing.key_file)]
+        problems += file_problems(key, KEY_HINT)
+    return problems
 
 
 def repeater_problems(config: RepeaterConfig) -> list[Problem]:
@@ -129,7 +136,8 @@ def repeater_problems(config: RepeaterConfig) -> list[Problem]:
     state = writable_dir_problem(Path(config.repeater.state_dir))
     if state is not None:
         problems.append((("repeater", "state_dir"), state))
-    return problems
+    keys = [(("repeater", "command_keys", i), path) for i, path in enumerate(config.repeater.command_keys)]
+    return problems + file_problems(keys, KEY_HINT)
 
 
 CHECKS: dict[str, Check] = {"edge": edge_problems, "uplink": uplink_problems, "repeater": repeater_problems}

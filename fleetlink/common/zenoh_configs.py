@@ -45,7 +45,7 @@ from typing import Any
 
 import zenoh
 
-from fleetlink.common.certs import edge_name
+from fleetlink.common.certs import CertError, check_site_certificate, edge_name
 from fleetlink.common.errors import ConfigError
 from fleetlink.common.names import site_problem
 
@@ -485,6 +485,16 @@ def render_router_config(
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise RouterConfigError(f"cannot read router config: {exc.strerror}", source=str(path)) from None
+    certificate = (
+        Path(cert_dir) / f"{edge_name(site)}.pem" if site is not None and cert_dir is not None else None
+    )
+    if certificate is not None and site is not None and "edge-${SITE}.pem" in text and certificate.exists():
+        # the site's router presents this certificate to the cloud: it must be the site's own
+        # (a missing file is zenoh's error when the router opens)
+        try:
+            check_site_certificate(certificate, site)
+        except CertError as exc:
+            raise RouterConfigError(str(exc), source=str(path), name="CERT_DIR") from None
     return render_router_json5(
         text,
         source=str(path),

@@ -31,6 +31,11 @@ class DemoPlaces:
     uplink_metrics: str = "127.0.0.1:9464"
     fleet_console: str = "127.0.0.1:8490"
 
+    @property
+    def keys(self) -> Path:
+        """The command signing key pair (written by the runner before the configs are used)."""
+        return self.workdir / "keys"
+
 
 def edge_config(p: DemoPlaces) -> dict[str, Any]:
     return {
@@ -75,6 +80,7 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
         "kafka": {"bootstrap_servers": p.bootstrap, "linger": "2ms"},
         "registry": {"url": p.registry_url},
         "zenoh": {"mode": "client", "connect": [p.cloud_router]},
+        "command_signing": {"key_file": str(p.keys / "command-signing-key.pem")},
         "commands": [
             {
                 "name": "lightring",
@@ -91,7 +97,11 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
 
 def repeater_config(p: DemoPlaces) -> dict[str, Any]:
     return {
-        "repeater": {"site": SITE, "state_dir": str(p.workdir / "repeater")},
+        "repeater": {
+            "site": SITE,
+            "state_dir": str(p.workdir / "repeater"),
+            "command_keys": [str(p.keys / "command-signing.pem")],
+        },
         "ros": {"distro": "jazzy", "message_paths": [str(m) for m in p.msg_paths]},
         "zenoh": {"mode": "client", "connect": [p.site_router]},
     }

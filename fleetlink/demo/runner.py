@@ -23,6 +23,7 @@ from typing import Any, Literal, TextIO
 
 import yaml
 
+from fleetlink.common.command_keys import write_command_key
 from fleetlink.common.durations import parse_duration_ms
 from fleetlink.common.errors import FleetlinkError
 from fleetlink.demo.configs import (
@@ -162,6 +163,7 @@ class Demo:
 
     def _start_services(self, places: DemoPlaces) -> None:
         work = self.o.workdir
+        write_command_key(places.keys)  # the uplink signs commands, the repeater checks them
         files = {}
         for name, config in (
             ("uplink", uplink_config(places)),

@@ -59,12 +59,21 @@ struct SubAtomics {
     dropped: AtomicU64,
 }
 
+/// Per data key (topic, type, hash): what arrived and what its publishers' sequence numbers say.
 #[derive(Default, Clone, Copy)]
-struct SubCounts {
+struct KeyCounts {
+    received: u64,
     gaps: u64,
     missing: u64,
     duplicates: u64,
+    lost_at_restart: u64,
 }
+
+/// Data keys counted one by one at most; more (a peer inventing keys) are counted together.
+const MAX_KEYS: usize = 65536;
+/// Plans kept at most; keys beyond take the Python path (counted there).
+const MAX_PLANS: usize = 65536;
+const OTHER_KEYS: &str = "*";
 
 struct Queue {
     items: VecDeque<Raw>,
@@ -125,7 +134,7 @@ struct State {
     programs: HashMap<u32, Arc<Program>>,
     plans: HashMap<String, Arc<Plan>>,
     seqs: SeqTracker,
-    counts: HashMap<u32, SubCounts>,
+    keys: HashMap<String, KeyCounts>,
     subs: HashMap<u32, Arc<SubAtomics>>,
     topics: HashMap<u32, String>,
 }
@@ -183,6 +192,7 @@ impl Grouper {
 
 /// What one `take()` made, before it becomes Python objects.
 struct Taken {
+    marks: HashMap<[u8; 16], i64>,
     groups: [Grouper; 2],
     slow: Vec<Raw>,
     lanes: HashMap<u32, (u64, u64)>,
@@ -242,7 +252,7 @@ impl DataPlane {
                 programs: HashMap::new(),
                 plans: HashMap::new(),
                 seqs: SeqTracker::new(max_sources),
-                counts: HashMap::new(),
+                keys: HashMap::new(),
                 subs: HashMap::new(),
                 topics: HashMap::new(),
             }),
@@ -311,8 +321,10 @@ impl DataPlane {
     }
 
     /// How the samples of data key `key` become records: one lane per mapping,
-    /// `(lane_id, program_id, head, tail, flags, delivery)`; `program_id` MISMATCH only counts.
-    fn set_plan(&self, key: String, lanes: Vec<(u32, u32, Vec<u8>, Vec<u8>, u8, u8)>) -> PyResult<()> {
+    /// `(lane_id, program_id, head, tail, flags, delivery)`; `program_id` MISMATCH only counts;
+    /// no lane at all: nothing maps the key (its samples are counted and dropped here). False
+    /// when the plan was not kept (too many plans: the key stays on the Python path).
+    fn set_plan(&self, key: String, lanes: Vec<(u32, u32, Vec<u8>, Vec<u8>, u8, u8)>) -> PyResult<bool> {
         let mut state = self.state.lock().unwrap();
         let mut built = Vec::with_capacity(lanes.len());
         for (id, program_id, head, tail, flags, delivery) in lanes {
@@ -335,8 +347,11 @@ impl DataPlane {
             };
             built.push(Lane { id, program, head, tail, flags, delivery });
         }
+        if state.plans.len() >= MAX_PLANS && !state.plans.contains_key(&key) {
+            return Ok(false);
+        }
         state.plans.insert(key, Arc::new(Plan { lanes: built }));
-        Ok(())
+        Ok(true)
     }
 
     /// Forget every plan (the mapping table changed): keys go to Python until planned again.
@@ -356,13 +371,15 @@ impl DataPlane {
         self.shared.ready.notify_all();
     }
 
-    /// Up to `max_samples` samples, waiting at most `timeout_s` for the first. Returns
-    /// `(groups, slow, lanes, samples, oldest_received_ns)`: `groups` a list of
+    /// Up to `max_samples` samples, waiting at most `timeout_s` for the first and then up to
+    /// `collect_s` for more. Returns
+    /// `(groups, slow, lanes, samples, oldest_received_ns, marks)`: `groups` a list of
     /// `(delivery, group)` (`fleetlink.wire.groups`; at most `group_records` records and, beyond
     /// one, `group_bytes` bytes each), `slow` the raw samples for the Python path
     /// `(sub_id, key, payload, attachment | None, received_ns)`, `lanes` the
-    /// `(lane_id, received, emitted)` counts of this call.
-    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576))]
+    /// `(lane_id, received, emitted)` counts of this call, `marks` the last `(gid, seq)` of each
+    /// publisher whose samples became records here.
+    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576, collect_s=0.0))]
     fn take<'py>(
         &self,
         py: Python<'py>,
@@ -371,9 +388,10 @@ impl DataPlane {
         max_value_bytes: usize,
         group_records: u32,
         group_bytes: usize,
+        collect_s: f64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let mut taken = py.detach(|| {
-            let raws = self.wait_and_drain(max_samples.max(1), timeout_s);
+            let raws = self.wait_and_drain(max_samples.max(1), timeout_s, collect_s);
             self.process(raws, max_value_bytes, group_records, group_bytes)
         });
         let mut groups: Vec<(u8, Bound<'py, PyBytes>)> = Vec::new();
@@ -397,7 +415,9 @@ impl DataPlane {
             })
             .collect();
         let lanes: Vec<(u32, u64, u64)> = taken.lanes.into_iter().map(|(id, (r, e))| (id, r, e)).collect();
-        (groups, slow, lanes, taken.samples, taken.oldest_ns).into_pyobject(py).map(|t| t.into_any())
+        let marks: Vec<(Bound<'py, PyBytes>, i64)> =
+            taken.marks.iter().map(|(gid, seq)| (PyBytes::new(py, gid), *seq)).collect();
+        (groups, slow, lanes, taken.samples, taken.oldest_ns, marks).into_pyobject(py).map(|t| t.into_any())
     }
 
     /// The intake's counters.
@@ -418,17 +438,36 @@ impl DataPlane {
         Ok(d)
     }
 
-    /// Per subscription: `(received, dropped, gaps, missing, duplicates)`.
-    fn sub_stats(&self) -> HashMap<u32, (u64, u64, u64, u64, u64)> {
+    /// Per subscription: `(received, dropped at the intake)`.
+    fn sub_stats(&self) -> HashMap<u32, (u64, u64)> {
         let state = self.state.lock().unwrap();
         state
             .subs
             .iter()
-            .map(|(id, a)| {
-                let c = state.counts.get(id).copied().unwrap_or_default();
-                (*id, (a.received.load(Ordering::Relaxed), a.dropped.load(Ordering::Relaxed), c.gaps, c.missing, c.duplicates))
-            })
+            .map(|(id, a)| (*id, (a.received.load(Ordering::Relaxed), a.dropped.load(Ordering::Relaxed))))
             .collect()
+    }
+
+    /// Per data key taken: `(received, gaps, missing, duplicates, lost_at_restart)` (keys beyond
+    /// the first 65,536 are counted under `*`).
+    fn key_stats(&self) -> HashMap<String, (u64, u64, u64, u64, u64)> {
+        let state = self.state.lock().unwrap();
+        state
+            .keys
+            .iter()
+            .map(|(k, c)| (k.clone(), (c.received, c.gaps, c.missing, c.duplicates, c.lost_at_restart)))
+            .collect()
+    }
+
+    /// Restore what a previous run spooled last per publisher: `(gid, seq)` pairs. The next
+    /// sample of each tells (counted as `lost_at_restart`) what was lost in between.
+    fn seed(&self, marks: Vec<(Vec<u8>, i64)>) -> PyResult<()> {
+        let mut state = self.state.lock().unwrap();
+        for (gid, seq) in marks {
+            let gid: [u8; 16] = gid.as_slice().try_into().map_err(|_| PyValueError::new_err("a GID has 16 bytes"))?;
+            state.seqs.seed(&gid, seq);
+        }
+        Ok(())
     }
 
     /// The last sequence number seen from a publisher GID (16 bytes), if any.
@@ -455,7 +494,10 @@ impl DataPlane {
 }
 
 impl DataPlane {
-    fn wait_and_drain(&self, max: usize, timeout_s: f64) -> Vec<Raw> {
+    /// Wait up to `timeout_s` for a first sample, then up to `collect_s` more for company (so that
+    /// a steady trickle is taken a few ms' worth at a time, not one sample at a time), and take
+    /// at most `max`.
+    fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64) -> Vec<Raw> {
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
         let mut q = self.shared.queue.lock().unwrap();
         while q.items.is_empty() && !q.woken {
@@ -464,6 +506,16 @@ impl DataPlane {
                 break;
             }
             q = self.shared.ready.wait_timeout(q, deadline - now).unwrap().0;
+        }
+        if !q.items.is_empty() && !q.woken && collect_s > 0.0 {
+            let until = Instant::now() + Duration::from_secs_f64(collect_s);
+            while q.items.len() < max && !q.woken {
+                let now = Instant::now();
+                if now >= until {
+                    break;
+                }
+                q = self.shared.ready.wait_timeout(q, until - now).unwrap().0;
+            }
         }
         q.woken = false;
         let n = q.items.len().min(max);
@@ -477,6 +529,7 @@ impl DataPlane {
 
     fn process(&self, raws: Vec<Raw>, max_value_bytes: usize, group_records: u32, group_bytes: usize) -> Taken {
         let mut taken = Taken {
+            marks: HashMap::new(),
             groups: [Grouper::new(group_records, group_bytes), Grouper::new(group_records, group_bytes)],
             slow: Vec::new(),
             lanes: HashMap::new(),
@@ -486,6 +539,12 @@ impl DataPlane {
         let mut state = self.state.lock().unwrap();
         let mut bodies: Vec<Vec<u8>> = Vec::new();
         for raw in raws {
+            let counts = if state.keys.len() < MAX_KEYS || state.keys.contains_key(&raw.key) {
+                state.keys.entry(raw.key.clone()).or_default()
+            } else {
+                state.keys.entry(OTHER_KEYS.to_owned()).or_default()
+            };
+            counts.received += 1;
             let parsed = raw.attachment.as_deref().and_then(attachment::parse);
             let Some(att) = parsed else {
                 taken.slow.push(raw); // no or a broken attachment: the Python path says why
@@ -493,12 +552,14 @@ impl DataPlane {
             };
             let seen = state.seqs.observe(&att.gid, att.seq);
             if !matches!(seen, Seen::First | Seen::Next) {
-                let counts = state.counts.entry(raw.sub).or_default();
+                let key = if state.keys.contains_key(&raw.key) { raw.key.as_str() } else { OTHER_KEYS };
+                let counts = state.keys.get_mut(key).expect("counted above");
                 match seen {
                     Seen::Gap(missing) => {
                         counts.gaps += 1;
                         counts.missing += missing;
                     }
+                    Seen::LostAtRestart(missing) => counts.lost_at_restart += missing,
                     Seen::Duplicate => counts.duplicates += 1,
                     _ => {}
                 }
@@ -510,6 +571,9 @@ impl DataPlane {
             if att.seq < 0 || !convert_all(&plan, &raw.payload, max_value_bytes, &mut bodies) {
                 taken.slow.push(raw);
                 continue;
+            }
+            if plan.lanes.iter().any(|l| l.program.is_some()) {
+                taken.marks.insert(att.gid, att.seq); // samples of one publisher come in order
             }
             let stamp = if att.source_ts_ns != 0 { att.source_ts_ns } else { raw.received_ns };
             let ts_ms = stamp.div_euclid(1_000_000);

@@ -24,9 +24,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from fleetlink.localstack.kafka import KafkaBroker
-from tests.fault.e2e_processes import BATCH, Bed, Count, Generator, bed, generate, streaming, tally
+from tests.fault import e2e_processes
+from tests.fault.e2e_processes import Bed, Count, Generator, bed, generate, streaming, tally
 from tests.integration.e2e_stack import TopicReader
+
+pytestmark = pytest.mark.usefixtures("wan_profile")
 
 
 def sender(b: Bed) -> dict[str, Any]:
@@ -38,7 +43,8 @@ def check(result: Count, retried: int) -> None:
     """Nothing lost or foreign; each duplicate belongs to a batch the edge sent again."""
     assert result.lost == [], str(result)
     assert result.unexpected == 0, str(result)
-    assert result.duplicated <= BATCH * retried, f"{result}; {retried} batch(es) retried"
+    batch = e2e_processes.PROFILE.batch
+    assert result.duplicated <= batch * retried, f"{result}; {retried} batch(es) retried"
 
 
 def test_kafka_frozen_longer_than_the_ack_timeout(

@@ -11,11 +11,11 @@ A document's steps, in the order they appear:
 
 Addresses are the only thing the test changes: the docs use the usual ports (7447 robots' router,
 7448 cloud router, 9092 Kafka, 8081 registry, 8480 edge admin, 8490 fleet console, 9464 uplink
-metrics); the test puts each on a free port, in commands and saved files by text, in the configs
-a service loads by ``$FLEETLINK_SET`` (the product's own override), and in ``$KAFKA_BOOTSTRAP`` /
-``$SCHEMA_REGISTRY_URL`` (the defaults of ``fleetlink kafka echo``). State folders — those a
-service config names, and ``fleetlink stack --dir`` — go to the test's folder, so a run never
-reads an earlier run's records. This module's parsing and rewriting are pure.
+metrics, 9465 repeater metrics); the test puts each on a free port, in commands and saved files
+by text, in the configs a service loads by ``$FLEETLINK_SET`` (the product's own override), and
+in ``$KAFKA_BOOTSTRAP`` / ``$SCHEMA_REGISTRY_URL`` (the defaults of ``fleetlink kafka echo``).
+State folders — those a service config names, and ``fleetlink stack --dir`` — go to the test's
+folder, so a run never reads an earlier run's records. This module's parsing and rewriting are pure.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import yaml
 
 from fleetlink.common.yaml_paths import format_path
 
-USUAL_PORTS = (7447, 7448, 9092, 8081, 8480, 8490, 9464)
+USUAL_PORTS = (7447, 7448, 9092, 8081, 8480, 8490, 9464, 9465)
 STATE_KEYS = (("spool", "dir"), ("repeater", "state_dir"))
 
 _STEP = re.compile(

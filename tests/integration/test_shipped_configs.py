@@ -77,7 +77,7 @@ def sets(values: dict[str, str]) -> list[str]:
     return [a for key, value in values.items() for a in ("--set", f"{key}={value}")]
 
 
-def uplink_sets(kafka: tuple[str, str], cloud: str, metrics: str, console: str) -> list[str]:
+def uplink_sets(kafka: tuple[str, str], cloud: str, metrics: str, console: str, key: Path) -> list[str]:
     return sets(
         {
             "kafka.bootstrap_servers": kafka[0],
@@ -85,6 +85,7 @@ def uplink_sets(kafka: tuple[str, str], cloud: str, metrics: str, console: str) 
             "zenoh.connect": f"[{cloud}]",
             "metrics.listen": metrics,
             "console.listen": console,
+            "command_signing.key_file": str(key),
         }
     )
 
@@ -94,8 +95,20 @@ def edge_sets(site: str, cloud: str, admin: str, spool: Path) -> list[str]:
     return sets({**values, "spool.dir": str(spool)})
 
 
-def repeater_sets(site: str, state: Path) -> list[str]:
-    return sets({"zenoh.connect": f"[{site}]", "repeater.state_dir": str(state)})
+def repeater_sets(site: str, state: Path, key: Path, metrics: str | None = None) -> list[str]:
+    values = {
+        "zenoh.connect": f"[{site}]",
+        "repeater.state_dir": str(state),
+        "repeater.command_keys": f"[{key}]",
+    }
+    return sets(values | ({"metrics.listen": metrics} if metrics else {}))
+
+
+def command_keys(bed: Bed, folder: Path) -> tuple[Path, Path]:
+    """The key pair commands are signed with, made as the docs say: ``fleetlink certs command-key``."""
+    made = bed.run("certs", "command-key", str(folder))
+    assert made.returncode == 0, made.stderr
+    return folder / "command-signing-key.pem", folder / "command-signing.pem"
 
 
 @pytest.fixture
@@ -108,6 +121,7 @@ def test_the_example_configs_run_as_shipped(tmp_path: Path, kafka: tuple[str, st
     admin, metrics, console = address(), address(), address()
     prefix = f"tb4_{uuid.uuid4().hex[:6]}_"
     with Bed(tmp_path) as bed:
+        private, public = command_keys(bed, tmp_path / "keys")
         ir = bed.follow("fleet.ir_intensity", *kafka)  # from now on, before any robot
         imu = bed.follow("fleet.imu", *kafka)
         bed.start(
@@ -122,7 +136,7 @@ def test_the_example_configs_run_as_shipped(tmp_path: Path, kafka: tuple[str, st
                 "run",
                 "-c",
                 "deploy/uplink.example.yaml",
-                *uplink_sets(kafka, cloud, metrics, console),
+                *uplink_sets(kafka, cloud, metrics, console, private),
             ],
             answers(f"http://{metrics}/health"),
         )
@@ -144,7 +158,7 @@ def test_the_example_configs_run_as_shipped(tmp_path: Path, kafka: tuple[str, st
                 "run",
                 "-c",
                 "deploy/repeater.example.yaml",
-                *repeater_sets(site, tmp_path / "repeater"),
+                *repeater_sets(site, tmp_path / "repeater", public, address()),
             ],
             in_log(tmp_path / "repeater.log", "running for site warehouse-a"),
         )
@@ -183,6 +197,7 @@ def test_the_compose_configs_run_with_their_commands(tmp_path: Path, kafka: tupl
     config = router["command"][router["command"].index("-c") + 1]
     mount = next(v.split(":")[0] for v in router["volumes"] if v.split(":")[1] == config)
     with Bed(tmp_path) as bed:
+        private, public = command_keys(bed, tmp_path / "keys")
         kidnap = bed.follow("fleet.kidnap_status", *kafka)  # from now on, before any robot
         hazards = bed.follow("fleet.hazard_detection", *kafka)
         bed.start(
@@ -192,7 +207,7 @@ def test_the_compose_configs_run_with_their_commands(tmp_path: Path, kafka: tupl
         )
         bed.start(
             "uplink",
-            [*command("uplink"), *uplink_sets(kafka, cloud, metrics, console)],
+            [*command("uplink"), *uplink_sets(kafka, cloud, metrics, console, private)],
             answers(health("uplink", metrics)),
         )
         bed.start(
@@ -202,7 +217,7 @@ def test_the_compose_configs_run_with_their_commands(tmp_path: Path, kafka: tupl
         )
         bed.start(
             "repeater",
-            [*command("repeater"), *repeater_sets(site, tmp_path / "repeater")],
+            [*command("repeater"), *repeater_sets(site, tmp_path / "repeater", public)],
             in_log(tmp_path / "repeater.log", "running for site warehouse-a"),
         )
         robots = [a.replace("tcp/edge:7447", site) for a in command("robots")]

@@ -21,6 +21,8 @@ import yaml
 
 from fleetlink.cli import build_parser
 from fleetlink.cli.validate import validate_file
+from fleetlink.common.command_keys import write_command_key
+from fleetlink.common.errors import ConfigError
 from fleetlink.common.zenoh_options import load_zenoh_file
 from tests.paths import DEPLOY, ROOT
 
@@ -47,22 +49,48 @@ def test_every_fleetlink_config_in_deploy_validates(path: Path) -> None:
     assert kind in ("edge", "uplink", "repeater")
 
 
-@pytest.mark.parametrize(
-    "path", sorted(DEPLOY.glob("*.example.yaml")), ids=lambda p: str(p.relative_to(DEPLOY))
-)
-def test_example_configs_pass_the_start_up_checks_as_shipped(
-    path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.chdir(ROOT)  # their relative paths are the repository's
-    monkeypatch.delenv("FLEETLINK_SET", raising=False)
-    validate_file(path)
+def _key_sets(name: str, keys: tuple[Path, Path]) -> list[str]:
+    """Where the command signing keys are: ``fleetlink certs command-key`` makes them first."""
+    private, public = keys
+    return {
+        "uplink": [f"command_signing.key_file={private}"],
+        "repeater": [f"repeater.command_keys=[{public}]"],
+    }.get(name, [])
+
+
+@pytest.fixture(scope="module")
+def command_keys(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    return write_command_key(tmp_path_factory.mktemp("keys"))
 
 
 @pytest.mark.parametrize("name", ["edge", "uplink", "repeater"])
-def test_compose_configs_pass_the_start_up_checks_with_their_volumes(name: str, tmp_path: Path) -> None:
-    # inside the container, the state folders are the named volumes; here, a temporary folder
-    sets = {"edge": ["spool.dir=" + str(tmp_path)], "repeater": ["repeater.state_dir=" + str(tmp_path)]}
-    validate_file(DEPLOY / "compose" / f"{name}.yaml", sets=sets.get(name, []))
+def test_example_configs_pass_the_start_up_checks_as_shipped(
+    name: str, command_keys: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(ROOT)  # their relative paths are the repository's
+    monkeypatch.delenv("FLEETLINK_SET", raising=False)
+    validate_file(DEPLOY / f"{name}.example.yaml", sets=_key_sets(name, command_keys))
+
+
+@pytest.mark.parametrize(
+    ("name", "key"), [("uplink", "command_signing.key_file"), ("repeater", "repeater.command_keys[0]")]
+)
+def test_a_missing_command_key_says_how_to_make_it(name: str, key: str, tmp_path: Path) -> None:
+    sets = [f"repeater.state_dir={tmp_path}"] if name == "repeater" else []
+    with pytest.raises(ConfigError) as info:
+        validate_file(DEPLOY / "compose" / f"{name}.yaml", sets=sets)
+    assert f"{key} (line" in str(info.value)
+    assert "fleetlink certs command-key DIR" in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["edge", "uplink", "repeater"])
+def test_compose_configs_pass_the_start_up_checks_with_their_volumes(
+    name: str, command_keys: tuple[Path, Path], tmp_path: Path
+) -> None:
+    # inside the container, the state folders and keys are named volumes; here, temporary ones
+    state = {"edge": [f"spool.dir={tmp_path}"], "repeater": [f"repeater.state_dir={tmp_path}"]}
+    sets = [*state.get(name, []), *_key_sets(name, command_keys)]
+    validate_file(DEPLOY / "compose" / f"{name}.yaml", sets=sets)
 
 
 @pytest.mark.parametrize("path", RENDERED, ids=lambda p: str(p.relative_to(DEPLOY)))
@@ -119,6 +147,9 @@ def test_compose_dependencies_wait_for_healthchecks() -> None:
         assert isinstance(depends, dict), f"{name}: depends_on is a list (it would not wait for health)"
         for dep, condition in depends.items():
             assert dep in services, f"{name} depends on unknown service {dep}"
+            if services[dep].get("restart") == "no":  # a one-shot job: waited for until it is done
+                assert condition == {"condition": "service_completed_successfully"}, f"{name} -> {dep}"
+                continue
             assert condition == {"condition": "service_healthy"}, f"{name} -> {dep}"
             assert "healthcheck" in services[dep], f"{dep} has no healthcheck, {name} waits for it"
 
@@ -156,20 +187,28 @@ def _containerfile() -> str:
     return (DEPLOY / "Containerfile").read_text()
 
 
-def test_state_folders_are_volumes_the_image_user_can_write() -> None:
+def test_volumes_written_by_fleetlink_are_folders_the_image_user_owns() -> None:
     containerfile = _containerfile()
     user = re.findall(r"^USER (\S+)", containerfile, re.MULTILINE)[-1]
-    made = re.search(r"mkdir -p ([^&]+)&&\s*chown -R (\S+) (\S+)", containerfile)
+    made = re.search(r"mkdir -p ([^&]+)&&\s*chown -R (\S+) ([^\n]+)", containerfile)
     assert made is not None, "the Containerfile makes no state folders"
-    folders, owner, owned = made.group(1).split(), made.group(2), made.group(3)
+    folders, owner, owned = made.group(1).split(), made.group(2), made.group(3).split()
     assert owner == user
+    # a named volume starts as a copy of the image's folder: it must exist there, owned by the user
+    for name, service in _fleetlink_services().items():
+        for volume in service.get("volumes", []):
+            source, target, *mode = volume.split(":")
+            if source.startswith(".") or mode == ["ro"]:
+                continue
+            assert target in folders, f"{name}: {target} is not made in the image"
+            assert any(target.startswith(o) for o in owned), f"{name}: {target} is not {user}'s"
     services = _fleetlink_services()
     state = {"edge": ("spool", "dir"), "repeater": ("repeater", "state_dir")}
     for name, (section, key) in state.items():
         _path, config = _service_config(services[name])
         folder = config[section][key]
         assert folder in folders, f"{name}: {folder} is not made in the image"
-        assert folder.startswith(owned), f"{name}: {folder} is not {user}'s"
+        assert any(folder.startswith(o) for o in owned), f"{name}: {folder} is not {user}'s"
         assert any(v.endswith(f":{folder}") and not v.startswith(".") for v in services[name]["volumes"]), (
             f"{name}: {folder} is on no named volume"
         )
