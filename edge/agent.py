@@ -177,15 +177,17 @@ class EdgeAgent:
             on_schema=book.add,
         )
         session_config = edge_session_config(self.zenoh_options)
+        plane_config = python_config_json(session_config)
+        # the edge's session first: a router-mode edge's data plane connects to its listeners
+        self._session = session = open_session(session_config)
         self._source = source = NativeSource(
-            python_config_json(session_config),
+            plane_config,
             max_items=config.intake.max_samples,
             max_bytes=int(config.intake.max_bytes),
             max_value_bytes=self._maker.max_value_bytes,
             group_records=group_records,
             group_bytes=group_bytes,
         )
-        self._session = session = open_session(session_config)
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)
         self._senders = {

@@ -39,6 +39,11 @@ class TopicsSection(Section):
 class IngestSection(Section):
     sites: list[str] = Field(default=["*"], description="sites served (Zenoh key chunks; * = all)")
     max_concurrent_batches: int = Field(default=64, ge=1, le=10_000)
+    native: bool = Field(
+        default=True,
+        description="produce records through the native path (librdkafka without the GIL, decisions "
+        "per tail); false: every record through Python",
+    )
 
     @field_validator("sites")
     @classmethod

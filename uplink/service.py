@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 import zenoh
 
+from fleetlink._native import ScannedBatch
 from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
 from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.ratelimit import LogLimiter
@@ -37,6 +38,7 @@ from fleetlink.uplink.identity import source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats
 from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
+from fleetlink.uplink.native_ingest import NativeIngest, NativeJob, view
 from fleetlink.uplink.ordered import KeyedSerialExecutor
 from fleetlink.uplink.policy import InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
@@ -44,7 +46,7 @@ from fleetlink.uplink.refusals import Refusals
 from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.topics import ensure_topics
-from fleetlink.wire import Ack, WireError, decode_batch, encode_ack
+from fleetlink.wire import Ack, WireError, decode_batch, decode_batch_head, encode_ack
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +85,7 @@ class Uplink:
         self._session: zenoh.Session | None = None
         self._queryables: list[Any] = []
         self._sink: KafkaSink | None = None
+        self._native: NativeIngest | None = None
         self._registry: SchemaRegistry | None = None
         self._ids: SchemaIds | None = None
         self._pool: ThreadPoolExecutor | None = None
@@ -123,6 +126,11 @@ class Uplink:
         ).start()
         self._registrations = RegistrationWriter(self._registry, cfg.topics.registrations, self.directory)
         self._sink = KafkaSink(cfg.kafka).start()
+        if cfg.ingest.native:
+            try:
+                self._native = NativeIngest(cfg.kafka.producer_config())
+            except (RuntimeError, ValueError) as exc:
+                log.warning("the native ingest path cannot start (%s); every record goes through Python", exc)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uplink-batch")
         self._serial = KeyedSerialExecutor(self._pool)
         self._session = zenoh.open(self._zenoh_options.to_config())
@@ -176,17 +184,24 @@ class Uplink:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=False)
             self._pool = None
-        if self._sink is not None:
-            left = self._sink.stop()
-            if left:
-                log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
-            self._sink = None
+        self._stop_producers()
         if self._session is not None:
             self._session.close()
             self._session = None
         if self._registry is not None:
             self._registry.stop()
             self._registry = None
+
+    def _stop_producers(self) -> None:
+        left = 0
+        if self._native is not None:
+            left += self._native.stop()
+            self._native = None
+        if self._sink is not None:
+            left += self._sink.stop()
+            self._sink = None
+        if left:
+            log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
 
     def __enter__(self) -> Uplink:
         return self.start()
@@ -239,8 +254,18 @@ class Uplink:
 
     def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> None:
         """On a worker: decode the batch and produce it; the reply comes with the last delivery report."""
+        scanned: ScannedBatch | None = None
         try:
-            batch = decode_batch(data)
+            if self._native is not None:
+                parsed = decode_batch_head(data)
+                try:
+                    scanned = ScannedBatch.scan(parsed.body, parsed.groups_at)
+                    batch = view(parsed.head, scanned)
+                except ValueError:
+                    batch = decode_batch(data)  # says exactly what is wrong (WireError)
+                    scanned = None
+            else:
+                batch = decode_batch(data)
         except WireError as exc:
             self._limiter.log(
                 logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s", str(query.key_expr), exc
@@ -272,6 +297,7 @@ class Uplink:
         )
         # ---------------------------------------------------------------------------------------
         missing = ids.unknown(batch.site, batch.elided) if batch.elided else ()
+        last_seq = scanned.seqs()[-1] if scanned is not None else batch.last_seq
         if missing:  # before anything is produced: the edge sends the batch again, with them
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
             log.info(
@@ -279,7 +305,7 @@ class Uplink:
                 batch.edge_id,
                 batch.stream,
                 batch.first_seq,
-                batch.last_seq,
+                last_seq,
                 len(missing),
             )
             self._finish(
@@ -288,7 +314,7 @@ class Uplink:
                     edge_id=batch.edge_id,
                     stream=batch.stream,
                     first_seq=batch.first_seq,
-                    last_seq=batch.last_seq,
+                    last_seq=last_seq,
                     status="need_schemas",
                     missing_schemas=missing,
                     detail="send the batch again with these schemas",
@@ -297,8 +323,9 @@ class Uplink:
             return
 
         def done(ack: Ack) -> None:
+            records = len(scanned) if scanned is not None else len(batch.records)
             self.metrics.on_ingested(
-                batch.site, ack.status, len(batch.records), sum(f.dead_lettered for f in ack.failures)
+                batch.site, ack.status, records, sum(f.dead_lettered for f in ack.failures)
             )
             if ack.status == "ok":
                 self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
@@ -316,16 +343,32 @@ class Uplink:
             self._finish(query, ack)
 
         metered = not isinstance(self.metrics, NullMetrics)
-        BatchJob(
-            batch,
+        on_delivery = self.metrics.on_delivered if metered else None
+        job = partial(
+            BatchJob,
             sink=sink,
             schema_ids=ids,
             dead_letter_topic=self.config.topics.dead_letter,
-            on_done=done,
             stats=self.stats,
             dead_letter_max_bytes=self._dlq_max,
-            on_delivery=self.metrics.on_delivered if metered else None,
+            on_delivery=on_delivery,
             diversion=diversion,
+        )
+        native = self._native
+        if scanned is None or native is None:
+            job(batch, on_done=done).run()
+            return
+        NativeJob(
+            batch,
+            scanned,
+            native=native,
+            sink=sink,
+            schema_ids=ids,
+            routes=verdict.routes,
+            job=partial(job, counted=False),
+            on_done=done,
+            stats=self.stats,
+            on_delivery=on_delivery,
         ).run()
 
     def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:

@@ -17,6 +17,7 @@ from fleetlink.common.zenoh_options import add_zenoh_arguments, options_from_arg
 
 
 def register_calls(ros_sub: Any, add_types: Any) -> None:
+    """``ros call`` and ``ros action send_goal``; ``add_types`` adds --distro and --msg-path."""
     call = ros_sub.add_parser("call", help="call a ROS service once (like ros2 service call)")
     call.add_argument("service", help="the service, e.g. /tb4_01/e_stop")
     call.add_argument("type", help="the service type, e.g. irobot_create_msgs/srv/EStop")
@@ -51,12 +52,11 @@ def _values(text: str) -> Any:
 
 
 def _node(args: argparse.Namespace) -> Any:
-    from fleetlink.cli.ros import _msg_paths
+    from fleetlink.cli.ros_common import typestore
     from fleetlink.roswire.node import RosNode
     from fleetlink.roswire.session import ros_session_config
-    from fleetlink.schemas.typestore import load_typestore
 
-    ts = load_typestore(args.distro, _msg_paths(args))
+    ts = typestore(args)
     config = ros_session_config(options_from_args(args))
     return RosNode(
         "fleetlink_cli", "/", domain_id=args.domain_id, config=config, typestore=ts, distro=args.distro

@@ -321,6 +321,7 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
                 sys.executable,
                 "-m",
                 "fleetlink",
+                "ros",
                 "sim",
                 "--robots",
                 "1",
