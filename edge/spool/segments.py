@@ -115,7 +115,8 @@ class Recovery:
 
 def _lost(reason: str, path: Path, damage: Damage, seqs: tuple[int, int], ack_mark: int) -> Finding:
     first, last, records = lost_range(seqs[0], seqs[1], ack_mark)
-    detail = f"{damage.end - damage.offset} bytes: {damage.reason}"
+    span = damage.end - damage.offset
+    detail = f"{span} bytes: {damage.reason}" if span else damage.reason
     return Finding(reason, path.name, damage.offset, damage.end, first, last, records, detail)
 
 

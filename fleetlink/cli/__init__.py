@@ -25,6 +25,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.cli.schemas",
     "fleetlink.cli.certs",
     "fleetlink.cli.edge",
+    "fleetlink.cli.spool",
     "fleetlink.cli.uplink",
     "fleetlink.cli.repeater",
 )

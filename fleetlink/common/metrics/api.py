@@ -27,6 +27,7 @@ class Metrics(Protocol):
     def on_dropped(self, mapping: str, stage: str | None, reason: str, n: int = 1) -> None: ...
     def on_dead_letter(self, mapping: str, stage: str | None = None, n: int = 1) -> None: ...
     def on_gap(self, topic: str, n: int = 1) -> None: ...
+    def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None: ...
 
     # buffers and the WAN (edge)
     def on_spooled(self, n: int, nbytes: int, stream: str = "spool") -> None: ...
@@ -43,6 +44,7 @@ class Metrics(Protocol):
         depth: int,
         in_flight: int,
         oldest_age_s: float,
+        damage_unacknowledged: int = 0,
     ) -> None: ...
     def set_wan(self, *, in_flight: int, link_up: bool) -> None: ...
     def set_robots(self, n: int) -> None: ...
@@ -97,6 +99,9 @@ class FamilyMetrics:
     def on_gap(self, topic: str, n: int = 1) -> None:
         self._count("fleetlink_sequence_gaps", topic, n=n)
 
+    def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None:
+        self._count("fleetlink_lost_before_spool", robot, topic, n=n)
+
     # buffers and the WAN -----------------------------------------------------------------
     def on_spooled(self, n: int, nbytes: int, stream: str = "spool") -> None:
         self._count("fleetlink_spool_appended_records", stream, n=n)
@@ -131,6 +136,7 @@ class FamilyMetrics:
         depth: int,
         in_flight: int,
         oldest_age_s: float,
+        damage_unacknowledged: int = 0,
     ) -> None:
         labels = (stream,)
         self._set(family("fleetlink_spool_bytes"), labels, nbytes)
@@ -138,6 +144,7 @@ class FamilyMetrics:
         self._set(family("fleetlink_spool_depth_records"), labels, depth)
         self._set(family("fleetlink_spool_in_flight_records"), labels, in_flight)
         self._set(family("fleetlink_spool_oldest_age_seconds"), labels, oldest_age_s)
+        self._set(family("fleetlink_spool_damage_unacknowledged"), labels, damage_unacknowledged)
 
     def set_wan(self, *, in_flight: int, link_up: bool) -> None:
         self._set(family("fleetlink_wan_in_flight_batches"), (), in_flight)

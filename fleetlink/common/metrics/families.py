@@ -80,13 +80,24 @@ FAMILIES: tuple[Family, ...] = (
         "Samples one stage dropped (reason: dropped, late, error)",
     ),
     _c("fleetlink_sequence_gaps", ("topic",), "ROS messages missing from a publisher's sequence numbers"),
+    _c(
+        "fleetlink_lost_before_spool",
+        ("robot", "topic"),
+        "ROS messages a publisher sent that never reached the spool: the edge was stopped or crashed "
+        "(counted from each publisher's first message after a restart)",
+    ),
     # -- buffers and the WAN (edge) --------------------------------------------------------
     _c("fleetlink_spool_appended_records", ("stream",), "Records appended to a buffer"),
     _c("fleetlink_spool_appended_bytes", ("stream",), "Bytes appended to a buffer"),
     _c(
         "fleetlink_spool_dropped_records",
         ("stream", "reason"),
-        "Records a buffer lost (reason: dropped_oldest, dropped_newest, corrupt, block_timeout)",
+        "Records a buffer lost (reason: dropped_oldest, dropped_newest, corrupt, missing, block_timeout)",
+    ),
+    _g(
+        "fleetlink_spool_damage_unacknowledged",
+        ("stream",),
+        "Damage findings in a spool awaiting an operator's acknowledgement",
     ),
     _g("fleetlink_spool_bytes", ("stream",), "Bytes held by a buffer (unacknowledged records)"),
     _g("fleetlink_spool_capacity_bytes", ("stream",), "The buffer's size limit in bytes"),

@@ -179,7 +179,9 @@ def test_torn_ledger_entry_is_ignored(tmp_path: Path, caplog: pytest.LogCaptureF
     assert len(ledger.read_bytes()) % ENTRY_SIZE == 0  # rewritten whole
 
 
-def test_a_lost_ledger_file_is_restored_from_its_copy(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def test_a_lost_ledger_file_is_restored_from_its_copy(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     fill(tmp_path, 50, ack_first=20)
     (tmp_path / "ledger").unlink()
     caplog.set_level(logging.ERROR)
