@@ -51,6 +51,8 @@ ROUTES = [
     ("put", "/robot_types/tb4"),
     ("delete", "/robot_types/tb4"),
     ("get", "/overlay"),
+    ("get", "/spool/damage"),
+    ("post", "/spool/damage/acknowledge"),
 ]
 
 
