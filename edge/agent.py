@@ -62,6 +62,9 @@ from fleetlink.wire import ingest_key
 log = logging.getLogger(__name__)
 
 _NS = 1_000_000_000
+ROBOT_PRIME_S = 2.0
+"""At start, how long the edge waits at most for the robots alive on the network (a liveliness
+query the router answers at once)."""
 _RECORD_MARGIN = 64 << 10
 """Room left in a spool frame for a record's topic, key and headers around its value."""
 
@@ -239,8 +242,12 @@ class EdgeAgent:
         self._processor.start()
         for sender in self._senders.values():
             sender.start()
-        self._subscriptions.start()
+        # robots alive now are registered before anything is received: a sample of a robot not
+        # registered yet makes no record, and after a restart it would be lost without a count
         self._registrar.start()
+        if registration.discover:
+            self._registrar.prime(ROBOT_PRIME_S)
+        self._subscriptions.start()
 
     @staticmethod
     def _robot_type(name: str, match: str) -> RobotType:

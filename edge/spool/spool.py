@@ -99,6 +99,8 @@ class Spool:
         self._space = threading.Condition(self._lock)
         self._state = "new"
         self._max_len = self.options.segment_bytes - SEGMENT_HEADER_SIZE - HEADER_SIZE
+        # a group must fit one frame of a segment, with its per-record lengths and a marks block
+        self._group_bytes = max(1, min(self.options.group_bytes, self._max_len * 3 // 4))
         self._ledger = Ledger(self.directory)
         self._report = DamageReport(self.directory)
         self._marks = MarkBook()
@@ -249,7 +251,7 @@ class Spool:
         """Take records in order (as groups: one write, one fsync when due). Under ``block`` a
         timeout raises ``SpoolFullError`` whose ``taken`` counts the leading records taken."""
         check_payloads(payloads, self._max_len)
-        groups = pack_groups(payloads, self.options.group_records, self.options.group_bytes)
+        groups = pack_groups(payloads, self.options.group_records, self._group_bytes)
         results: list[int | None] = []
         try:
             self._append_groups(groups, results)
@@ -262,8 +264,7 @@ class Spool:
         """Take a group made elsewhere (split when above the group limits); returns the records
         taken. Under ``block`` a timeout raises ``SpoolFullError`` with ``taken`` set."""
         groups = [
-            (g, group_count(g))
-            for g in split_group(group, self.options.group_records, self.options.group_bytes)
+            (g, group_count(g)) for g in split_group(group, self.options.group_records, self._group_bytes)
         ]
         for g, _count in groups:
             if len(g) > self._max_len:

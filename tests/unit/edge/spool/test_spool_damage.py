@@ -187,7 +187,7 @@ def test_damage_found_while_reading_is_reported(tmp_path: Path) -> None:
     with segment.open("r+b") as handle:  # the disk goes bad under the running spool
         handle.seek(SEGMENT_HEADER_SIZE + 2 * FRAME + HEADER_SIZE + 20)
         handle.write(b"\xff")
-    seqs = []
+    seqs: list[int] = []
     while (batch := spool.read_unacked(100, 1 << 20)) is not None:
         seqs.extend(r.seq for r in batch.records)
         spool.ack(batch.first_seq)
