@@ -51,6 +51,7 @@ from confluent_kafka.serialization import MessageField, SerializationContext
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fleetlink.common.command_keys import write_command_key  # noqa: E402
 from fleetlink.localstack.process import exit_on_sigterm  # noqa: E402
 from fleetlink.localstack.relay import TcpRelay  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
@@ -246,11 +247,20 @@ def main(argv: list[str] | None = None) -> int:
         site = stack.enter_context(ZenohRouter(connect=(relay.endpoint,), extra=NO_GOSSIP))
         robots = Robots(site.endpoint, args.robots, ts)
         stack.callback(robots.close)
+        signing_key, public_key = write_command_key(
+            Path(state) / "keys"
+        )  # the uplink signs, the repeater checks
         repeater = stack.enter_context(
             Repeater(
                 RepeaterConfig.model_validate(
                     {
-                        "repeater": {"site": "site-a", "state_dir": state, "id": "bench", "heartbeat": "2s"},
+                        "repeater": {
+                            "site": "site-a",
+                            "state_dir": state,
+                            "id": "bench",
+                            "heartbeat": "2s",
+                            "command_keys": [str(public_key)],
+                        },
                         "ros": {"distro": "jazzy", "message_paths": [str(IROBOT)]},
                         "zenoh": {"mode": "client", "connect": [site.endpoint]},
                     }
@@ -268,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
                     "command_dead_letter": f"bench.dlq.{run}",
                     "dead_letter": f"bench.dl.{run}",
                 },
+                "command_signing": {"key_file": str(signing_key)},
                 "commands": [
                     {
                         "name": "lightring",

@@ -91,19 +91,15 @@ class EdgeAgent:
         config: EdgeConfig,
         zenoh_options: ZenohOptions | None = None,
         *,
-        intake_items: int = 100_000,
-        intake_bytes: int = 64 << 20,
         stop_timeout_s: float = 5.0,
     ) -> None:
         self.config = config
         self.zenoh_options = config.zenoh.merged_with(zenoh_options or ZenohOptions())
         self.table: MappingTable = config.mapping_table()
         self.stop_timeout_s = stop_timeout_s
-        self.intake_items = intake_items
-        self.intake_bytes = intake_bytes
         self.intake: Intake[Item] = Intake()
         """Control items for the processing thread (registration events); samples go through the
-        data plane's intake (``intake_items`` samples, ``intake_bytes`` bytes)."""
+        data plane's intake (the config's ``intake`` section)."""
         self._lock = threading.Lock()
         self._started = False
         self._session: zenoh.Session | None = None
@@ -184,10 +180,13 @@ class EdgeAgent:
             on_schema=book.add,
         )
         session_config = edge_session_config(self.zenoh_options)
+        plane_config = python_config_json(session_config)
+        # the edge's session first: a router-mode edge's data plane connects to its listeners
+        self._session = session = open_session(session_config)
         self._source = source = NativeSource(
-            python_config_json(session_config),
-            max_items=self.intake_items,
-            max_bytes=self.intake_bytes,
+            plane_config,
+            max_items=config.intake.max_samples,
+            max_bytes=int(config.intake.max_bytes),
             max_value_bytes=self._maker.max_value_bytes,
             group_records=group_records,
             group_bytes=group_bytes,
@@ -195,7 +194,6 @@ class EdgeAgent:
         # what each publisher had in the spool when the last run stopped: its first sample now
         # tells what never reached the spool (lost_at_restart, docs/spool.md "Loss before the spool")
         source.seed(self._spool.marks())
-        self._session = session = open_session(session_config)
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)
         self._senders = {
@@ -391,6 +389,8 @@ class EdgeAgent:
         }
         if self._processor is not None:
             out.update(self._processor.counters())
+            out["intake"]["lag_ms"] = self._processor.lag_ns // 1_000_000
+        out["memory"] = {"rss_bytes": resident_bytes(), "bound_bytes": self.config.memory_bound()}
         if self._subscriptions is not None:
             out["subscriptions"] = self._subscriptions.snapshot()
             out["lost_before_spool"] = lost_before_spool(out["subscriptions"], self.table)
@@ -460,6 +460,17 @@ def lost_before_spool(subscriptions: dict[str, Any], table: MappingTable) -> dic
         robot = min(robots) if robots else parts[0] if len(parts) > 1 else ""  # (a robot gone since)
         out.setdefault(robot, {})[topic] = int(lost)
     return out
+
+
+def resident_bytes() -> int:
+    """This process's resident memory (0 where /proc is not there)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
 
 
 def _stats_dict(buffer: RecordBuffer) -> dict[str, Any]:

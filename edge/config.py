@@ -56,7 +56,8 @@ class RosSection(Section):
     distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "jazzy"
     """Decides type hashes and the rmw_zenoh wire details."""
     message_paths: list[Path] = []
-    """Folders of custom ``.msg`` packages (e.g. irobot_create_msgs)."""
+    """Folders of your own packages (each holding ``msg/``, ``srv/``, ``action/``); the standard
+    ones and irobot_create_msgs ship with fleetlink (a folder here replaces a package of its name)."""
     attachment: Literal["auto", "v1", "v2"] = "auto"
 
 
@@ -215,6 +216,23 @@ class MemorySection(Section):
         return MemoryBuffer(max_bytes=int(self.max_bytes), max_records=self.max_records)
 
 
+BASE_RSS = 256 << 20
+"""The edge process with nothing held (measured 170-200 MB with 1,000 subscriptions and the
+standard type store; rounded up)."""
+
+
+class IntakeSection(Section):
+    """What the edge holds between receiving a sample and spooling its records: one queue for
+    every subscription, bounded in samples and in bytes. A sample that does not fit is dropped
+    and counted (``intake.dropped``): the robots never wait, and the edge's memory stays bounded
+    whatever the backlog (docs/edge.md, "Memory")."""
+
+    max_samples: int = Field(default=100_000, ge=1, le=10_000_000)
+    max_bytes: ByteSize = ByteSize(64 << 20)
+    lag_alarm: DurationNs = 2 * _NS
+    """Health turns ``degraded`` while samples wait longer than this between receipt and spool."""
+
+
 class WanSection(Section):
     # Defaults measured with bench/bench_e2e.py (docs/benchmarks.md): batches of 500 records cost
     # the edge 14% and the uplink 12% more CPU per record than batches of up to 2,000 (each batch
@@ -277,9 +295,20 @@ class EdgeConfig(Section):
     registration: RegistrationSection = RegistrationSection()
     spool: SpoolSection
     memory: MemorySection = MemorySection()
+    intake: IntakeSection = IntakeSection()
     wan: WanSection = WanSection()
     topics: TopicsSection = TopicsSection()
     admin: AdminSection | None = None
+
+    def memory_bound(self) -> int:
+        """The edge's resident memory at most, in bytes, whatever the backlog: the base process
+        (interpreter, libraries, type store, Zenoh sessions), the intake (samples plus the
+        bookkeeping of each), the spool's frames kept in memory, the memory buffer, the WAN
+        batches in flight (raw and compressed) and the group being built."""
+        recent = min(32 << 20, int(self.spool.max_bytes))
+        intake = int(self.intake.max_bytes) + self.intake.max_samples * 160
+        wan = self.wan.max_in_flight * 2 * int(self.wan.batch_max_bytes) + 2 * int(self.wan.batch_max_bytes)
+        return BASE_RSS + intake + recent + int(self.memory.max_bytes) + wan
 
     @model_validator(mode="after")
     def _unique_names(self) -> EdgeConfig:

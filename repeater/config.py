@@ -5,8 +5,9 @@
     repeater:
       site: warehouse-a              # serves fleetlink/<site>/command/**
       state_dir: /var/lib/fleetlink/repeater
+      command_keys: [/etc/fleetlink/command-signing.pem]   # the uplink's public key
       dead_man: 30s                  # optional cap; default: each command's own lease
-    ros: {domain_id: 0, distro: jazzy, message_paths: [msgs/irobot_create_msgs]}
+    ros: {domain_id: 0, distro: jazzy}      # message_paths: [your own packages' folders]
     zenoh: {mode: peer, connect: [tcp/127.0.0.1:7447]}   # the site router
 
 Durations are ``"250ms"``, ``"1s"``, ``"2m"``, ``"1h"`` or a number of seconds
@@ -22,6 +23,7 @@ from pydantic import Field
 
 from fleetlink.common.configfile import Section
 from fleetlink.common.durations import PositiveSeconds
+from fleetlink.common.metrics_config import MetricsSection
 from fleetlink.common.names import KeyChunk, Site, host_id
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.schemas.typestore import Distro
@@ -35,6 +37,11 @@ def default_repeater_id() -> str:
 class RepeaterSection(Section):
     site: Site = Field(examples=["warehouse-a"])
     state_dir: Path
+    command_keys: list[Path] = Field(
+        min_length=1,
+        description="public keys (PEM) of the uplink's command signing key: a command not signed "
+        "by one of them for this site is refused unread (fleetlink certs command-key)",
+    )
     id: KeyChunk = Field(default_factory=default_repeater_id)
     """Names this repeater in status batches (one key chunk)."""
     dead_man: PositiveSeconds | None = None
@@ -52,10 +59,13 @@ class RosSection(Section):
     distro: Distro = "jazzy"
     """Decides type hashes (and so the data keys robots subscribe on)."""
     message_paths: list[Path] = []
-    """Folders of custom ``.msg`` packages the commands use (e.g. irobot_create_msgs)."""
+    """Folders of your own packages the commands use; the standard ones and irobot_create_msgs ship
+    with fleetlink (a folder here replaces a package of its name)."""
 
 
 class RepeaterConfig(Section):
     repeater: RepeaterSection
     ros: RosSection = RosSection()
     zenoh: ZenohSection = ZenohSection()
+    metrics: MetricsSection | None = None
+    """Prometheus ``/metrics`` and ``/health`` over HTTP; off when absent (docs/metrics.md)."""

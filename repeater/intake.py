@@ -1,21 +1,26 @@
-"""Commands arriving over Zenoh: each envelope is checked, converted to CDR, offered to the
-schedule, journalled (fsynced before the answer) and answered with what the repeater did
-(``applied``, ``duplicate``, ``expired``, ``superseded``, ``rejected``, ``need-schema``)."""
+"""Commands arriving over Zenoh: each envelope's signature is checked first (only the cloud's key
+makes a command, ``fleetlink.wire.command_auth``: a forged one is refused, counted and never
+read further nor journalled); then it is decoded, converted to CDR, offered to the schedule,
+journalled (fsynced before the answer) and answered with what the repeater did (``applied``,
+``duplicate``, ``expired``, ``superseded``, ``rejected``, ``need-schema``)."""
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import zenoh
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
+from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.repeater.converter import Converter
 from fleetlink.repeater.errors import ConversionError, JournalError
 from fleetlink.repeater.schedule import Change, Offer, Publish
 from fleetlink.repeater.shared import Shared, to_command
 from fleetlink.repeater.statuses import record
+from fleetlink.wire.command_auth import verify_envelope
 from fleetlink.wire.commands import CommandEnvelope, CommandReply, Result, decode_envelope, encode_reply
-from fleetlink.wire.errors import EnvelopeError
+from fleetlink.wire.errors import CommandAuthError, EnvelopeError
 from fleetlink.wire.keys import command_key
 
 log = logging.getLogger(__name__)
@@ -38,20 +43,40 @@ class Intake:
         *,
         max_active: int,
         publish: Callable[[list[Publish], float], None],
+        keys: Mapping[bytes, Ed25519PublicKey],
+        on_forged: Callable[[str], None] = lambda _kind: None,
     ) -> None:
         self._shared = shared
         self._converter = converter
         self._max_active = max_active
         self._publish = publish
+        self._keys = keys
+        self._on_forged = on_forged
+        self._limiter = LogLimiter(log)
 
     def on_query(self, query: zenoh.Query) -> None:
         """A Zenoh query on ``fleetlink/<site>/command/**`` (on a Zenoh thread)."""
         shared = self._shared
+        payload = query.payload
+        data = payload.to_bytes() if payload is not None else b""
         try:
-            payload = query.payload
+            attachment = query.attachment
+            verify_envelope(
+                data, attachment.to_bytes() if attachment is not None else None, shared.site, self._keys
+            )
+        except CommandAuthError as exc:
+            shared.stats.forged += 1
+            self._on_forged(exc.kind)
+            self._limiter.log(
+                logging.WARNING, f"forged:{exc.kind}", "refused a command on %s: %s", query.key_expr, exc
+            )
+            query.reply_err(str(exc).encode())
+            query.drop()
+            return
+        try:
             if payload is None:
                 raise EnvelopeError("command envelope", "the query carries no payload")
-            env = decode_envelope(payload.to_bytes())
+            env = decode_envelope(data)
         except EnvelopeError as exc:
             shared.stats.malformed += 1
             log.warning("refused a malformed command on %s: %s", query.key_expr, exc)

@@ -22,11 +22,17 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 import zenoh
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
+from fleetlink.common.command_keys import load_public_key
+from fleetlink.common.errors import FleetlinkError
+from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
+from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.repeater.config import RepeaterConfig
 from fleetlink.repeater.converter import Converter
@@ -45,6 +51,7 @@ from fleetlink.roswire.node import RosNode
 from fleetlink.roswire.session import open_session, ros_session_config
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire.command_auth import key_id
 from fleetlink.wire.commands import CommandEnvelope, CommandReply
 from fleetlink.wire.keys import site_prefix
 
@@ -82,6 +89,10 @@ class Repeater:
         self._node: RosNode | None = None
         self._watcher: GraphWatcher | None = None
         self._queryable: Any = None
+        self.metrics: PrometheusMetrics | NullMetrics = (
+            PrometheusMetrics("repeater") if config.metrics is not None else NullMetrics()
+        )
+        self._metrics_server: HttpServer | None = None
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -92,7 +103,12 @@ class Repeater:
         except SchemaError as exc:
             raise RepeaterConfigError(f"ros.message_paths: cannot load message types: {exc}") from None
         intake = self._intake = Intake(
-            shared, Converter(typestore, ros.distro), max_active=cfg.max_active, publish=self._loop.publish
+            shared,
+            Converter(typestore, ros.distro),
+            max_active=cfg.max_active,
+            publish=self._loop.publish,
+            keys=trusted_keys(cfg.command_keys),
+            on_forged=self.metrics.on_forged_command,
         )
         self.store.open()
         with shared.lock:
@@ -125,11 +141,17 @@ class Repeater:
         self._loop.start()
         key = f"{site_prefix(self.site)}/command/**"
         self._queryable = self._session.declare_queryable(key, intake.on_query)
+        if self.config.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
+            host, port = split_listen(self.config.metrics.listen)
+            self._metrics_server = serve_metrics(host, port, self.metrics)
         log.info("repeater %s serving %s (%d commands resumed)", self.id, key, len(self.schedule.active()))
         return self
 
     def stop(self) -> None:
         shared = self._shared
+        if self._metrics_server is not None:
+            self._metrics_server.stop()
+            self._metrics_server = None
         if self._queryable is not None:
             self._queryable.undeclare()
             self._queryable = None
@@ -183,8 +205,25 @@ class Repeater:
 
     # -- views ----------------------------------------------------------------------------
 
+    @property
+    def metrics_url(self) -> str | None:
+        """Where ``/metrics`` and ``/health`` are served, when configured."""
+        return self._metrics_server.url if self._metrics_server is not None else None
+
     def subscribers(self, topic: str) -> int:
         return self._subscribers.count(topic)
 
     def pending_statuses(self) -> int:
         return self._shared.link.pending() if self._shared.link is not None else 0
+
+
+def trusted_keys(paths: list[Path]) -> dict[bytes, Ed25519PublicKey]:
+    """The public keys commands must be signed with, by key id (errors name the config key)."""
+    keys: dict[bytes, Ed25519PublicKey] = {}
+    for index, path in enumerate(paths):
+        try:
+            key = load_public_key(path)
+        except FleetlinkError as exc:
+            raise RepeaterConfigError(f"repeater.command_keys[{index}]: {exc}") from None
+        keys[key_id(key)] = key
+    return keys

@@ -24,6 +24,8 @@ class RepeaterStats:
     rejected: int = 0
     need_schema: int = 0
     malformed: int = 0
+    forged: int = 0
+    """Commands refused unread: not signed by a trusted key for this site."""
     publishes: int = 0
     late_joiner_publishes: int = 0
     publish_errors: int = 0

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
-from pydantic import Field, field_validator
+from pathlib import Path
+
+from pydantic import Field, field_validator, model_validator
 
 from fleetlink.common.configfile import Section
 from fleetlink.common.console_config import ConsoleSection
-from fleetlink.common.names import KafkaTopic, site_problem
+from fleetlink.common.durations import Seconds
+from fleetlink.common.metrics_config import MetricsSection
+from fleetlink.common.names import KafkaTopic, Site, site_problem
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.uplink.commands.mapping import CommandMapping, unique_names
 from fleetlink.uplink.kafka_settings import KafkaSection
+from fleetlink.uplink.policy import pattern_problem
 
 
 class RegistrySection(Section):
@@ -25,11 +30,18 @@ class TopicsSection(Section):
     registrations: KafkaTopic = "fleetlink.robots"
     command_dead_letter: KafkaTopic = "fleetlink.commands.dead-letter"
     command_status: KafkaTopic = "fleetlink.commands.status"
+    refused: KafkaTopic = "fleetlink.refused"
+    """The cloud-side dead-letter topic: records the uplink refused (site, topic and reason in headers)."""
 
 
 class IngestSection(Section):
     sites: list[str] = Field(default=["*"], description="sites served (Zenoh key chunks; * = all)")
     max_concurrent_batches: int = Field(default=64, ge=1, le=10_000)
+    native: bool = Field(
+        default=True,
+        description="produce records through the native path (librdkafka without the GIL, decisions "
+        "per tail); false: every record through Python",
+    )
 
     @field_validator("sites")
     @classmethod
@@ -41,8 +53,50 @@ class IngestSection(Section):
         return value
 
 
-class MetricsSection(Section):
-    listen: str = Field(default="127.0.0.1:9464", description="host:port serving /metrics and /health")
+class SitePolicy(Section):
+    topics: list[str] = Field(
+        default=["*"],
+        description="Kafka topic patterns the site may write ('*', '?', '[...]'; {site} is the site's "
+        "name); topics fleetlink owns are refused whatever the patterns say",
+    )
+
+    @field_validator("topics")
+    @classmethod
+    def _patterns(cls, value: list[str]) -> list[str]:
+        for pattern in value:
+            problem = pattern_problem(pattern)
+            if problem is not None:
+                raise ValueError(f"{pattern!r} {problem}")
+        return value
+
+
+class PolicySection(Section):
+    """Where each site may write (docs/security.md): ``default`` for every site, ``sites`` per site."""
+
+    default: SitePolicy = SitePolicy()
+    sites: dict[Site, SitePolicy] = {}
+
+    def patterns(self) -> dict[str, list[str]]:
+        return {site: policy.topics for site, policy in self.sites.items()}
+
+
+class OwnershipSection(Section):
+    release_after: Seconds = Field(
+        default=0.0,
+        ge=0,
+        description="how long a robot deregistered by its site (liveliness lost for the edge's grace "
+        "period) stays that site's before another site may register it",
+    )
+
+
+class CommandSigningSection(Section):
+    key_file: Path = Field(
+        description="the Ed25519 private key (PEM) command envelopes are signed with "
+        "(fleetlink certs command-key); repeaters hold its public key"
+    )
+
+
+__all__ = ["MetricsSection", "UplinkConfig"]
 
 
 class UplinkConfig(Section):
@@ -57,8 +111,23 @@ class UplinkConfig(Section):
     """Prometheus ``/metrics`` and ``/health`` over HTTP; off when absent (docs/metrics.md)."""
     console: ConsoleSection | None = None
     """The fleet web console (every site through the Zenoh admin space); off when absent (docs/console.md)."""
+    policy: PolicySection = PolicySection()
+    """The Kafka topics each site may write (docs/security.md)."""
+    ownership: OwnershipSection = OwnershipSection()
+    """When a robot may move to another site (docs/security.md)."""
+    command_signing: CommandSigningSection | None = None
+    """The key commands are signed with; required with command mappings (docs/commands.md)."""
 
     @field_validator("commands")
     @classmethod
     def _unique_command_names(cls, value: list[CommandMapping]) -> list[CommandMapping]:
         return unique_names(value)
+
+    @model_validator(mode="after")
+    def _signing_key_for_commands(self) -> UplinkConfig:
+        if self.commands and self.command_signing is None:
+            raise ValueError(
+                "command_signing.key_file is required with command mappings: repeaters accept "
+                "only signed commands (make a key with 'fleetlink certs command-key DIR')"
+            )
+        return self

@@ -20,3 +20,7 @@ class ProduceError(UplinkError):
         super().__init__(message)
         self.code = code
         self.retriable = retriable
+
+
+class KafkaCredentialsError(ConfigError, UplinkError):
+    """The broker refused the configured credentials (SASL or TLS client certificate)."""

@@ -24,6 +24,7 @@ from confluent_kafka import KafkaError, Message
 
 from fleetlink.schemas.single_object import confluent_frame
 from fleetlink.uplink.dead_letter import dead_letter
+from fleetlink.uplink.diversion import Diversion
 from fleetlink.uplink.errors import ProduceError
 from fleetlink.uplink.producer import Delivery, RawCallback
 from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
@@ -79,6 +80,15 @@ class IngestStats:
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
 
+def count_outcome(stats: IngestStats, status: str) -> None:
+    """Count a batch answered ``status``."""
+    with stats.lock:
+        if status == "ok":
+            stats.batches_ok += 1
+        else:
+            stats.batches_failed += 1
+
+
 class BatchJob:
     """Produce one batch; ``on_done(ack)`` is called once, when every record is settled."""
 
@@ -93,8 +103,14 @@ class BatchJob:
         stats: IngestStats,
         dead_letter_max_bytes: int = 900_000,
         on_delivery: Callable[[str, bool, float], None] | None = None,
+        diversion: Diversion | None = None,
+        counted: bool = True,
     ) -> None:
         self._batch = batch
+        self._counted = counted
+        """False for a part of a batch (``native_ingest``): the whole batch is counted there."""
+        self._diversion = diversion
+        """Records of topics the policy does not let out as they are (``uplink.diversion``)."""
         self._sink = sink
         self._ids = schema_ids
         self._dlq = dead_letter_topic
@@ -110,9 +126,10 @@ class BatchJob:
 
     def run(self) -> None:
         records = self._batch.records
-        with self._stats.lock:
-            self._stats.batches += 1
-            self._stats.records += len(records)
+        if self._counted:
+            with self._stats.lock:
+                self._stats.batches += 1
+                self._stats.records += len(records)
         if not records:
             self._finish()
             return
@@ -121,8 +138,12 @@ class BatchJob:
         report = self._report
         heads: dict[tuple[str, bytes], bytes] = {}
         unavailable: dict[tuple[str, bytes], str] = {}  # the registry failed once: not again per record
+        diverted = self._diversion.routes if self._diversion is not None else None
         for index, record in enumerate(records):
             topic, value = record.kafka_topic, record.value
+            if diverted and topic in diverted:
+                self._divert(record)
+                continue
             if not record.raw_value:
                 head = heads.get((topic, value[2:10])) if value[:2] == SINGLE_OBJECT_MAGIC else None
                 if head is None:
@@ -158,9 +179,14 @@ class BatchJob:
 
     # -- per record ------------------------------------------------------------------------
 
+    def _divert(self, record: Record) -> None:
+        if self._diversion is not None:
+            self._diversion.handle(record, self._settle)
+
     def _kafka_value(self, record: Record) -> bytes:
         fingerprint, body = split_single_object(record.value)
-        schema_id = self._ids.id_for(record.kafka_topic, fingerprint, self._batch.schemas)
+        batch = self._batch
+        schema_id = self._ids.id_for(batch.site, record.kafka_topic, fingerprint, batch.schemas)
         return confluent_frame(schema_id, bytes(body))
 
     def _report(self, index: int, error: KafkaError | None, _msg: Message) -> None:
@@ -241,11 +267,8 @@ class BatchJob:
         failures = tuple(sorted(self._dead + self._retry, key=lambda f: f.seq))
         status: Literal["ok", "error"] = "error" if self._retry else "ok"
         detail = self._retry[0].reason if self._retry else ""
-        with self._stats.lock:
-            if status == "ok":
-                self._stats.batches_ok += 1
-            else:
-                self._stats.batches_failed += 1
+        if self._counted:
+            count_outcome(self._stats, status)
         self._on_done(
             Ack(
                 edge_id=batch.edge_id,

@@ -1,12 +1,18 @@
-"""Schema ids for (topic, fingerprint): registered once under ``<topic>-value``, then cached.
+"""Schema ids for (site, topic, fingerprint): registered once under ``<topic>-value``, then cached.
 
 The edge names each value's schema by its 64-bit fingerprint and ships the schema text in the
 batch until an uplink has acknowledged it; the uplink keeps every text it read (``learn``),
 registers it under the record's topic subject (TopicNameStrategy) and reuses the id for every
-later record of that pair. ``unknown`` names the left-out schemas it has no text for: the
+later record of that triple. ``unknown`` names the left-out schemas it has no text for: the
 batch is then answered ``need_schemas`` before anything is produced. A registry that cannot be
 reached is retriable (the batch goes back to the edge's spool); a registry that refuses the
 schema is not (the records go to the dead-letter topic with the registry's reason).
+
+Texts are verified and kept per site: ``learn`` computes the fingerprint of every text it has
+not seen from that site and returns those that do not match the fingerprint they came with
+(the batch is then refused), and a site's records only ever use texts that site sent. A text
+with the right fingerprint may still differ in what the fingerprint leaves out (docs, defaults,
+logical types); kept per site, it can only describe that site's own records.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from typing import Any, Protocol
 
 from fleetlink.schemas.errors import IncompatibleSchemaError, RegistryError
 from fleetlink.schemas.registry import RegistryUnavailableError, subject_for_topic
+from fleetlink.schemas.single_object import fingerprint
 
 
 class Registry(Protocol):
@@ -45,35 +52,50 @@ class SchemaIds:
     ) -> None:
         self._registry = registry
         self._compatibility = compatibility
-        self._ids: dict[tuple[str, bytes], int] = {}
-        self._texts: dict[bytes, str] = {}
+        self._ids: dict[tuple[str, str, bytes], int] = {}
+        self._texts: dict[tuple[str, bytes], str] = {}
         self._max_texts = max_texts
         self._lock = threading.Lock()
 
-    def learn(self, schemas: Mapping[bytes, str]) -> None:
-        """Remember the schema texts a batch carried (by fingerprint)."""
+    def learn(self, site: str, schemas: Mapping[bytes, str]) -> list[bytes]:
+        """Remember the schema texts a batch from ``site`` carried (by fingerprint); a text not
+        seen before from that site is checked against its fingerprint first. Returns the
+        fingerprints whose text does not match (none of those is learnt). The first matching text
+        of a fingerprint stays (another matching one differs only in docs or defaults)."""
         texts = self._texts
-        if all(fp in texts for fp in schemas):
-            return
-        with self._lock:
-            for fp, text in schemas.items():
-                if fp not in texts:
+        if all(texts.get((site, fp)) == text for fp, text in schemas.items()):
+            return []
+        wrong: list[bytes] = []
+        for fp, text in schemas.items():
+            known = texts.get((site, fp))
+            if known == text:
+                continue
+            if not _matches(fp, text):
+                wrong.append(fp)
+                continue
+            if known is None:
+                with self._lock:
                     if len(texts) >= self._max_texts:
                         del texts[next(iter(texts))]
-                    texts[fp] = text
+                    texts[site, fp] = text
+        return wrong
 
-    def unknown(self, fingerprints: Iterable[bytes]) -> tuple[bytes, ...]:
-        """Those of ``fingerprints`` with no text known here, in a stable order."""
-        return tuple(sorted(fp for fp in fingerprints if fp not in self._texts))
+    def unknown(self, site: str, fingerprints: Iterable[bytes]) -> tuple[bytes, ...]:
+        """Those of ``fingerprints`` with no text known here from ``site``, in a stable order."""
+        return tuple(sorted(fp for fp in fingerprints if (site, fp) not in self._texts))
 
-    def id_for(self, topic: str, fingerprint: bytes, schemas: Mapping[bytes, str]) -> int:
-        key = (topic, fingerprint)
+    def id_for(
+        self, site: str, topic: str, fingerprint: bytes, schemas: Mapping[bytes, str] | None = None
+    ) -> int:
+        """The registry id of ``site``'s schema ``fingerprint`` under ``topic``'s subject;
+        ``schemas``: the texts of the batch at hand, which ``learn`` verified."""
+        key = (site, topic, fingerprint)
         cached = self._ids.get(key)
         if cached is not None:
             return cached
-        text = schemas.get(fingerprint)
+        text = schemas.get(fingerprint) if schemas else None
         if text is None:
-            text = self._texts.get(fingerprint)
+            text = self._texts.get((site, fingerprint))
         if text is None:
             raise SchemaRefusedError(f"the batch carries no schema for fingerprint {fingerprint.hex()}")
         subject = subject_for_topic(topic)
@@ -93,3 +115,11 @@ class SchemaIds:
         with self._lock:
             self._ids[key] = schema_id
         return schema_id
+
+
+def _matches(expected: bytes, text: str) -> bool:
+    """Is ``text`` an Avro schema whose fingerprint is ``expected``?"""
+    try:
+        return fingerprint(text) == expected
+    except Exception:  # noqa: BLE001 - not JSON, not a schema fastavro can put in canonical form
+        return False

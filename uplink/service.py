@@ -20,20 +20,32 @@ from typing import Any, Protocol
 
 import zenoh
 
+from fleetlink._native import ScannedBatch
 from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
 from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.schemas.registry import SchemaRegistry
+from fleetlink.uplink.admission import Admission, Refused
+from fleetlink.uplink.commands.decode import CommandDecoder
+from fleetlink.uplink.commands.directory import RobotDirectory
+from fleetlink.uplink.commands.registrations import RegistrationsReader
 from fleetlink.uplink.commands.router import CommandRouter
 from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.diversion import Diversion
+from fleetlink.uplink.identity import source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats
+from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
+from fleetlink.uplink.native_ingest import NativeIngest, NativeJob, view
 from fleetlink.uplink.ordered import KeyedSerialExecutor
+from fleetlink.uplink.policy import InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
+from fleetlink.uplink.refusals import Refusals
+from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.topics import ensure_topics
-from fleetlink.wire import Ack, WireError, decode_batch, encode_ack
+from fleetlink.wire import Ack, WireError, decode_batch, decode_batch_head, encode_ack
 
 log = logging.getLogger(__name__)
 
@@ -72,11 +84,17 @@ class Uplink:
         self._session: zenoh.Session | None = None
         self._queryables: list[Any] = []
         self._sink: KafkaSink | None = None
+        self._native: NativeIngest | None = None
         self._registry: SchemaRegistry | None = None
         self._ids: SchemaIds | None = None
         self._pool: ThreadPoolExecutor | None = None
         self._serial: KeyedSerialExecutor | None = None
         self._commands: CommandRouter | None = None
+        self._admission: Admission | None = None
+        self._registrations: RegistrationWriter | None = None
+        self._reader: RegistrationsReader | None = None
+        self.directory = RobotDirectory(release_after_ms=round(config.ownership.release_after * 1000))
+        """Which site holds each robot: read from the registrations topic, claimed at ingest."""
         self.delivery_latency = DeliveryLatency()
         """Per site: from a batch's arrival to Kafka's last delivery report (shown by the console)."""
         self.extension_factories = tuple(extensions)
@@ -86,16 +104,31 @@ class Uplink:
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
         self._dlq_max = max(1_000, config.kafka.message_max_bytes - 64 * 1024)
+        self.refusals = Refusals(
+            self.metrics, refused_topic=config.topics.refused, max_value_bytes=self._dlq_max
+        )
+        """What was refused from each source (batches whole, records to the refused topic)."""
 
     # -- lifecycle -------------------------------------------------------------------------
 
     def start(self) -> Uplink:
         cfg = self.config
+        check_kafka_access(cfg.kafka)
         ensure_topics(cfg.kafka, cfg.topics)
         self._registry = SchemaRegistry(cfg.registry.url)
         self._registry.start()
         self._ids = SchemaIds(self._registry, compatibility=cfg.registry.compatibility)
+        self._admission = Admission(_policy(cfg), self._ids)
+        self._reader = RegistrationsReader(
+            cfg.kafka, cfg.topics.registrations, CommandDecoder(self._registry), self.directory
+        ).start()
+        self._registrations = RegistrationWriter(self._registry, cfg.topics.registrations, self.directory)
         self._sink = KafkaSink(cfg.kafka).start()
+        if cfg.ingest.native:
+            try:
+                self._native = NativeIngest(cfg.kafka.producer_config())
+            except (RuntimeError, ValueError) as exc:
+                log.warning("the native ingest path cannot start (%s); every record goes through Python", exc)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uplink-batch")
         self._serial = KeyedSerialExecutor(self._pool)
         self._session = zenoh.open(self._zenoh_options.to_config())
@@ -105,7 +138,7 @@ class Uplink:
             log.info("serving edge batches on %s", key)
         if cfg.commands:
             self._commands = CommandRouter(
-                cfg, session=self._session, sink=self._sink, registry=self._registry
+                cfg, session=self._session, sink=self._sink, registry=self._registry, directory=self.directory
             ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
@@ -138,20 +171,30 @@ class Uplink:
         if self._commands is not None:
             self._commands.stop()
             self._commands = None
+        if self._reader is not None:
+            self._reader.stop()
+            self._reader = None
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=False)
             self._pool = None
-        if self._sink is not None:
-            left = self._sink.stop()
-            if left:
-                log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
-            self._sink = None
+        self._stop_producers()
         if self._session is not None:
             self._session.close()
             self._session = None
         if self._registry is not None:
             self._registry.stop()
             self._registry = None
+
+    def _stop_producers(self) -> None:
+        left = 0
+        if self._native is not None:
+            left += self._native.stop()
+            self._native = None
+        if self._sink is not None:
+            left += self._sink.stop()
+            self._sink = None
+        if left:
+            log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
 
     def __enter__(self) -> Uplink:
         return self.start()
@@ -204,8 +247,18 @@ class Uplink:
 
     def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> None:
         """On a worker: decode the batch and produce it; the reply comes with the last delivery report."""
+        scanned: ScannedBatch | None = None
         try:
-            batch = decode_batch(data)
+            if self._native is not None:
+                parsed = decode_batch_head(data)
+                try:
+                    scanned = ScannedBatch.scan(parsed.body, parsed.groups_at)
+                    batch = view(parsed.head, scanned)
+                except ValueError:
+                    batch = decode_batch(data)  # says exactly what is wrong (WireError)
+                    scanned = None
+            else:
+                batch = decode_batch(data)
         except WireError as exc:
             self._limiter.log(
                 logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s", str(query.key_expr), exc
@@ -213,12 +266,31 @@ class Uplink:
             self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
             self._finish(query, error=f"malformed batch: {exc}")
             return
-        sink, ids = self._sink, self._ids
-        if sink is None or ids is None:
+        sink, ids, admission, registrations = self._sink, self._ids, self._admission, self._registrations
+        if sink is None or ids is None or admission is None or registrations is None:
             self._finish(query, error="uplink stopping")
             return
-        ids.learn(batch.schemas)
-        missing = ids.unknown(batch.elided) if batch.elided else ()
+        # -- who sent it, what it may write (uplink.admission): per batch, per distinct topic --
+        key = str(query.key_expr)
+        source = source_of(key)
+        verdict = (
+            Refused("identity", "not an ingest key") if source is None else admission.check(source, batch)
+        )
+        if isinstance(verdict, Refused):
+            self.refusals.batch(source, key, verdict.reason, verdict.detail)
+            self.metrics.on_ingested(site_of(key), "refused", 0)
+            self._finish(query, error=f"refused ({verdict.reason}): {verdict.detail}")
+            return
+        diversion = (
+            Diversion(
+                verdict.source, verdict.routes, sink=sink, refusals=self.refusals, registrations=registrations
+            )
+            if verdict.routes
+            else None
+        )
+        # ---------------------------------------------------------------------------------------
+        missing = ids.unknown(batch.site, batch.elided) if batch.elided else ()
+        last_seq = scanned.seqs()[-1] if scanned is not None else batch.last_seq
         if missing:  # before anything is produced: the edge sends the batch again, with them
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
             log.info(
@@ -226,7 +298,7 @@ class Uplink:
                 batch.edge_id,
                 batch.stream,
                 batch.first_seq,
-                batch.last_seq,
+                last_seq,
                 len(missing),
             )
             self._finish(
@@ -235,7 +307,7 @@ class Uplink:
                     edge_id=batch.edge_id,
                     stream=batch.stream,
                     first_seq=batch.first_seq,
-                    last_seq=batch.last_seq,
+                    last_seq=last_seq,
                     status="need_schemas",
                     missing_schemas=missing,
                     detail="send the batch again with these schemas",
@@ -244,8 +316,9 @@ class Uplink:
             return
 
         def done(ack: Ack) -> None:
+            records = len(scanned) if scanned is not None else len(batch.records)
             self.metrics.on_ingested(
-                batch.site, ack.status, len(batch.records), sum(f.dead_lettered for f in ack.failures)
+                batch.site, ack.status, records, sum(f.dead_lettered for f in ack.failures)
             )
             if ack.status == "ok":
                 self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
@@ -263,15 +336,32 @@ class Uplink:
             self._finish(query, ack)
 
         metered = not isinstance(self.metrics, NullMetrics)
-        BatchJob(
-            batch,
+        on_delivery = self.metrics.on_delivered if metered else None
+        job = partial(
+            BatchJob,
             sink=sink,
             schema_ids=ids,
             dead_letter_topic=self.config.topics.dead_letter,
-            on_done=done,
             stats=self.stats,
             dead_letter_max_bytes=self._dlq_max,
-            on_delivery=self.metrics.on_delivered if metered else None,
+            on_delivery=on_delivery,
+            diversion=diversion,
+        )
+        native = self._native
+        if scanned is None or native is None:
+            job(batch, on_done=done).run()
+            return
+        NativeJob(
+            batch,
+            scanned,
+            native=native,
+            sink=sink,
+            schema_ids=ids,
+            routes=verdict.routes,
+            job=partial(job, counted=False),
+            on_done=done,
+            stats=self.stats,
+            on_delivery=on_delivery,
         ).run()
 
     def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:
@@ -288,5 +378,13 @@ class Uplink:
 
 def site_of(key: str) -> str:
     """The site of an ingest key ``fleetlink/<site>/ingest/<edge_id>`` (``?`` if it is not one)."""
-    parts = key.split("/")
-    return parts[1] if len(parts) == 4 and parts[0] == "fleetlink" and parts[2] == "ingest" else "?"
+    source = source_of(key)
+    return source.site if source is not None else "?"
+
+
+def _policy(cfg: UplinkConfig) -> TopicPolicy:
+    topics = cfg.topics
+    owned = {topics.command_dead_letter, topics.command_status, topics.refused}
+    owned.update(mapping.from_ for mapping in cfg.commands)
+    internal = InternalTopics(topics.registrations, topics.dead_letter, frozenset(owned))
+    return TopicPolicy(cfg.policy.patterns(), cfg.policy.default.topics, internal)

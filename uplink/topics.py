@@ -14,7 +14,7 @@ log = logging.getLogger(__name__)
 
 
 def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float = 15.0) -> None:
-    """Create the registrations (compacted), dead-letter and command topics if missing.
+    """Create the registrations (compacted), dead-letter, refused and command topics if missing.
 
     A broker that cannot be reached now is not fatal: the uplink starts, records wait in the
     edges' spools, and the next start creates the topics.
@@ -30,6 +30,7 @@ def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float =
         NewTopic(topics.dead_letter, num_partitions=1, replication_factor=-1),
         NewTopic(topics.command_dead_letter, num_partitions=1, replication_factor=-1),
         NewTopic(topics.command_status, num_partitions=1, replication_factor=-1),
+        NewTopic(topics.refused, num_partitions=1, replication_factor=-1),
     ]
     try:
         existing = set(admin.list_topics(timeout=timeout_s).topics)

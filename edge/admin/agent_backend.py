@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from fleetlink.edge.admin.backend import (
     BufferState,
     EdgeSnapshot,
+    IntakeState,
     MappingCounts,
     MappingIssue,
     RobotState,
@@ -96,6 +97,16 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
         if isinstance(found, list)
     }
     running = data.get("running")
+    intake, memory = _dict(data.get("intake")), _dict(data.get("memory"))
+    intake_state = IntakeState(
+        dropped=_int(intake.get("dropped")),
+        queued=_int(intake.get("queued")),
+        max_samples=_int(intake.get("max_items")),
+        lag_s=_int(intake.get("lag_ms")) / 1000,
+        lag_alarm_s=config.intake.lag_alarm / 1e9,
+        rss_bytes=_int(memory.get("rss_bytes")),
+        bound_bytes=_int(memory.get("bound_bytes")),
+    )
     return EdgeSnapshot(
         mappings=mappings,
         issues=issues,
@@ -109,6 +120,7 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
             for robot, topics in _dict(data.get("lost_before_spool")).items()
         },
         spool_damage=damage,
+        intake=intake_state,
     )
 
 

@@ -75,6 +75,21 @@ class WanTotals:
 
 
 @dataclass(frozen=True, slots=True)
+class IntakeState:
+    """Between receipt and spool: what waits, for how long, what was dropped; the memory."""
+
+    dropped: int = 0
+    queued: int = 0
+    max_samples: int = 0
+    lag_s: float = 0.0
+    lag_alarm_s: float = 0.0
+    """0: no alarm set."""
+    rss_bytes: int = 0
+    bound_bytes: int = 0
+    """0: not known."""
+
+
+@dataclass(frozen=True, slots=True)
 class EdgeSnapshot:
     """The agent's state at one moment, for counters, gauges and health. Every field has a
     neutral default so an agent can fill in what it has."""
@@ -95,6 +110,7 @@ class EdgeSnapshot:
     crashed (running total since start, counted from each publisher's first sample)."""
     spool_damage: Mapping[str, Sequence[Mapping[str, Any]]] = field(default_factory=dict)
     """Stream -> the damage findings awaiting an operator's acknowledgement."""
+    intake: IntakeState = field(default_factory=IntakeState)
 
 
 class AdminBackend(Protocol):

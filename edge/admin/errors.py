@@ -52,6 +52,20 @@ class UnauthorizedError(AdminError):
     status = 401
 
 
+class ForbiddenError(AdminError):
+    status = 403
+
+
+class TooManyAttemptsError(AdminError):
+    """Too many wrong tokens from this client: it must wait ``retry_after`` seconds."""
+
+    status = 429
+
+    def __init__(self, retry_after: float) -> None:
+        super().__init__(f"too many wrong tokens: try again in {retry_after:.0f} s")
+        self.retry_after = retry_after
+
+
 class PersistError(AdminError):
     """The overlay file could not be written; the change was not applied."""
 

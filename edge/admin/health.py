@@ -8,7 +8,12 @@ Rules (thresholds in ``HealthRules``):
 - degraded, per buffer: filled over 80 % of its capacity (``spool_filling``), or appenders are
   blocked waiting for room (``spool_full``), or damage was found in it that no operator has
   acknowledged yet (``spool_damage``, until ``POST /spool/damage/acknowledge``);
-- degraded: the WAN link is down (``wan_down``: records are held in the buffers).
+- degraded: the WAN link is down (``wan_down``: records are held in the buffers);
+- degraded: overloaded, samples wait longer than ``intake.lag_alarm`` between receipt and spool
+  (``lagging``), or the intake is over 90 % full (``intake_full``: samples are being dropped,
+  counted);
+- degraded: the process holds more than the memory bound its configuration implies
+  (``memory``).
 """
 
 from __future__ import annotations
@@ -95,6 +100,7 @@ def assess(
                 f"the uplink does not answer; {held} record(s) held in the buffers",
             )
         )
+    problems.extend(_intake_problems(snapshot))
     return Health.of(problems, spool_fill=fill, wan_link_up=snapshot.wan_link_up, robots=robots)
 
 
@@ -107,3 +113,38 @@ def _damage_detail(count: int, snapshot: EdgeSnapshot) -> str:
         f"{count} damage finding(s) ({lost} record(s) lost){where}; see GET /spool/damage, "
         "then POST /spool/damage/acknowledge"
     )
+
+
+def _intake_problems(snapshot: EdgeSnapshot) -> list[Problem]:
+    intake = snapshot.intake
+    out: list[Problem] = []
+    if intake.lag_alarm_s > 0 and intake.lag_s > intake.lag_alarm_s:
+        out.append(
+            Problem(
+                "intake",
+                "edge",
+                "lagging",
+                f"samples wait {intake.lag_s:.1f} s between receipt and spool "
+                f"(alarm at {intake.lag_alarm_s:g} s): the edge cannot keep up",
+            )
+        )
+    if intake.max_samples and intake.queued >= 0.9 * intake.max_samples:
+        out.append(
+            Problem(
+                "intake",
+                "edge",
+                "intake_full",
+                f"{intake.queued} of {intake.max_samples} samples queued; {intake.dropped} dropped so far",
+            )
+        )
+    if intake.bound_bytes and intake.rss_bytes > intake.bound_bytes:
+        out.append(
+            Problem(
+                "process",
+                "edge",
+                "memory",
+                f"resident memory {intake.rss_bytes >> 20} MiB exceeds the bound of "
+                f"{intake.bound_bytes >> 20} MiB its configuration implies",
+            )
+        )
+    return out

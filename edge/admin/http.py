@@ -1,7 +1,9 @@
 """The admin API over HTTP: a FastAPI app on the ``AdminService`` (OpenAPI at ``/openapi.json``).
 
 Every admin route needs ``Authorization: Bearer <token>`` when a token is configured (401
-otherwise). ``/health``, ``/metrics`` and ``/openapi.json`` stay open for probes and scrapers.
+otherwise); after a few wrong tokens a client is locked out for a while (429 with
+``Retry-After``, ``fleetlink.common.login_limiter``). ``/health``, ``/metrics`` and
+``/openapi.json`` stay open for probes and scrapers.
 Errors are JSON ``ErrorView`` objects; validation errors (422) list each problem with its path
 in the request body, as ``fleetlink validate`` writes YAML paths.
 """
@@ -18,10 +20,17 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fleetlink import __version__
 from fleetlink.common.configfile import format_path
+from fleetlink.common.login_limiter import LoginLimiter
 from fleetlink.common.metrics import PrometheusMetrics, add_metrics_routes
 from fleetlink.edge.admin.auth import authorized
 from fleetlink.edge.admin.bodies import DryRunBody, MappingBody, MappingChangeBody, RobotTypeBody, raw
-from fleetlink.edge.admin.errors import AdminError, FieldProblem, InvalidChangeError, UnauthorizedError
+from fleetlink.edge.admin.errors import (
+    AdminError,
+    FieldProblem,
+    InvalidChangeError,
+    TooManyAttemptsError,
+    UnauthorizedError,
+)
 from fleetlink.edge.admin.overlay import Overlay
 from fleetlink.edge.admin.problems import document_path, message_of
 from fleetlink.edge.admin.service import AdminService
@@ -44,6 +53,7 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
     for code, text in (
         (400, "the body cannot be read (not JSON)"),
         (401, "missing or wrong admin token"),
+        (429, "too many wrong tokens from this client: wait Retry-After seconds"),
         (404, "not found"),
         (409, "name taken"),
         (422, "invalid: each problem names its field"),
@@ -52,15 +62,23 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 
-def error_response(status: int, message: str, problems: tuple[FieldProblem, ...] = ()) -> JSONResponse:
+def error_response(
+    status: int, message: str, problems: tuple[FieldProblem, ...] = (), *, retry_after: float | None = None
+) -> JSONResponse:
     views = [ProblemView(path=p.path, message=p.message, config_path=p.config_path) for p in problems]
     body = ErrorView(status=status, error=message, problems=views)
-    headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
-    return JSONResponse(body.model_dump(mode="json"), status_code=status, headers=headers)
+    headers = {"WWW-Authenticate": "Bearer"} if status == 401 else {}
+    if retry_after is not None:
+        headers["Retry-After"] = str(max(1, round(retry_after)))
+    return JSONResponse(body.model_dump(mode="json"), status_code=status, headers=headers or None)
 
 
 def create_app(
-    service: AdminService, *, token: SecretStr | None = None, metrics: PrometheusMetrics | None = None
+    service: AdminService,
+    *,
+    token: SecretStr | None = None,
+    metrics: PrometheusMetrics | None = None,
+    limiter: LoginLimiter | None = None,
 ) -> FastAPI:
     app = FastAPI(
         title="fleetlink edge admin",
@@ -71,9 +89,26 @@ def create_app(
         "at runtime (validated like the config file, saved, applied atomically).",
     )
 
+    logins = limiter if limiter is not None else LoginLimiter()
+
     def require_token(request: Request) -> None:
-        if not authorized(token, request.headers.get("authorization")):
-            raise UnauthorizedError("missing or wrong admin token (Authorization: Bearer <token>)")
+        if token is None:
+            return
+        client = request.client.host if request.client is not None else "?"
+        wait = logins.retry_after(client)
+        if wait > 0:
+            if metrics is not None:
+                metrics.on_admin_refused("locked_out")
+            raise TooManyAttemptsError(wait)
+        header = request.headers.get("authorization")
+        if authorized(token, header):
+            logins.success(client)
+            return
+        if header is not None:  # a wrong token, not a request that forgot it
+            logins.failure(client)
+            if metrics is not None:
+                metrics.on_admin_refused("wrong_token")
+        raise UnauthorizedError("missing or wrong admin token (Authorization: Bearer <token>)")
 
     router = APIRouter(dependencies=[Depends(require_token)], responses=_ERRORS)
     _routes(router, service)
@@ -85,7 +120,8 @@ def create_app(
     def on_admin_error(_request: Request, exc: AdminError) -> JSONResponse:
         problems = exc.problems if isinstance(exc, InvalidChangeError) else ()
         message = exc.summary if isinstance(exc, InvalidChangeError) else str(exc)
-        return error_response(exc.status, message, problems)
+        wait = exc.retry_after if isinstance(exc, TooManyAttemptsError) else None
+        return error_response(exc.status, message, problems, retry_after=wait)
 
     @app.exception_handler(StarletteHTTPException)
     def on_http_error(_request: Request, exc: StarletteHTTPException) -> JSONResponse:

@@ -15,6 +15,7 @@ edge process passes factories for them, so the admin never imports what is built
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
@@ -24,6 +25,7 @@ import zenoh
 from fastapi import FastAPI
 from pydantic import SecretStr
 
+from fleetlink.common.exposure import check_exposure
 from fleetlink.common.metrics import HttpServer, PrometheusMetrics
 from fleetlink.edge.admin.agent_backend import AgentBackend
 from fleetlink.edge.admin.backend import AdminBackend, EdgeSnapshot
@@ -39,6 +41,8 @@ from fleetlink.edge.config import EdgeConfig
 
 if TYPE_CHECKING:
     from fleetlink.edge.agent import EdgeAgent
+
+log = logging.getLogger(__name__)
 
 
 class AdminExtension(Protocol):
@@ -73,6 +77,15 @@ class EdgeAdmin:
         self.token = token
         configured = base.admin.listen if base.admin is not None else None
         self.listen = listen if listen is not None else configured
+        if self.listen:  # closed by default: before any socket opens
+            check_exposure(
+                self.listen,
+                has_token=token is not None,
+                key="admin.listen",
+                what="the edge admin API and console",
+                credentials_from="FLEETLINK_ADMIN_TOKEN or FLEETLINK_ADMIN_TOKEN_FILE",
+                log=log,
+            )
         self.metrics = metrics if metrics is not None else PrometheusMetrics("edge")
         self.service: AdminService | None = None
         self.http: HttpServer | None = None
@@ -103,7 +116,9 @@ class EdgeAdmin:
                     extension.mount(app)  # e.g. the web console under /console/
                 self.http = HttpServer(app, self.listen, name="edge-admin").start()
             if session is not None:
-                self.zenoh = ZenohAdmin(session, service, edge_id=self.base.edge_id, token=self.token).start()
+                self.zenoh = ZenohAdmin(
+                    session, service, edge_id=self.base.edge_id, token=self.token, metrics=self.metrics
+                ).start()
                 for extension in self.extensions:
                     extension.start(session)  # e.g. fleetlink/<site>/console/status
         except BaseException:

@@ -54,6 +54,14 @@ class EdgeTelemetry:
 
     def _counters(self, snapshot: EdgeSnapshot) -> None:
         m, d = self.metrics, self._deltas.delta
+        intake = snapshot.intake
+        m.on_intake_dropped(d(("intake_dropped",), intake.dropped))
+        m.set_intake(
+            queued=intake.queued,
+            lag_s=intake.lag_s,
+            rss_bytes=intake.rss_bytes,
+            bound_bytes=intake.bound_bytes,
+        )
         for name, counts in snapshot.mappings.items():
             m.on_received(name, d(("received", name), counts.received))
             m.on_emitted(name, None, d(("emitted", name), counts.emitted))

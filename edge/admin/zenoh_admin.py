@@ -2,7 +2,10 @@
 
 Queries are answered off the Zenoh callback thread (a small pool), each reply on a concrete
 key. With an admin token configured, a query must carry ``Bearer <token>`` as its attachment
-(401 otherwise); the WAN link's mutual TLS and per-site ACLs decide who can reach the key at all.
+(401 otherwise; after a few wrong tokens every query waits out a lockout, 429); the WAN link's
+mutual TLS and per-site ACLs decide who can reach the key at all. Without a token the space is
+read-only: every change is refused (403), since anyone on the site network or in the cloud can
+reach it.
 """
 
 from __future__ import annotations
@@ -14,6 +17,8 @@ from typing import Any
 import zenoh
 from pydantic import SecretStr
 
+from fleetlink.common.login_limiter import LoginLimiter
+from fleetlink.common.metrics import Metrics, NullMetrics
 from fleetlink.common.pooled_queryable import PooledQueryable
 from fleetlink.edge.admin.auth import authorized
 from fleetlink.edge.admin.listing import declared
@@ -23,11 +28,22 @@ from fleetlink.wire.keys import admin_key
 
 log = logging.getLogger(__name__)
 
+CHANGES = frozenset({"add", "put", "delete"})
+_CLIENT = "zenoh"
+"""Zenoh queries carry no trustworthy sender: wrong tokens are counted for the space as a whole."""
+
 
 class ZenohAdmin:
     def __init__(
-        self, session: zenoh.Session, service: AdminService, *, edge_id: str, token: SecretStr | None = None
+        self,
+        session: zenoh.Session,
+        service: AdminService,
+        *,
+        edge_id: str,
+        token: SecretStr | None = None,
+        metrics: Metrics | None = None,
     ) -> None:
+        self.metrics: Metrics = metrics if metrics is not None else NullMetrics()
         self.session = session
         self.service = service
         self.edge_id = edge_id
@@ -35,6 +51,9 @@ class ZenohAdmin:
         self.key = admin_key(service.site)
         self._queryable = PooledQueryable(self._answer, workers=2, name="edge-admin-zenoh")
         self.answered = 0
+        self.logins = LoginLimiter()
+        self.refused_changes = 0
+        """Changes refused because no admin token is configured."""
 
     def start(self) -> ZenohAdmin:
         if not self._queryable.running:
@@ -63,13 +82,9 @@ class ZenohAdmin:
             found = targets(self.service.site, key, op, bool(payload), names)
             if not found:
                 return
-            if not authorized(self.token, attachment):
-                self._reply(
-                    query,
-                    Target(found[0].key, ""),
-                    401,
-                    {"error": "missing or wrong admin token (attachment 'Bearer <token>')", "problems": []},
-                )
+            denied = self._denied(attachment, found)
+            if denied is not None:
+                self._reply(query, Target(found[0].key, ""), denied[0], {"error": denied[1], "problems": []})
                 return
             body, problem = parse_body(payload)
             for target in found:
@@ -82,6 +97,26 @@ class ZenohAdmin:
             log.warning("admin query on %s failed: %r", query.key_expr, exc)
         finally:
             query.drop()
+
+    def _denied(self, attachment: bytes | None, found: list[Target]) -> tuple[int, str] | None:
+        """(status, reason) when the query may not do what it asks; None when it may."""
+        if self.token is None:
+            if any(t.op in CHANGES for t in found):
+                self.refused_changes += 1
+                self.metrics.on_admin_refused("read_only")
+                return 403, "changes over Zenoh need an admin token (FLEETLINK_ADMIN_TOKEN on the edge)"
+            return None
+        wait = self.logins.retry_after(_CLIENT)
+        if wait > 0:
+            self.metrics.on_admin_refused("locked_out")
+            return 429, f"too many wrong tokens: try again in {wait:.0f} s"
+        if authorized(self.token, attachment):
+            self.logins.success(_CLIENT)
+            return None
+        if attachment is not None:
+            self.logins.failure(_CLIENT)
+            self.metrics.on_admin_refused("wrong_token")
+        return 401, "missing or wrong admin token (attachment 'Bearer <token>')"
 
     def _names(self, resource: str) -> list[str]:
         if resource == "mappings":

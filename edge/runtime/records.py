@@ -32,15 +32,16 @@ from fleetlink.roswire.subscriber import RosSample
 from fleetlink.schemas.codec import Codec
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.wire import SINGLE_OBJECT_MAGIC, PayloadTemplate, Record, single_object
+from fleetlink.wire.robot_events import EDGE_HEADER, ROBOT_HEADER, SITE_HEADER
 
 H_SOURCE_TOPIC = "fleetlink.source_topic"
 H_ROS_TYPE = "fleetlink.ros_type"
 H_TYPE_HASH = "fleetlink.type_hash"
-H_SITE = "fleetlink.site"
-H_ROBOT = "fleetlink.robot"
+H_SITE = SITE_HEADER
+H_ROBOT = ROBOT_HEADER
 H_SEQ = "fleetlink.seq"
 H_MAPPING = "fleetlink.mapping"
-H_EDGE = "fleetlink.edge"
+H_EDGE = EDGE_HEADER
 # dead letters (the same names the uplink uses for the ones it makes)
 H_DLQ_STAGE = "fleetlink.dlq.stage"
 H_DLQ_REASON = "fleetlink.dlq.reason"

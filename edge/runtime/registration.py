@@ -32,28 +32,11 @@ from fleetlink.roswire.robot_watcher import STRING_HASHES, STRING_TYPE, RobotWat
 from fleetlink.roswire.robots import Reason, RobotEvent, RobotEventKind, RobotType, parse_registration
 from fleetlink.roswire.subscriber import RosSample, RosSubscriber
 from fleetlink.wire import Record, single_object
+from fleetlink.wire.robot_events import EVENT_SCHEMA
 
 log = logging.getLogger(__name__)
 
 ROBOTS_TOPIC = "/fleetlink/robots"
-EVENT_SCHEMA: dict[str, Any] = {
-    "type": "record",
-    "name": "RobotEvent",
-    "namespace": "fleetlink",
-    "doc": "A robot registered at, or deregistered from, a fleetlink edge.",
-    "fields": [
-        {"name": "robot", "type": "string"},
-        {"name": "robot_type", "type": "string"},
-        {"name": "site", "type": "string"},
-        {"name": "edge_id", "type": "string"},
-        {
-            "name": "event",
-            "type": {"type": "enum", "name": "RobotEventKind", "symbols": ["registered", "deregistered"]},
-        },
-        {"name": "reason", "type": "string", "doc": "discovered | explicit | liveliness_lost | config"},
-        {"name": "timestamp", "type": {"type": "long", "logicalType": "timestamp-millis"}},
-    ],
-}
 _WRITER = AvroWriter(EVENT_SCHEMA)
 EVENT_FINGERPRINT = _WRITER.fingerprint
 EVENT_SCHEMA_JSON = _WRITER.identity.json

@@ -116,6 +116,8 @@ class Spool:
         self._bytes = 0
         self._depth = 0
         self._blocked = 0
+        self._refusing = False
+        """``block`` gave up once and nothing left since: refuse at once, do not wait again."""
         self._evicting_helps = True
         self._warned: set[str] = set()
         self._c = dict.fromkeys(COUNTERS, 0)
@@ -388,7 +390,7 @@ class Spool:
             return True
         if policy == "block":
             remaining = deadline - time.monotonic()
-            if remaining > 0:
+            if remaining > 0 and not self._refusing:
                 self._blocked += 1
                 try:
                     self._space.wait(remaining)
@@ -397,12 +399,16 @@ class Spool:
                 self._check_open()
                 return True
             self._c["block_timeouts"] += 1
-            self._warn(
-                "block",
-                "spool %s: full for %ss; refusing records",
-                self.directory,
-                self.options.block_timeout_s,
-            )
+            if not self._refusing:
+                self._warn(
+                    "block",
+                    "spool %s: full for %ss; refusing records until room is made",
+                    self.directory,
+                    self.options.block_timeout_s,
+                )
+            # until an acknowledgement makes room, refuse at once: waiting again for each group
+            # would hold the intake up for block_timeout each time while nothing can change
+            self._refusing = True
             raise SpoolFullError("the spool is full", path=self.directory)
         self._c["dropped_newest"] += count
         self._warn("drop_newest", "spool %s: full; dropping new records (counted)", self.directory)
@@ -505,6 +511,7 @@ class Spool:
         if mark > self._persisted_mark and self._ledger.record_ack(mark, sync=self.options.fsync == "always"):
             self._persisted_mark = mark
         self._reclaim(force_active=False)
+        self._refusing = False
         self._space.notify_all()
 
     # -- the sender's side -----------------------------------------------------------------------

@@ -19,12 +19,14 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 from fleetlink.common.certs import (
     CLOUD_NAME,
     CertError,
+    certificate_site,
     edge_name,
     generate_bundle,
     issue,
     load_ca,
     write_identity,
 )
+from fleetlink.common.command_keys import write_command_key
 
 
 def register(sub: Any) -> None:
@@ -68,6 +70,14 @@ def register(sub: Any) -> None:
     add.add_argument("--days", type=int, default=825, help="validity in days (default: %(default)s)")
     add.set_defaults(handler=_issue)
 
+    key = actions.add_parser(
+        "command-key",
+        help="a new key pair commands are signed with (the uplink's private key, the repeaters' public key)",
+    )
+    key.add_argument("dir", type=Path, help="output directory")
+    key.add_argument("--force", action="store_true", help="replace an existing key in DIR")
+    key.set_defaults(handler=_command_key)
+
     show = actions.add_parser("show", help="list the certificates in DIR")
     show.add_argument("dir", type=Path)
     show.set_defaults(handler=_show)
@@ -82,6 +92,20 @@ def _init(args: argparse.Namespace) -> int:
     for name, files in bundle.identities.items():
         print(f"{name:<18} {files.certificate}  (key {files.key.name}, mode 0600)")
     print(f"cloud router hosts: {', '.join(hosts)}")
+    private, public = write_command_key(args.dir)
+    print(f"{'command signing':<18} {private} (uplink, mode 0600); {public.name} (repeaters)")
+    return 0
+
+
+def _command_key(args: argparse.Namespace) -> int:
+    private = args.dir / "command-signing-key.pem"
+    if private.exists() and not args.force:
+        raise CertError(
+            f"{private} exists; use --force to replace it (repeaters then need the new public key)"
+        )
+    private, public = write_command_key(args.dir)
+    print(f"uplink (command_signing.key_file): {private}  (mode 0600)")
+    print(f"repeaters (repeater.command_keys): {public}")
     return 0
 
 
@@ -97,6 +121,7 @@ def _issue(args: argparse.Namespace) -> int:
         client=client,
         hosts=args.host,
         valid_days=args.days,
+        site=args.site,
     )
     files = write_identity(ident, args.dir)
     print(f"{name}  {files.certificate}  (key {files.key.name}, mode 0600)")
@@ -113,7 +138,11 @@ def _usages(cert: x509.Certificate) -> str:
 
 
 def _show(args: argparse.Namespace) -> int:
-    paths = sorted(p for p in args.dir.glob("*.pem") if not p.name.endswith("-key.pem"))
+    paths = sorted(
+        p
+        for p in args.dir.glob("*.pem")
+        if not p.name.endswith("-key.pem") and p.name != "command-signing.pem"
+    )
     if not paths:
         raise CertError(f"no certificates in {args.dir}")
     for path in paths:
@@ -124,7 +153,12 @@ def _show(args: argparse.Namespace) -> int:
             continue
         cn = cert.subject.rfc4514_string()
         expires = cert.not_valid_after_utc.date().isoformat()
-        print(f"{path.name:<28} {_usages(cert):<14} expires {expires}  {cn}")
+        try:
+            site = certificate_site(cert)
+            bound = f"  site {site}" if site else ""
+        except CertError as exc:
+            bound = f"  ({exc})"
+        print(f"{path.name:<28} {_usages(cert):<14} expires {expires}  {cn}{bound}")
     return 0
 
 

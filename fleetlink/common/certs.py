@@ -3,7 +3,10 @@
 The edge router connects to the cloud router over TLS with mutual authentication; the cloud
 identifies each edge by the common name of its client certificate (``edge-<site>``) and the
 edge identifies the cloud by the server certificate's common name (``fleetlink-cloud``). The
-Zenoh ACLs in ``deploy/zenoh/`` are keyed on those names.
+Zenoh ACLs in ``deploy/zenoh/`` are keyed on those names. An edge certificate also names its
+site in a URI subject alternative name, ``urn:fleetlink:site:<site>``: :func:`certificate_site`
+reads it back and refuses a certificate whose common name and site disagree, and rendering an
+edge router's config checks that its certificate is the site's (docs/security.md).
 
 This module makes such a set with the ``cryptography`` package: ECDSA P-256 keys, PKCS#8 PEM
 private keys, X.509 v3 certificates with the key-usage extensions rustls (zenoh's TLS stack)
@@ -39,6 +42,8 @@ __all__ = [
     "CertificateAuthority",
     "Identity",
     "IdentityFiles",
+    "certificate_site",
+    "check_site_certificate",
     "edge_name",
     "generate_bundle",
     "issue",
@@ -62,9 +67,51 @@ class CertError(FleetlinkError):
     """A certificate could not be made, read or written; the message names the file or name."""
 
 
+EDGE_PREFIX = "edge-"
+SITE_URI_PREFIX = "urn:fleetlink:site:"
+
+
 def edge_name(site: str) -> str:
     """Common name of a site's edge router certificate (the cloud ACL subject for that site)."""
-    return f"edge-{site}"
+    return f"{EDGE_PREFIX}{site}"
+
+
+def site_uri(site: str) -> str:
+    """The subject alternative name that binds a certificate to a site."""
+    return f"{SITE_URI_PREFIX}{site}"
+
+
+def certificate_site(cert: x509.Certificate) -> str | None:
+    """The site a certificate is bound to (None: a certificate of no site, e.g. the cloud's).
+
+    Raises ``CertError`` when it names a site that its common name is not ``edge-<site>`` for,
+    or is named like an edge certificate without naming its site.
+    """
+    try:
+        names = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        uris = [
+            u
+            for u in names.get_values_for_type(x509.UniformResourceIdentifier)
+            if u.startswith(SITE_URI_PREFIX)
+        ]
+    except x509.ExtensionNotFound:
+        uris = []
+    common = _common_name(cert)
+    if len(uris) > 1:
+        raise CertError(f"certificate {common!r} names {len(uris)} sites")
+    if not uris:
+        if common.startswith(EDGE_PREFIX):
+            raise CertError(
+                f"certificate {common!r} does not name its site ({SITE_URI_PREFIX}...); reissue it "
+                "with 'fleetlink certs issue DIR --site SITE'"
+            )
+        return None
+    site = uris[0][len(SITE_URI_PREFIX) :]
+    if common != edge_name(site):
+        raise CertError(
+            f"certificate {common!r} names site {site!r}, so it must be named {edge_name(site)!r}"
+        )
+    return site
 
 
 @dataclass(frozen=True)
@@ -199,14 +246,24 @@ def issue(
     hosts: Sequence[str] = (),
     valid_days: int = 825,
     organization: str = "fleetlink",
+    site: str | None = None,
 ) -> Identity:
     """Issue an end-entity certificate signed by ``ca``.
+
+    ``site``: an edge certificate, bound to that site (its common name must be ``edge-<site>``;
+    an ``edge-`` name without a site is refused).
 
     ``server`` adds the TLS server usage (a listening router; ``hosts`` become DNS/IP subject
     alternative names, which clients verify when ``verify_name_on_connect`` is on); ``client``
     adds TLS client usage (a connecting router or client under mTLS). A certificate may be both.
     """
     _check_name(common_name)
+    if site is not None and common_name != edge_name(site):
+        raise CertError(
+            f"certificate {common_name!r}: a certificate of site {site!r} is named {edge_name(site)!r}"
+        )
+    if site is None and common_name.startswith(EDGE_PREFIX):
+        raise CertError(f"certificate {common_name!r}: edge certificates are issued for a site (--site)")
     if not (server or client):
         raise CertError(f"certificate {common_name!r}: choose server, client or both")
     if server and not hosts:
@@ -246,8 +303,11 @@ def issue(
             x509.AuthorityKeyIdentifier.from_issuer_public_key(ca.key.public_key()), critical=False
         )
     )
-    if hosts:
-        builder = builder.add_extension(x509.SubjectAlternativeName(_alt_names(hosts)), critical=False)
+    alt = _alt_names(hosts)
+    if site is not None:
+        alt.append(x509.UniformResourceIdentifier(site_uri(site)))
+    if alt:
+        builder = builder.add_extension(x509.SubjectAlternativeName(alt), critical=False)
     return Identity(builder.sign(ca.key, hashes.SHA256()), key)
 
 
@@ -262,7 +322,7 @@ def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
     )
 
 
-def _write_private(path: Path, data: bytes) -> None:
+def write_private(path: Path, data: bytes) -> None:
     """Write a private key readable by its owner only (created 0600, never world-readable)."""
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
@@ -273,14 +333,14 @@ def _write_private(path: Path, data: bytes) -> None:
         raise CertError(f"cannot write private key {path}: {exc.strerror}") from None
 
 
-def _write_public(path: Path, data: bytes) -> None:
+def write_public(path: Path, data: bytes) -> None:
     try:
         path.write_bytes(data)
     except OSError as exc:
         raise CertError(f"cannot write certificate {path}: {exc.strerror}") from None
 
 
-def _make_dir(directory: Path) -> None:
+def make_dir(directory: Path) -> None:
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -289,10 +349,10 @@ def _make_dir(directory: Path) -> None:
 
 def write_ca(ca: CertificateAuthority, directory: Path) -> tuple[Path, Path]:
     """Write ``ca.pem`` and ``ca-key.pem``; returns their paths."""
-    _make_dir(directory)
+    make_dir(directory)
     cert_path, key_path = directory / "ca.pem", directory / "ca-key.pem"
-    _write_public(cert_path, ca.certificate.public_bytes(serialization.Encoding.PEM))
-    _write_private(key_path, _key_pem(ca.key))
+    write_public(cert_path, ca.certificate.public_bytes(serialization.Encoding.PEM))
+    write_private(key_path, _key_pem(ca.key))
     log.debug("wrote CA certificate path=%s cn=%s", cert_path, ca.common_name)
     return cert_path, key_path
 
@@ -301,12 +361,25 @@ def write_identity(identity: Identity, directory: Path, name: str | None = None)
     """Write ``<name>.pem`` and ``<name>-key.pem`` (name defaults to the common name)."""
     name = name or identity.common_name
     _check_name(name)
-    _make_dir(directory)
+    make_dir(directory)
     cert_path, key_path = directory / f"{name}.pem", directory / f"{name}-key.pem"
-    _write_public(cert_path, identity.certificate.public_bytes(serialization.Encoding.PEM))
-    _write_private(key_path, _key_pem(identity.key))
+    write_public(cert_path, identity.certificate.public_bytes(serialization.Encoding.PEM))
+    write_private(key_path, _key_pem(identity.key))
     log.debug("wrote certificate path=%s cn=%s", cert_path, identity.common_name)
     return IdentityFiles(name, cert_path, key_path)
+
+
+def check_site_certificate(path: Path, site: str) -> None:
+    """Raise ``CertError`` unless ``path`` holds a certificate bound to ``site``."""
+    try:
+        cert = x509.load_pem_x509_certificate(path.read_bytes())
+    except OSError as exc:
+        raise CertError(f"{path}: cannot read the site certificate: {exc.strerror}") from None
+    except ValueError:
+        raise CertError(f"{path}: not a PEM certificate") from None
+    bound = certificate_site(cert)
+    if bound != site:
+        raise CertError(f"{path}: the certificate is site {bound!r}'s, not site {site!r}'s")
 
 
 def load_ca(directory: Path) -> CertificateAuthority:
@@ -343,8 +416,8 @@ def generate_bundle(
     identities: dict[str, IdentityFiles] = {}
     for name in servers:
         identities[name] = write_identity(issue(ca, name, now=now, server=True, hosts=hosts), directory)
-    for name in [*clients, *(edge_name(site) for site in sites)]:
+    for name, site in [*((c, None) for c in clients), *((edge_name(s), s) for s in sites)]:
         if name in identities:
             raise CertError(f"certificate name {name!r} requested twice")
-        identities[name] = write_identity(issue(ca, name, now=now, client=True), directory)
+        identities[name] = write_identity(issue(ca, name, now=now, client=True, site=site), directory)
     return CertBundle(directory, ca_cert, identities)

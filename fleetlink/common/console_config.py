@@ -23,6 +23,11 @@ class ConsoleSection(Section):
     token_file: Path | None = Field(
         default=None, description="file holding the access token (wins over token_env)"
     )
+    session_ttl: Seconds = Field(
+        default=8 * 3600.0,
+        gt=0,
+        description="how long a browser stays signed in (then the token is asked again)",
+    )
     query_timeout: Seconds = Field(
         default=3.0, gt=0, le=60, description="how long to wait for the sites' answers over Zenoh"
     )

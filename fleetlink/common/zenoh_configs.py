@@ -45,7 +45,7 @@ from typing import Any
 
 import zenoh
 
-from fleetlink.common.certs import edge_name
+from fleetlink.common.certs import CertError, check_site_certificate, edge_name
 from fleetlink.common.errors import ConfigError
 from fleetlink.common.names import site_problem
 
@@ -54,6 +54,7 @@ __all__ = [
     "AclBlock",
     "RouterConfigError",
     "cloud_site_acl",
+    "concrete_json5",
     "edge_raw_acl",
     "placeholders",
     "render_router_config",
@@ -360,13 +361,7 @@ def render_router_json5(
     values: Mapping[str, Value] | None = None,
 ) -> zenoh.Config:
     """Render a template text into a ``zenoh.Config`` (no file access; see the module docstring)."""
-    merged: dict[str, Value] = {"LISTEN": list(listen), "CONNECT": list(connect)}
-    if site is not None:
-        _check_site(site, source=source)
-        merged["SITE"] = site
-    if cert_dir is not None:
-        merged["CERT_DIR"] = str(cert_dir)
-    merged.update(values or {})
+    merged = _values(source, site=site, listen=listen, connect=connect, cert_dir=cert_dir, values=values)
     rendered = render_text(text, merged, source=source)
     try:
         conf = zenoh.Config.from_json5(rendered)
@@ -400,6 +395,78 @@ def render_router_json5(
     return conf
 
 
+def _values(
+    source: str,
+    *,
+    site: str | None,
+    listen: Sequence[str],
+    connect: Sequence[str],
+    cert_dir: str | Path | None,
+    values: Mapping[str, Value] | None,
+) -> dict[str, Value]:
+    merged: dict[str, Value] = {"LISTEN": list(listen), "CONNECT": list(connect)}
+    if site is not None:
+        _check_site(site, source=source)
+        merged["SITE"] = site
+    if cert_dir is not None:
+        merged["CERT_DIR"] = str(cert_dir)
+    merged.update(values or {})
+    return merged
+
+
+def concrete_json5(
+    text: str,
+    *,
+    source: str = "<text>",
+    header: str = "",
+    site: str | None = None,
+    listen: Sequence[str] = (),
+    connect: Sequence[str] = (),
+    cert_dir: str | Path | None = None,
+    sites: Sequence[str] = (),
+    raw_to_cloud: Sequence[str] = (),
+    raw_from: Mapping[str, Sequence[str]] | None = None,
+) -> str:
+    """The text of a concrete config file that stock ``zenohd`` (or any Zenoh) reads.
+
+    Without generated ACL parts it is the template with its placeholders filled in, comments
+    kept; with them (``sites``, ``raw_to_cloud``, ``raw_from``) it is JSON holding the settings
+    that differ from Zenoh's defaults. ``header`` (``//`` comment lines) goes on top.
+    """
+    conf = render_router_json5(
+        text,
+        source=source,
+        site=site,
+        listen=listen,
+        connect=connect,
+        cert_dir=cert_dir,
+        sites=sites,
+        raw_to_cloud=raw_to_cloud,
+        raw_from=raw_from,
+    )
+    if sites or raw_to_cloud or raw_from:
+        body = (
+            json.dumps(_non_default(json.loads(str(conf)), json.loads(str(zenoh.Config()))), indent=2) + "\n"
+        )
+    else:
+        merged = _values(source, site=site, listen=listen, connect=connect, cert_dir=cert_dir, values=None)
+        body = render_text(text, merged, source=source)
+    return header + body
+
+
+def _non_default(value: Any, default: Any) -> Any:
+    """The parts of a config (as JSON data) that differ from Zenoh's default config."""
+    if not isinstance(value, dict) or not isinstance(default, dict):
+        return value
+    out = {}
+    for key, item in value.items():
+        if key not in default:
+            out[key] = item
+        elif item != default[key]:
+            out[key] = _non_default(item, default[key])
+    return out
+
+
 def render_router_config(
     path: str | Path,
     *,
@@ -418,6 +485,16 @@ def render_router_config(
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise RouterConfigError(f"cannot read router config: {exc.strerror}", source=str(path)) from None
+    certificate = (
+        Path(cert_dir) / f"{edge_name(site)}.pem" if site is not None and cert_dir is not None else None
+    )
+    if certificate is not None and site is not None and "edge-${SITE}.pem" in text and certificate.exists():
+        # the site's router presents this certificate to the cloud: it must be the site's own
+        # (a missing file is zenoh's error when the router opens)
+        try:
+            check_site_certificate(certificate, site)
+        except CertError as exc:
+            raise RouterConfigError(str(exc), source=str(path), name="CERT_DIR") from None
     return render_router_json5(
         text,
         source=str(path),

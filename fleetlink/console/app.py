@@ -35,7 +35,17 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fleetlink import __version__
 from fleetlink.common.extras import missing_extra
-from fleetlink.console.auth import COOKIE, Access, check, cookie_value, may_change, token_matches
+from fleetlink.common.login_limiter import LoginLimiter
+from fleetlink.console.auth import (
+    COOKIE,
+    SESSION_TTL_S,
+    Access,
+    bearer,
+    check,
+    cookie_value,
+    may_change,
+    token_matches,
+)
 from fleetlink.console.envelope import Envelope
 from fleetlink.console.errors import FormError
 from fleetlink.console.forms import MappingForm, field_errors, mapping_body, refusal_fields
@@ -99,22 +109,34 @@ def _form_change(
     return _change(send(body))
 
 
-class _Denied(Exception):  # noqa: N818 - an internal signal turned into a 401/403 answer
-    def __init__(self, status: int, message: str) -> None:
+class _Denied(Exception):  # noqa: N818 - an internal signal turned into a 401/403/429 answer
+    def __init__(self, status: int, message: str, *, retry_after: float | None = None) -> None:
         super().__init__(message)
         self.status = status
+        self.retry_after = retry_after
+
+
+def _client(request: Request) -> str:
+    return request.client.host if request.client is not None else "?"
 
 
 class _Console:
     """What the routes share: the source, the token, the templates, the rates, the clock."""
 
     def __init__(
-        self, sites: Sites, token: SecretStr | None, poll_interval_s: float, clock: Callable[[], float]
+        self,
+        sites: Sites,
+        token: SecretStr | None,
+        poll_interval_s: float,
+        clock: Callable[[], float],
+        session_ttl_s: float,
     ) -> None:
         self.sites = sites
         self.token = token
         self.poll_interval_s = poll_interval_s
         self.clock = clock
+        self.session_ttl_s = session_ttl_s
+        self.logins = LoginLimiter(clock=clock)
         self.templates = Environment(
             loader=PackageLoader("fleetlink.console", "templates"), autoescape=select_autoescape(["html"])
         )
@@ -123,9 +145,19 @@ class _Console:
         )
 
     def access(self, request: Request) -> Access:
-        return check(
-            self.token, authorization=request.headers.get("authorization"), cookie=request.cookies.get(COOKIE)
+        if self.token is None:
+            return Access(allowed=True)
+        client = _client(request)
+        wait = self.logins.retry_after(client)
+        if wait > 0:
+            raise _Denied(429, f"too many wrong tokens: try again in {wait:.0f} s", retry_after=wait)
+        authorization = request.headers.get("authorization")
+        access = check(
+            self.token, authorization=authorization, cookie=request.cookies.get(COOKIE), now=self.clock()
         )
+        if bearer(authorization) is not None:  # a token was tried: count it (an old cookie is not)
+            (self.logins.success if access.allowed and not access.by_cookie else self.logins.failure)(client)
+        return access
 
     def reader(self, request: Request) -> None:
         if not self.access(request).allowed:
@@ -160,16 +192,20 @@ def create_console_app(
     token: SecretStr | None,
     poll_interval_s: float = 1.0,
     clock: Callable[[], float] = time.time,
+    session_ttl_s: float = SESSION_TTL_S,
 ) -> FastAPI:
     app = FastAPI(
         title="fleetlink console", version=__version__, docs_url=None, redoc_url=None, openapi_url=None
     )
     app.mount("/static", StaticFiles(packages=[("fleetlink.console", "static")]), name="static")
-    console = _Console(sites, token, poll_interval_s, clock)
+    console = _Console(sites, token, poll_interval_s, clock, session_ttl_s)
 
     @app.exception_handler(_Denied)
     def on_denied(_request: Request, exc: _Denied) -> JSONResponse:
-        return _refused(exc.status, str(exc))
+        response = _refused(exc.status, str(exc))
+        if exc.retry_after is not None:
+            response.headers["Retry-After"] = str(max(1, round(exc.retry_after)))
+        return response
 
     @app.exception_handler(RequestValidationError)
     def on_invalid(_request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -216,13 +252,21 @@ def _page_routes(app: FastAPI, console: _Console) -> None:
         form = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=10)
         given = (form.get("token") or [""])[0]
         target = _safe_next(request, (form.get("next") or [""])[0])
+        client = _client(request)
+        wait = console.logins.retry_after(client) if token is not None else 0.0
+        if wait > 0:
+            error = f"too many wrong tokens: try again in {wait:.0f} s"
+            return console.page(request, "login.html", status=429, next=target, error=error)
         if token is not None and not token_matches(token, given):
+            console.logins.failure(client)
             return console.page(request, "login.html", status=401, next=target, error="wrong token")
+        console.logins.success(client)
         response = RedirectResponse(target, status_code=303, headers=_HEADERS)
         if token is not None:
             response.set_cookie(
                 COOKIE,
-                cookie_value(token),
+                cookie_value(token, now=console.clock(), ttl_s=console.session_ttl_s),
+                max_age=int(console.session_ttl_s),
                 httponly=True,
                 samesite="strict",
                 path=base_path(request),

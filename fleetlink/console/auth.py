@@ -1,8 +1,11 @@
 """Who may use the console: the holder of the admin token (the same token as the admin API).
 
 A browser signs in once with a form; the console then sets an ``HttpOnly``, ``SameSite=Strict``
-cookie holding a keyed hash of the token (never the token itself), which it checks on every
-request, constant-time. Scripts may send ``Authorization: Bearer <token>`` instead. A change
+cookie holding the session's expiry time and a keyed hash of it under the token (never the
+token itself), which it checks on every request, constant-time: a session ends after
+``session_ttl`` (8 h by default), and changing the token ends every session. Scripts may send
+``Authorization: Bearer <token>`` instead. After a few wrong tokens (form or header) a client
+is locked out for a while (``fleetlink.common.login_limiter``). A change
 made with the cookie must also carry the ``X-Fleetlink-Console`` header, which a page of another
 site cannot add without the console's consent (CORS), so a cross-site form cannot change
 mappings. Without a token configured the console is open, like the admin API (keep it on
@@ -24,12 +27,29 @@ from fleetlink.console.errors import ConsoleConfigError
 
 COOKIE = "fleetlink_console"
 CHANGE_HEADER = "x-fleetlink-console"
-_CONTEXT = b"fleetlink console session v1"
+SESSION_TTL_S = 8 * 3600.0
+_CONTEXT = b"fleetlink console session v2\x00"
 
 
-def cookie_value(token: SecretStr) -> str:
-    """The cookie that proves the token: HMAC-SHA256 of a fixed text keyed by the token."""
-    return hmac.new(token.get_secret_value().encode(), _CONTEXT, hashlib.sha256).hexdigest()
+def _session_mac(token: SecretStr, expires: int) -> str:
+    return hmac.new(
+        token.get_secret_value().encode(), _CONTEXT + str(expires).encode(), hashlib.sha256
+    ).hexdigest()
+
+
+def cookie_value(token: SecretStr, *, now: float, ttl_s: float = SESSION_TTL_S) -> str:
+    """A session cookie valid until ``now + ttl_s``: ``<expires>.<HMAC-SHA256 keyed by the token>``."""
+    expires = int(now + ttl_s)
+    return f"{expires}.{_session_mac(token, expires)}"
+
+
+def session_valid(token: SecretStr, cookie: str, *, now: float) -> bool:
+    """Does ``cookie`` prove the token, and has its session not expired?"""
+    expires_text, _, mac = cookie.partition(".")
+    if not expires_text.isdigit() or len(expires_text) > 12:
+        return False
+    expires = int(expires_text)
+    return now < expires and hmac.compare_digest(mac.encode(), _session_mac(token, expires).encode())
 
 
 def token_matches(token: SecretStr, given: str) -> bool:
@@ -50,14 +70,14 @@ class Access:
     by_cookie: bool = False
 
 
-def check(token: SecretStr | None, *, authorization: str | None, cookie: str | None) -> Access:
-    """May this request read the console? (``by_cookie``: proven by the session cookie.)"""
+def check(token: SecretStr | None, *, authorization: str | None, cookie: str | None, now: float) -> Access:
+    """May this request read the console? (``by_cookie``: proven by an unexpired session cookie.)"""
     if token is None:
         return Access(allowed=True)
     given = bearer(authorization)
     if given is not None and token_matches(token, given):
         return Access(allowed=True)
-    if cookie is not None and hmac.compare_digest(cookie.encode(), cookie_value(token).encode()):
+    if cookie is not None and session_valid(token, cookie, now=now):
         return Access(allowed=True, by_cookie=True)
     return Access(allowed=False)
 

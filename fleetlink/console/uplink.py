@@ -23,6 +23,7 @@ from fastapi.responses import RedirectResponse
 from pydantic import SecretStr
 
 from fleetlink.common.console_config import ConsoleSection
+from fleetlink.common.exposure import check_exposure
 from fleetlink.common.metrics import HttpServer
 from fleetlink.console.app import create_console_app
 from fleetlink.console.auth import load_console_token
@@ -91,13 +92,7 @@ class UplinkConsole:
             return self
         s = self.settings
         token = self._token if self._token is not None else load_console_token(s.token_env, s.token_file)
-        if token is None:
-            log.warning(
-                "the fleet console has no access token (%s is not set): anyone who reaches %s can "
-                "change mappings; keep it on loopback",
-                s.token_env or "token_env",
-                s.listen,
-            )
+        check_console_exposure(s, token)
         sites = ZenohSites(
             self.session,
             token=token,
@@ -106,7 +101,12 @@ class UplinkConsole:
             commands=lambda: command_view(self._router()),
         )
         app = FastAPI(title="fleetlink fleet console", docs_url=None, redoc_url=None, openapi_url=None)
-        app.mount("/console", create_console_app(sites, token=token, poll_interval_s=s.poll_interval))
+        app.mount(
+            "/console",
+            create_console_app(
+                sites, token=token, poll_interval_s=s.poll_interval, session_ttl_s=s.session_ttl
+            ),
+        )
 
         @app.get("/", include_in_schema=False)
         def front() -> RedirectResponse:
@@ -153,6 +153,23 @@ def uplink_console(
     return make
 
 
+def check_console_exposure(settings: ConsoleSection, token: SecretStr | None) -> None:
+    """Closed by default: no token and a non-loopback ``console.listen`` is a start-up error."""
+    check_exposure(
+        settings.listen,
+        has_token=token is not None,
+        key="console.listen",
+        what="the fleet console",
+        credentials_from=f"console.token_file or ${settings.token_env or 'FLEETLINK_ADMIN_TOKEN'}",
+        log=log,
+    )
+
+
 def console_extensions(config: UplinkConfig) -> list[Callable[[Uplink], UplinkConsole]]:
-    """The extensions an uplink process runs for ``config``: the fleet console when it has one."""
-    return [] if config.console is None else [uplink_console(config.console)]
+    """The extensions an uplink process runs for ``config``: the fleet console when it has one
+    (its exposure is checked here, before the uplink opens anything)."""
+    if config.console is None:
+        return []
+    settings = config.console
+    check_console_exposure(settings, load_console_token(settings.token_env, settings.token_file))
+    return [uplink_console(settings)]

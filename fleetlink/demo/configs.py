@@ -26,6 +26,15 @@ class DemoPlaces:
     site_router: str
     workdir: Path
     msg_paths: tuple[Path, ...]
+    edge_admin: str = "127.0.0.1:8480"
+    """The edge's admin API: its site console (/console/), /metrics and /health."""
+    uplink_metrics: str = "127.0.0.1:9464"
+    fleet_console: str = "127.0.0.1:8490"
+
+    @property
+    def keys(self) -> Path:
+        """The command signing key pair (written by the runner before the configs are used)."""
+        return self.workdir / "keys"
 
 
 def edge_config(p: DemoPlaces) -> dict[str, Any]:
@@ -62,6 +71,7 @@ def edge_config(p: DemoPlaces) -> dict[str, Any]:
         "registration": {"grace_period": "3s"},
         "spool": {"dir": str(p.workdir / "spool"), "max_bytes": "256MiB", "policy": "block"},
         "wan": {"linger": "20ms", "ack_timeout": "10s"},
+        "admin": {"listen": p.edge_admin},
     }
 
 
@@ -70,6 +80,7 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
         "kafka": {"bootstrap_servers": p.bootstrap, "linger": "2ms"},
         "registry": {"url": p.registry_url},
         "zenoh": {"mode": "client", "connect": [p.cloud_router]},
+        "command_signing": {"key_file": str(p.keys / "command-signing-key.pem")},
         "commands": [
             {
                 "name": "lightring",
@@ -79,12 +90,18 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
                 "repeat": {"period": "1s", "lease": "15s"},
             },
         ],
+        "metrics": {"listen": p.uplink_metrics},
+        "console": {"listen": p.fleet_console},
     }
 
 
 def repeater_config(p: DemoPlaces) -> dict[str, Any]:
     return {
-        "repeater": {"site": SITE, "state_dir": str(p.workdir / "repeater")},
+        "repeater": {
+            "site": SITE,
+            "state_dir": str(p.workdir / "repeater"),
+            "command_keys": [str(p.keys / "command-signing.pem")],
+        },
         "ros": {"distro": "jazzy", "message_paths": [str(m) for m in p.msg_paths]},
         "zenoh": {"mode": "client", "connect": [p.site_router]},
     }

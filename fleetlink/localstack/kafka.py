@@ -36,6 +36,10 @@ class KafkaSettings:
     data_dir: Path
     advertised_port: int | None = None  # a relay in front of the broker (fault tests)
     host: str = "127.0.0.1"
+    sasl_port: int | None = None
+    """A second listener, SASL_PLAINTEXT with the PLAIN mechanism, for ``sasl_users``."""
+    sasl_users: tuple[tuple[str, str], ...] = ()
+    """(user, password) pairs the SASL listener accepts."""
 
     @property
     def bootstrap(self) -> str:
@@ -68,6 +72,15 @@ def server_properties(s: KafkaSettings) -> str:
         # retention would delete them within minutes on this test/demo broker
         "log.retention.ms": "-1",
     }
+    if s.sasl_port is not None:
+        users = " ".join(f'user_{user}="{password}"' for user, password in s.sasl_users)
+        props["listeners"] += f",SASL_PLAINTEXT://{s.host}:{s.sasl_port}"
+        props["advertised.listeners"] += f",SASL_PLAINTEXT://{s.host}:{s.sasl_port}"
+        props["listener.security.protocol.map"] += ",SASL_PLAINTEXT:SASL_PLAINTEXT"
+        props["sasl.enabled.mechanisms"] = "PLAIN"
+        props["listener.name.sasl_plaintext.plain.sasl.jaas.config"] = (
+            f"org.apache.kafka.common.security.plain.PlainLoginModule required {users};"
+        )
     return "".join(f"{k}={v}\n" for k, v in props.items())
 
 
@@ -145,6 +158,8 @@ class KafkaBroker:
 
     def start(self, timeout: float = 90.0) -> float:
         ensure_port_free(self.settings.port, "the Kafka broker", self.settings.host)
+        if self.settings.sasl_port is not None:
+            ensure_port_free(self.settings.sasl_port, "the Kafka broker's SASL listener", self.settings.host)
         ensure_port_free(self.settings.controller_port, "the Kafka controller", self.settings.host)
         self._format()
         return self.process.start(timeout)

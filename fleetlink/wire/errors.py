@@ -25,3 +25,16 @@ class EnvelopeError(FleetlinkError):
         self.reason = reason
         self.data = data[:256]
         super().__init__(f"malformed {what}: {reason}")
+
+
+class CommandAuthError(FleetlinkError):
+    """A command envelope that is not signed for this site by a trusted key.
+
+    ``kind`` is one of ``unsigned``, ``unknown_key``, ``bad_signature``, ``other_site`` (a
+    metric label); the message says what exactly.
+    """
+
+    def __init__(self, kind: str, reason: str) -> None:
+        self.kind = kind
+        self.reason = reason
+        super().__init__(f"command refused ({kind}): {reason}")

@@ -11,6 +11,16 @@ from fleetlink.localstack.artifacts import fetch_all
 from fleetlink.localstack.java import KAFKA_MIN_JAVA, find_java
 from fleetlink.localstack.kafka import KafkaBroker, KafkaSettings
 from fleetlink.localstack.process import free_port
+from tests.fault import e2e_processes
+from tests.fault.e2e_processes import PROFILES, WanProfile
+
+
+@pytest.fixture(params=PROFILES, ids=lambda p: p.name)
+def wan_profile(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> WanProfile:
+    """Run the test once per WAN profile (one batch of 100 in flight; the edge's defaults)."""
+    profile: WanProfile = request.param
+    monkeypatch.setattr(e2e_processes, "PROFILE", profile)
+    return profile
 
 
 @pytest.fixture

@@ -42,9 +42,35 @@ from tests.integration.e2e_stack import TopicReader
 
 ROOT = Path(__file__).resolve().parents[2]
 STRING = "std_msgs/msg/String"
-BATCH = 100
-"""wan.batch_max_records of the edges under test: with one batch in flight, the in-flight
-window is this many records."""
+
+
+@dataclass(frozen=True)
+class WanProfile:
+    """The WAN settings of the edges under test (``None``: the edge's default)."""
+
+    name: str
+    batch_max_records: int | None
+    max_in_flight: int | None
+
+    @property
+    def batch(self) -> int:
+        """Records per batch at most (the edge's default is 2,000)."""
+        return self.batch_max_records or 2000
+
+    @property
+    def window(self) -> int:
+        """Records in flight at most: what one fault can make the edge send twice."""
+        return self.batch * (self.max_in_flight or 4)
+
+    def settings(self) -> dict[str, int]:
+        out = {"batch_max_records": self.batch_max_records, "max_in_flight": self.max_in_flight}
+        return {k: v for k, v in out.items() if v is not None}
+
+
+PROFILES = (WanProfile("1x100", 100, 1), WanProfile("defaults", None, None))
+"""Every end-to-end fault test runs with one small batch in flight and with the defaults."""
+PROFILE = PROFILES[0]
+"""The profile of the test running (``tests/fault/conftest.py: wan_profile`` sets it)."""
 
 
 class Process:
@@ -56,7 +82,8 @@ class Process:
         self.log = log
         self.proc: subprocess.Popen[bytes] | None = None
 
-    def start(self) -> Process:
+    def start(self, env: dict[str, str] | None = None) -> Process:
+        """Start it (``env``: the whole environment, else this process's)."""
         with self.log.open("ab") as out:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "fleetlink", "-v", *self.argv],
@@ -64,6 +91,7 @@ class Process:
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
+                env=env,
             )
         return self
 
@@ -160,12 +188,15 @@ class Bed:
         return self.edge
 
     def start_uplink(self) -> Process:
+        """Start the uplink and wait until it serves batches (it first reads the registrations
+        topic to its end: an edge started earlier would see its first batches go unanswered)."""
         n = sum(p.name == "uplink" for p in self.processes)
-        self.uplink = Process(
+        uplink = self.uplink = Process(
             "uplink", ["uplink", "run", "-c", str(self.uplink_yaml)], self.tmp / f"uplink-{n}.log"
         ).start()
-        self.processes.append(self.uplink)
-        return self.uplink
+        self.processes.append(uplink)
+        self.wait(lambda: uplink.log_lines("uplink running") > 0, 30, "the uplink serves batches")
+        return uplink
 
     def stats(self) -> dict[str, Any]:
         try:
@@ -252,10 +283,9 @@ def bed(
                 },
                 "registration": {"grace_period": "30s"},
                 "wan": {
-                    "batch_max_records": BATCH,
+                    **PROFILE.settings(),
                     "linger": "10ms",
                     "ack_timeout": ack_timeout,
-                    "max_in_flight": 1,
                     "retry_backoff_min": "100ms",
                     "retry_backoff_max": "1s",
                 },

@@ -21,8 +21,11 @@ from pathlib import Path
 import pytest
 
 from fleetlink.localstack.kafka import KafkaBroker
-from tests.fault.e2e_processes import BATCH, Count, generate, streaming, tally
+from tests.fault import e2e_processes
+from tests.fault.e2e_processes import Count, generate, streaming, tally
 from tests.integration.e2e_stack import TopicReader
+
+pytestmark = pytest.mark.usefixtures("wan_profile")
 
 
 @pytest.fixture
@@ -102,7 +105,7 @@ def test_wan_cut_hang_style(
 def within_window(result: Count) -> None:
     assert result.lost == [], str(result)
     assert result.unexpected == 0
-    assert result.duplicated <= BATCH, str(result)
+    assert result.duplicated <= e2e_processes.PROFILE.window, str(result)
 
 
 def test_uplink_killed_mid_stream(

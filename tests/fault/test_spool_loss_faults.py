@@ -1,16 +1,16 @@
 """Loss around the spool with real processes (edge, uplink, Kafka, registry, Zenoh routers).
 
-Row 30 crash in a burst:   kill -9 the edge while three robots publish a burst of 60,000 records
+Row 37 crash in a burst:   kill -9 the edge while three robots publish a burst of 60,000 records
                            and keep publishing; restart it. Per robot and topic, every record
                            published is in Kafka or counted as lost before the spool, exactly.
-Row 31 ledger deleted:     the edge stopped (cleanly, then by kill -9), its ``ledger`` file
+Row 38 ledger deleted:     the edge stopped (cleanly, then by kill -9), its ``ledger`` file
                            deleted: restored from ``ledger.copy``; duplicates stay within the
                            in-flight window; reported until acknowledged.
-Row 32 segment deleted:    a middle segment of unacknowledged records deleted while the edge is
+Row 39 segment deleted:    a middle segment of unacknowledged records deleted while the edge is
                            stopped: ``fleetlink spool check`` and the restarted edge count exactly
                            the records Kafka never gets, name the file and seqs, and report
                            ``degraded`` until ``fleetlink spool acknowledge --admin`` clears it.
-Row 33 segments deleted:   every segment deleted, the ledger kept: every unacknowledged record is
+Row 40 segments deleted:   every segment deleted, the ledger kept: every unacknowledged record is
                            counted, exactly as many as Kafka misses.
 """
 
@@ -93,7 +93,7 @@ def metric(admin: str, name: str, **labels: str) -> float | None:
     return None
 
 
-# --- row 30 ---------------------------------------------------------------------------------------
+# --- row 37 ---------------------------------------------------------------------------------------
 class Robot:
     """One robot publishing ``"<robot>:<n>"`` on ``/<robot>/chatter`` at ``rate`` a second."""
 
@@ -140,7 +140,7 @@ def sent(fleet: list[Robot]) -> int:
     return sum(r.sent for r in fleet)
 
 
-def test_row30_kill9_in_a_burst_every_record_is_in_kafka_or_counted_lost_before_the_spool(
+def test_row37_kill9_in_a_burst_every_record_is_in_kafka_or_counted_lost_before_the_spool(
     kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
 ) -> None:
     with bed(tmp_path, kafka_bootstrap, schema_registry_url) as b, robots(b.site.endpoint) as fleet:
@@ -217,8 +217,8 @@ def test_row30_kill9_in_a_burst_every_record_is_in_kafka_or_counted_lost_before_
         assert total >= 50_000
 
 
-# --- row 31 ---------------------------------------------------------------------------------------
-def test_row31_a_deleted_ledger_keeps_duplicates_within_the_window(
+# --- row 38 ---------------------------------------------------------------------------------------
+def test_row38_a_deleted_ledger_keeps_duplicates_within_the_window(
     kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
 ) -> None:
     with bed(tmp_path, kafka_bootstrap, schema_registry_url) as b:
@@ -274,7 +274,7 @@ def test_row31_a_deleted_ledger_keeps_duplicates_within_the_window(
     assert result.duplicated <= window  # the copy knew the ack mark: only what was in flight again
 
 
-# --- rows 32 and 33 -------------------------------------------------------------------------------
+# --- rows 39 and 40 -------------------------------------------------------------------------------
 def spooled_while_cut(b: Bed, gen: Generator, records: int) -> tuple[int, int]:
     """Publish ``records`` with the WAN cut, then stop the edge cleanly with them unacknowledged.
     Returns (published in all, published before the cut)."""
@@ -293,7 +293,7 @@ def spooled_while_cut(b: Bed, gen: Generator, records: int) -> tuple[int, int]:
 
 
 @pytest.mark.parametrize("which", ["middle", "all"])
-def test_rows32_33_deleted_segments_are_counted_exactly(
+def test_rows39_40_deleted_segments_are_counted_exactly(
     kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path, which: str
 ) -> None:
     with bed(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as b:

@@ -11,13 +11,17 @@ bypasses the relays). Each test makes its own topics, consumer group and state d
 
 from __future__ import annotations
 
+import atexit
 import json
+import shutil
+import tempfile
 import threading
 import time
 import uuid
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +32,7 @@ from confluent_kafka.schema_registry import SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer, AvroSerializer
 from confluent_kafka.serialization import MessageField, SerializationContext
 
+from fleetlink.common.command_keys import write_command_key
 from fleetlink.common.zenoh_configs import render_router_config
 from fleetlink.localstack.relay import TcpRelay
 from fleetlink.repeater.config import RepeaterConfig
@@ -299,6 +304,14 @@ class TopicLog:
 # -- fleetlink processes ---------------------------------------------------------------------
 
 
+@cache
+def command_keys() -> tuple[Path, Path]:
+    """One command signing key pair for the test process: (the uplink's private, the repeaters' public)."""
+    directory = Path(tempfile.mkdtemp(prefix="fleetlink-command-keys-"))
+    atexit.register(shutil.rmtree, directory, True)
+    return write_command_key(directory)
+
+
 def uplink_config(
     bootstrap: str, registry_url: str, cloud: str, commands: list[dict[str, Any]], *, suffix: str
 ) -> UplinkConfig:
@@ -312,8 +325,10 @@ def uplink_config(
                 "registrations": f"robots.{suffix}",
                 "command_dead_letter": f"cmd-dlq.{suffix}",
                 "command_status": f"cmd-status.{suffix}",
+                "refused": f"refused.{suffix}",
             },
             "commands": commands,
+            "command_signing": {"key_file": str(command_keys()[0])},
         }
     )
 
@@ -370,6 +385,7 @@ def repeater_config(site: Site, state_dir: Path, **repeater: Any) -> RepeaterCon
                 "id": f"rep-{site.name}",
                 "heartbeat": "300ms",
                 "status_timeout": "1s",
+                "command_keys": [str(command_keys()[1])],
                 **repeater,
             },
             "ros": {"distro": "jazzy", "message_paths": [str(IROBOT)]},

@@ -18,12 +18,13 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import zenoh
 
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.uplink.commands.plan import Forward
+from fleetlink.uplink.commands.signing import CommandSigner
 from fleetlink.wire.commands import SETTLED, CommandReply, decode_reply, encode_envelope
 from fleetlink.wire.errors import EnvelopeError
 from fleetlink.wire.keys import command_key
@@ -51,8 +52,10 @@ class Forwarder:
         query_timeout: float = 5.0,
         clock: Callable[[], float],
         stop: threading.Event,
+        signer: CommandSigner,
     ) -> None:
         self._session = session
+        self._signer = signer
         self._timeout = query_timeout
         self._clock = clock
         self._stop = stop
@@ -79,7 +82,7 @@ class Forwarder:
                 return result
             timeout = min(self._timeout, max(remaining, 0.05))
             result.attempts += 1
-            replies, problem = self._query(fwd.key_expr, encode_envelope(env), target, timeout)
+            replies, problem = self._query(fwd.key_expr, encode_envelope(env), target, timeout, fwd.site)
             needy = [r for r in replies if r.result == "need-schema"] if env.schema is None else []
             if needy and fwd.site is not None:
                 env = full  # the full envelope, with the schema: at once
@@ -93,6 +96,7 @@ class Forwarder:
                             encode_envelope(full),
                             zenoh.QueryTarget.BEST_MATCHING,
                             timeout,
+                            reply.site,
                         )
                         replies += more
             result.replies = replies
@@ -117,26 +121,36 @@ class Forwarder:
         return result
 
     def _query(
-        self, key: str, payload: bytes, target: zenoh.QueryTarget, timeout: float
+        self, key: str, payload: bytes, target: zenoh.QueryTarget, timeout: float, site: str | None
     ) -> tuple[list[CommandReply], str]:
+        """Send one signed envelope; each reply's site is the one its key proves, not what it says."""
         replies: list[CommandReply] = []
         problems: list[str] = []
         try:
             for reply in self._session.get(
                 key,
                 payload=payload,
+                attachment=self._signer.attachment(payload, site),
                 target=target,
                 timeout=timeout,
                 consolidation=zenoh.ConsolidationMode.NONE,
             ):
                 if reply.ok is not None:
                     try:
-                        replies.append(decode_reply(reply.ok.payload.to_bytes()))
+                        decoded = decode_reply(reply.ok.payload.to_bytes())
                     except EnvelopeError as exc:
                         problems.append(str(exc))
+                        continue
+                    replies.append(replace(decoded, site=site_of_key(str(reply.ok.key_expr))))
                 elif reply.err is not None:
                     text = reply.err.payload.to_bytes()[:300].decode("utf-8", "replace")
                     problems.append(f"site refused: {text}")
         except zenoh.ZError as exc:
             problems.append(f"query failed: {exc}")
         return replies, "; ".join(problems)
+
+
+def site_of_key(key: str) -> str:
+    """The site of a reply key ``fleetlink/<site>/...`` (routers let a site answer only there)."""
+    parts = key.split("/", 2)
+    return parts[1] if len(parts) >= 2 and parts[0] == "fleetlink" else ""

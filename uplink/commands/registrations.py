@@ -179,11 +179,13 @@ class RegistrationsReader:
                     exc.reason,
                 )
                 return
-            if not self.directory.apply(key, decoded.record):
+            ts_type, timestamp_ms = msg.timestamp()
+            if not self.directory.apply(key, decoded.record, timestamp_ms if ts_type else 0):
                 self._limiter.log(
                     logging.WARNING,
                     "unusable",
-                    "registrations: record %s[%d]@%d has no robot/site/event",
+                    "registrations: record %s[%d]@%d has no robot/site/event, or comes from a site "
+                    "that does not hold the robot",
                     msg.topic(),
                     msg.partition(),
                     msg.offset(),

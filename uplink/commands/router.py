@@ -40,6 +40,7 @@ from fleetlink.uplink.commands.mapping import CommandMapping
 from fleetlink.uplink.commands.offsets import OffsetTracker
 from fleetlink.uplink.commands.plan import CommandRecord, Forward, command_id, lease_until_ms, plan
 from fleetlink.uplink.commands.registrations import RegistrationsReader
+from fleetlink.uplink.commands.signing import CommandSigner, load_signer
 from fleetlink.uplink.commands.status_writer import STATUS_KEY, StatusIntake, StatusWriter
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.dead_letter import dead_letter
@@ -79,6 +80,8 @@ class CommandRouter:
         query_timeout: float = 5.0,
         workers: int = 32,
         max_in_flight: int = 256,
+        directory: RobotDirectory | None = None,
+        signer: CommandSigner | None = None,
     ) -> None:
         self.config = config
         self.group_id = group_id or f"{config.kafka.client_id}.commands"
@@ -92,12 +95,18 @@ class CommandRouter:
         self._subscribed: tuple[str, ...] = ()
         self.set_mappings(config.commands)
         self.stats = RouterStats()
-        self.directory = RobotDirectory()
+        self._own_directory = directory is None
+        self.directory = directory if directory is not None else RobotDirectory()
+        """Where each robot is; the uplink's (fed by its reader) or, when none is given, this router's own."""
         self.decoder = CommandDecoder(registry)
         self.status_writer = StatusWriter(sink, registry, config.topics.command_status)
-        self.intake = StatusIntake(self.status_writer)
+        self.intake = StatusIntake(self.status_writer, owner_of=self.directory.owner)
         self._stop = threading.Event()
-        self.forwarder = Forwarder(session, query_timeout=query_timeout, clock=clock, stop=self._stop)
+        if signer is None:
+            signer = load_signer(config)
+        self.forwarder = Forwarder(
+            session, query_timeout=query_timeout, clock=clock, stop=self._stop, signer=signer
+        )
         self._tracker = OffsetTracker()
         self.assigned = threading.Event()
         """Set once the consumer group gave this router its first partitions."""
@@ -114,9 +123,10 @@ class CommandRouter:
         cfg = self.config
         self._stop.clear()
         self._queryable = self._session.declare_queryable(STATUS_KEY, self.intake.on_query)
-        self._reader = RegistrationsReader(
-            cfg.kafka, cfg.topics.registrations, self.decoder, self.directory
-        ).start(registrations_catch_up_s)
+        if self._own_directory:
+            self._reader = RegistrationsReader(
+                cfg.kafka, cfg.topics.registrations, self.decoder, self.directory
+            ).start(registrations_catch_up_s)
         self._pool = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="uplink-command")
         self._consumer = Consumer(dict(cfg.kafka.consumer_config(self.group_id)))
         self._thread = threading.Thread(target=self._run, name="uplink-commands", daemon=True)

@@ -13,6 +13,8 @@ import zenoh
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.schemas.errors import RegistryError
 from fleetlink.schemas.registry import subject_for_topic
+from fleetlink.uplink.commands.ownership import Owner
+from fleetlink.uplink.commands.status_checks import check_status
 from fleetlink.uplink.commands.status_records import STATUS_SCHEMA, status_value
 from fleetlink.uplink.errors import ProduceError
 from fleetlink.uplink.ingest import Sink
@@ -100,11 +102,16 @@ class StatusWriter:
 class StatusIntake:
     """The queryable on ``fleetlink/*/command-status/*``."""
 
-    def __init__(self, writer: StatusWriter) -> None:
+    def __init__(self, writer: StatusWriter, *, owner_of: Callable[[str], Owner | None]) -> None:
         self._writer = writer
+        self._owner_of = owner_of
         self._limiter = LogLimiter(log)
         self.batches = 0
         self.heartbeats = 0
+        self.refused = 0
+        """Status batches naming another site than their key's."""
+        self.dropped = 0
+        """Status events about a robot another site holds."""
 
     def on_query(self, query: zenoh.Query) -> None:
         payload = query.payload
@@ -123,6 +130,28 @@ class StatusIntake:
             query.reply_err(str(exc).encode())
             query.drop()
             return
+        checked = check_status(str(query.key_expr), batch, self._owner_of)
+        if checked.problem is not None:
+            self.refused += 1
+            self._limiter.log(
+                logging.WARNING,
+                "forged-status",
+                "refused a status batch on %s: %s",
+                query.key_expr,
+                checked.problem,
+            )
+            query.reply_err(f"refused: {checked.problem}".encode())
+            query.drop()
+            return
+        if checked.dropped:
+            self.dropped += checked.dropped
+            self._limiter.log(
+                logging.WARNING,
+                "foreign-status",
+                "dropped %d status event(s) on %s about robots another site holds",
+                checked.dropped,
+                query.key_expr,
+            )
         if not batch.events:
             self.heartbeats += 1
             query.reply(query.key_expr, encode_status_ack(StatusAck(0)))
@@ -130,6 +159,7 @@ class StatusIntake:
             return
         self.batches += 1
         count = len(batch.events)
+        events = checked.events
 
         def done(problem: str | None) -> None:
             try:
@@ -146,4 +176,7 @@ class StatusIntake:
             finally:
                 query.drop()
 
-        self._writer.write(batch.events, done)
+        if not events:
+            done(None)
+            return
+        self._writer.write(events, done)

@@ -29,6 +29,10 @@ class Metrics(Protocol):
     def on_gap(self, topic: str, n: int = 1) -> None: ...
     def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None: ...
 
+    # the intake (edge)
+    def on_intake_dropped(self, n: int = 1) -> None: ...
+    def set_intake(self, *, queued: int, lag_s: float, rss_bytes: int, bound_bytes: int) -> None: ...
+
     # buffers and the WAN (edge)
     def on_spooled(self, n: int, nbytes: int, stream: str = "spool") -> None: ...
     def on_spool_dropped(self, stream: str, reason: str, n: int = 1) -> None: ...
@@ -48,13 +52,16 @@ class Metrics(Protocol):
     ) -> None: ...
     def set_wan(self, *, in_flight: int, link_up: bool) -> None: ...
     def set_robots(self, n: int) -> None: ...
+    def on_admin_refused(self, reason: str) -> None: ...
 
     # uplink
     def on_ingested(self, site: str, status: str, records: int, dead_lettered: int = 0) -> None: ...
     def on_delivered(self, topic: str, ok: bool, latency_s: float) -> None: ...
+    def on_refused(self, site: str, reason: str, *, batches: int = 0, records: int = 0) -> None: ...
 
     # repeater
     def on_command(self, command: str, outcome: str, n: int = 1) -> None: ...
+    def on_forged_command(self, reason: str) -> None: ...
 
     # every process
     def set_health(self, state: HealthState) -> None: ...
@@ -101,6 +108,16 @@ class FamilyMetrics:
 
     def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None:
         self._count("fleetlink_lost_before_spool", robot, topic, n=n)
+
+    # the intake ---------------------------------------------------------------------------
+    def on_intake_dropped(self, n: int = 1) -> None:
+        self._count("fleetlink_intake_dropped_samples", n=n)
+
+    def set_intake(self, *, queued: int, lag_s: float, rss_bytes: int, bound_bytes: int) -> None:
+        self._set(family("fleetlink_intake_queued_samples"), (), queued)
+        self._set(family("fleetlink_intake_lag_seconds"), (), lag_s)
+        self._set(family("fleetlink_memory_resident_bytes"), (), rss_bytes)
+        self._set(family("fleetlink_memory_bound_bytes"), (), bound_bytes)
 
     # buffers and the WAN -----------------------------------------------------------------
     def on_spooled(self, n: int, nbytes: int, stream: str = "spool") -> None:
@@ -153,6 +170,9 @@ class FamilyMetrics:
     def set_robots(self, n: int) -> None:
         self._set(family("fleetlink_robots_registered"), (), n)
 
+    def on_admin_refused(self, reason: str) -> None:
+        self._count("fleetlink_admin_refused", reason)
+
     # uplink --------------------------------------------------------------------------------------
     def on_ingested(self, site: str, status: str, records: int, dead_lettered: int = 0) -> None:
         self._count("fleetlink_ingest_batches", site, status)
@@ -163,9 +183,18 @@ class FamilyMetrics:
         self._count("fleetlink_kafka_delivered", topic, "ok" if ok else "error")
         self._observe(family("fleetlink_kafka_delivery_latency_seconds"), (), max(0.0, latency_s))
 
+    def on_refused(self, site: str, reason: str, *, batches: int = 0, records: int = 0) -> None:
+        if batches:
+            self._count("fleetlink_ingest_refused_batches", site, reason, n=batches)
+        if records:
+            self._count("fleetlink_ingest_refused_records", site, reason, n=records)
+
     # repeater --------------------------------------------------------------------------------
     def on_command(self, command: str, outcome: str, n: int = 1) -> None:
         self._count("fleetlink_commands", command, outcome, n=n)
+
+    def on_forged_command(self, reason: str) -> None:
+        self._count("fleetlink_commands_forged", reason)
 
     # every process ---------------------------------------------------------------------------
     def set_health(self, state: HealthState) -> None:

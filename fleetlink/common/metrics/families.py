@@ -86,6 +86,18 @@ FAMILIES: tuple[Family, ...] = (
         "ROS messages a publisher sent that never reached the spool: the edge was stopped or crashed "
         "(counted from each publisher's first message after a restart)",
     ),
+    # -- the intake (edge): between receiving a sample and spooling its records --------------
+    _c(
+        "fleetlink_intake_dropped_samples", (), "Samples the full intake could not take (counted, never held)"
+    ),
+    _g("fleetlink_intake_queued_samples", (), "Samples received and not yet turned into records"),
+    _g(
+        "fleetlink_intake_lag_seconds",
+        (),
+        "How long the oldest sample taken last had waited since it arrived",
+    ),
+    _g("fleetlink_memory_resident_bytes", (), "The process's resident memory"),
+    _g("fleetlink_memory_bound_bytes", (), "The most the edge's configuration lets it hold (docs/edge.md)"),
     # -- buffers and the WAN (edge) --------------------------------------------------------
     _c("fleetlink_spool_appended_records", ("stream",), "Records appended to a buffer"),
     _c("fleetlink_spool_appended_bytes", ("stream",), "Bytes appended to a buffer"),
@@ -118,6 +130,11 @@ FAMILIES: tuple[Family, ...] = (
     _g("fleetlink_wan_link_up", (), "1 when the uplink answered recently, else 0"),
     _h("fleetlink_wan_ack_latency_seconds", "From sending a batch to its acknowledgement"),
     _g("fleetlink_robots_registered", (), "Robots registered at this edge"),
+    _c(
+        "fleetlink_admin_refused",
+        ("reason",),
+        "Admin requests refused (reason: wrong_token, locked_out, read_only)",
+    ),
     # -- uplink ----------------------------------------------------------------------------------
     _c(
         "fleetlink_ingest_batches",
@@ -126,6 +143,16 @@ FAMILIES: tuple[Family, ...] = (
     ),
     _c("fleetlink_ingest_records", ("site",), "Records received from edges"),
     _c("fleetlink_ingest_dead_lettered", ("site",), "Records the uplink sent to the dead-letter topic"),
+    _c(
+        "fleetlink_ingest_refused_batches",
+        ("site", "reason"),
+        "Batches refused whole, nothing produced (reason: identity, headers, schema)",
+    ),
+    _c(
+        "fleetlink_ingest_refused_records",
+        ("site", "reason"),
+        "Records written to the refused topic instead of theirs (reason: topic, registration)",
+    ),
     _c("fleetlink_kafka_delivered", ("topic", "result"), "Kafka delivery reports (result: ok, error)"),
     _h("fleetlink_kafka_delivery_latency_seconds", "From produce() to Kafka's delivery report"),
     # -- repeater --------------------------------------------------------------------------------
@@ -133,6 +160,12 @@ FAMILIES: tuple[Family, ...] = (
         "fleetlink_commands",
         ("command", "outcome"),
         "Commands handled (outcome: published, repeated, expired, refused)",
+    ),
+    _c(
+        "fleetlink_commands_forged",
+        ("reason",),
+        "Command envelopes refused unread: not signed by a trusted key for this site (reason: "
+        "unsigned, unknown_key, bad_signature, other_site)",
     ),
     # -- every process ---------------------------------------------------------------------------
     _g("fleetlink_health", ("state",), "1 for the process's current health state (ok, degraded, failed)"),

@@ -74,7 +74,8 @@ WRONG = [
     {"Authorization": "Bearer wrong"},
     {"Authorization": f"Basic {TOKEN}"},
     {"Cookie": f"{COOKIE}={TOKEN}"},
-    {"Cookie": f"{COOKIE}={cookie_value(SecretStr('other'))}"},
+    {"Cookie": f"{COOKIE}={cookie_value(SecretStr('other'), now=1_000.0)}"},
+    {"Cookie": f"{COOKIE}={cookie_value(SecretStr(TOKEN), now=1_000.0 - 9 * 3600)}"},  # expired
 ]
 
 
@@ -131,7 +132,7 @@ def test_sign_in_sets_a_cookie_that_opens_the_console(w: World) -> None:
     )
     assert (right.status_code, right.headers["location"]) == (303, f"/console/sites/{SITE}")
     cookie = right.headers["set-cookie"]
-    assert cookie.startswith(f"{COOKIE}={cookie_value(SecretStr(TOKEN))};")
+    assert cookie.startswith(f"{COOKIE}={cookie_value(SecretStr(TOKEN), now=1_000.0)};")
     assert TOKEN not in cookie
     for flag in ("HttpOnly", "Path=/console/", "SameSite=strict"):
         assert flag in cookie
@@ -371,3 +372,27 @@ def test_the_fleet_pages() -> None:
         ("b", "mappings/imu", "delete", None),
         ("b", "mappings/imu", "put", {"to": "x"}),
     ]
+
+
+def test_a_session_ends_after_its_time(w: World) -> None:
+    clock = Clock()
+    client = edge_client(w, clock=clock)
+    client.post("/console/login", data={"token": TOKEN, "next": "/console/"}, follow_redirects=False)
+    assert client.get("/console/api/sites").status_code == 200
+    clock.now += 8 * 3600 + 1
+    assert client.get("/console/api/sites").status_code == 401
+
+
+def test_wrong_tokens_lock_a_client_out(w: World) -> None:
+    client = edge_client(w)
+    answers = [
+        client.post("/console/login", data={"token": f"guess-{i}", "next": "/console/"}).status_code
+        for i in range(200)
+    ]
+    assert answers[:5] == [401] * 5  # five tries are checked ...
+    assert set(answers[5:]) == {429}  # ... then every attempt is refused unchecked
+    locked = client.post("/console/login", data={"token": TOKEN, "next": "/console/"}, follow_redirects=False)
+    assert locked.status_code == 429  # even the right token waits out the lockout
+    bearer = client.get("/console/api/sites", headers={"Authorization": "Bearer nope"})
+    assert bearer.status_code == 429
+    assert int(bearer.headers["retry-after"]) >= 1

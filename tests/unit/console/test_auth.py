@@ -7,18 +7,38 @@ from pathlib import Path
 import pytest
 from pydantic import SecretStr
 
-from fleetlink.console.auth import Access, bearer, check, cookie_value, load_console_token, may_change
+from fleetlink.console.auth import (
+    SESSION_TTL_S,
+    Access,
+    bearer,
+    check,
+    cookie_value,
+    load_console_token,
+    may_change,
+    session_valid,
+)
 from fleetlink.console.errors import ConsoleConfigError
 
 TOKEN = SecretStr("s3cret-token")
-COOKIE = cookie_value(TOKEN)
+NOW = 1_000_000.0
+COOKIE = cookie_value(TOKEN, now=NOW)
 
 
 def test_the_cookie_proves_the_token_without_holding_it() -> None:
     assert TOKEN.get_secret_value() not in COOKIE
-    assert len(COOKIE) == 64
-    assert cookie_value(SecretStr("s3cret-token")) == COOKIE
-    assert cookie_value(SecretStr("other")) != COOKIE
+    expires, _, mac = COOKIE.partition(".")
+    assert (int(expires), len(mac)) == (NOW + SESSION_TTL_S, 64)
+    assert cookie_value(SecretStr("s3cret-token"), now=NOW) == COOKIE
+    assert cookie_value(SecretStr("other"), now=NOW) != COOKIE
+
+
+def test_a_session_cookie_expires_and_its_time_cannot_be_moved() -> None:
+    assert session_valid(TOKEN, COOKIE, now=NOW + SESSION_TTL_S - 1)
+    assert not session_valid(TOKEN, COOKIE, now=NOW + SESSION_TTL_S)
+    expires, _, mac = COOKIE.partition(".")
+    assert not session_valid(TOKEN, f"{int(expires) + 3600}.{mac}", now=NOW)
+    for junk in ("", ".", "x.y", "-1.abc", "9" * 20 + ".abc"):
+        assert not session_valid(TOKEN, junk, now=NOW)
 
 
 @pytest.mark.parametrize(
@@ -54,7 +74,7 @@ def test_bearer(header: str | None, expected: str | None) -> None:
 def test_check(
     token: SecretStr | None, authorization: str | None, cookie: str | None, expected: Access
 ) -> None:
-    assert check(token, authorization=authorization, cookie=cookie) == expected
+    assert check(token, authorization=authorization, cookie=cookie, now=NOW) == expected
 
 
 @pytest.mark.parametrize(

@@ -8,10 +8,12 @@ from __future__ import annotations
 from typing import Any, cast
 
 import zenoh
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from fleetlink.console.uplink import NO_COMMANDS, command_view
 from fleetlink.schemas.registry import SchemaRegistry
 from fleetlink.uplink.commands.router import CommandRouter
+from fleetlink.uplink.commands.signing import CommandSigner
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.producer import KafkaSink
 
@@ -21,6 +23,7 @@ def router() -> CommandRouter:
         {
             "kafka": {"bootstrap_servers": "127.0.0.1:9"},
             "registry": {"url": "http://127.0.0.1:9"},
+            "command_signing": {"key_file": "unused.pem"},
             "commands": [
                 {
                     "name": "lightring",
@@ -37,6 +40,7 @@ def router() -> CommandRouter:
         session=cast(zenoh.Session, unused),
         sink=cast(KafkaSink, unused),
         registry=cast(SchemaRegistry, unused),
+        signer=CommandSigner(Ed25519PrivateKey.generate()),
     )
 
 

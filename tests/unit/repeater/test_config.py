@@ -24,7 +24,7 @@ def no_sockets(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_shipped_example_is_a_valid_repeater_config(no_sockets: None) -> None:
-    kind, config = validate_file(DEPLOY / "repeater.example.yaml")
+    kind, config = validate_file(DEPLOY / "repeater.example.yaml", host_checks=False)  # keys: test_deploy
     assert kind == "repeater"
     assert isinstance(config, RepeaterConfig)
     section = config.repeater
@@ -32,7 +32,7 @@ def test_shipped_example_is_a_valid_repeater_config(no_sockets: None) -> None:
 
 
 def with_dead_man(value: object) -> RepeaterConfig:
-    section = {"site": "a", "state_dir": "/tmp/x", "dead_man": value}
+    section = {"site": "a", "state_dir": "/tmp/x", "command_keys": ["/k.pem"], "dead_man": value}
     return RepeaterConfig.model_validate({"repeater": section})
 
 
@@ -72,7 +72,9 @@ def test_bad_durations(text: object, reason: str) -> None:
 
 
 def test_defaults() -> None:
-    config = RepeaterConfig.model_validate({"repeater": {"site": "a", "state_dir": "/tmp/x"}})
+    config = RepeaterConfig.model_validate(
+        {"repeater": {"site": "a", "state_dir": "/tmp/x", "command_keys": ["/k.pem"]}}
+    )
     assert config.repeater.dead_man is None
     assert config.repeater.id  # from the host name
     assert (config.ros.distro, config.ros.domain_id, config.zenoh.mode) == ("jazzy", 0, None)
@@ -107,7 +109,15 @@ def test_bad_config_exits_non_zero_naming_yaml_paths(
         "ros.distro (line 7)",
         "ros.domain_id (line 8)",
         "zenoh.colour (line 11)",
+        "repeater.command_keys",
     ):
         assert where in err
     assert "must be one key chunk" in err
     assert "invalid duration 'soon'" in err
+
+
+def test_a_repeater_without_a_key_to_check_commands_with_does_not_start(tmp_path: Path) -> None:
+    with pytest.raises(ValidationError, match=r"repeater\.command_keys"):
+        RepeaterConfig.model_validate(
+            {"repeater": {"site": "a", "state_dir": str(tmp_path), "command_keys": []}}
+        )

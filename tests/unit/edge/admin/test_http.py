@@ -76,6 +76,21 @@ def test_without_a_token_the_api_is_open(w: World) -> None:
     assert client(w, token=None).get("/mappings").status_code == 200
 
 
+def test_wrong_tokens_lock_a_client_out(w: World) -> None:
+    """200 wrong tokens in a burst: five are checked, the rest are refused unchecked."""
+    c = client(w)
+    answers = [
+        c.get("/mappings", headers={"Authorization": f"Bearer guess-{i}"}).status_code for i in range(200)
+    ]
+    assert answers[:5] == [401] * 5
+    assert set(answers[5:]) == {429}
+    locked = c.get("/mappings", headers=AUTH)
+    assert locked.status_code == 429  # the right token waits out the lockout too
+    assert int(locked.headers["retry-after"]) >= 1
+    assert c.get("/mappings").status_code == 429
+    assert w.backend.installs == 0
+
+
 def test_mappings_with_live_counters(w: World) -> None:
     w.snapshot[0] = EdgeSnapshot(
         mappings={

@@ -10,7 +10,6 @@ import pytest
 
 from fleetlink.edge.runtime.registration import (
     EVENT_FINGERPRINT,
-    EVENT_SCHEMA,
     EVENT_SCHEMA_JSON,
     RobotChange,
     event_json,
@@ -19,6 +18,7 @@ from fleetlink.edge.runtime.registration import (
 from fleetlink.roswire.robots import Reason, RobotEvent, RobotEventKind
 from fleetlink.schemas.single_object import fingerprint
 from fleetlink.wire import split_single_object
+from fleetlink.wire.robot_events import EVENT_SCHEMA
 
 
 @pytest.mark.parametrize(

@@ -19,7 +19,11 @@ def reg(robot: str, site: str, event: str = "registered") -> Event:
     ("events", "sites", "registered"),
     [
         ([reg("tb4_01", "a")], {"tb4_01": "a"}, ["tb4_01"]),
-        ([reg("tb4_01", "a"), reg("tb4_01", "b")], {"tb4_01": "b"}, ["tb4_01"]),  # moved
+        (
+            [reg("tb4_01", "a"), reg("tb4_01", "a", "deregistered"), reg("tb4_01", "b")],
+            {"tb4_01": "b"},
+            ["tb4_01"],
+        ),
         ([reg("tb4_01", "a"), reg("tb4_01", "a", "deregistered")], {"tb4_01": "a"}, []),  # last known site
         ([reg("tb4_01", "a"), ("tb4_01", None)], {"tb4_01": None}, []),  # tombstone forgets
         ([("tb4_02", {"site": "a"})], {"tb4_02": "a"}, ["tb4_02"]),  # robot from the key, event defaults
@@ -53,3 +57,28 @@ def test_unusable_events_are_ignored(key: str | None, value: dict[str, Any] | No
     directory = RobotDirectory()
     assert not directory.apply(key, value)
     assert (len(directory), directory.ignored, directory.sites()) == (0, 1, [])
+
+
+def test_a_record_from_a_site_that_does_not_hold_the_robot_is_ignored() -> None:
+    directory = RobotDirectory(release_after_ms=1000)
+    assert directory.apply(*reg("tb4_01", "a"), timestamp_ms=0)
+    assert not directory.apply(*reg("tb4_01", "b"), timestamp_ms=10)  # registered at a
+    assert not directory.apply(*reg("tb4_01", "b", "deregistered"), timestamp_ms=20)
+    assert directory.apply(*reg("tb4_01", "a", "deregistered"), timestamp_ms=100)
+    assert not directory.apply(*reg("tb4_01", "b"), timestamp_ms=500)  # a holds it 1 s more
+    assert (directory.site_of("tb4_01"), directory.conflicts) == ("a", 3)
+    assert directory.apply(*reg("tb4_01", "b"), timestamp_ms=1100)
+    assert directory.site_of("tb4_01") == "b"
+    assert directory.apply("tb4_01", None)  # an operator's release
+    assert directory.apply(*reg("tb4_01", "c"), timestamp_ms=1200)
+
+
+def test_claims_are_checked_and_applied_at_once() -> None:
+    directory = RobotDirectory()
+    assert directory.claim("tb4_01", "a", registered=True, now_ms=0) is None
+    assert directory.claim("tb4_01", "b", registered=True, now_ms=1) == "the robot is registered at site 'a'"
+    assert directory.claim("tb4_01", "a", registered=False, now_ms=2) is None
+    assert directory.claim("tb4_01", "b", registered=True, now_ms=3) is None
+    owner = directory.owner("tb4_01")
+    assert owner is not None
+    assert (owner.site, owner.registered, owner.since_ms) == ("b", True, 3)

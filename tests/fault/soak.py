@@ -1,0 +1,211 @@
+"""A fleet of robots into an edge whose WAN is cut: memory over time, and every message accounted.
+
+``run_fleet`` starts, as real processes, an edge agent and a fleet of robots
+(``bench.fleet_publisher``: each robot its own Zenoh session, real recorded messages) through a
+site router whose WAN link is cut from the start; it samples the edge's resident memory after a
+warm-up, then stops the robots and accounts for every message: published = lost in transit
+(sequence gaps) + dropped at the intake + held in the spool + evicted (``drop_oldest``) + refused
+(``block``, ``drop_newest``). ``run_soak`` is the memory soak (a small, full spool); used by
+tests/fault/test_memory_soak.py, tests/fault/test_receive_under_load.py and bench/bench_soak.py.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bench.fleet_publisher import TOPICS
+from fleetlink.localstack.relay import TcpRelay
+from fleetlink.localstack.zenoh_router import ZenohRouter
+from tests.fault.e2e_processes import Process
+from tests.paths import ROOT
+
+
+@dataclass
+class Soak:
+    policy: str
+    published: int = 0
+    rss_mb: list[float] = field(default_factory=list)
+    """Resident memory of the edge, sampled every half second after the warm-up."""
+    stats: dict[str, Any] = field(default_factory=dict)
+    registrations: int = 0
+
+    def count(self, *path: str) -> int:
+        value: Any = self.stats
+        for key in path:
+            value = value.get(key, {}) if isinstance(value, dict) else {}
+        return int(value) if isinstance(value, int) else 0
+
+    @property
+    def missing(self) -> int:
+        return sum(int(s.get("missing", 0)) for s in self.stats.get("subscriptions", {}).values())
+
+    def accounted(self) -> dict[str, int]:
+        """Where every published message went (each counted once)."""
+        buffer = ("streams", "durable", "buffer")
+        return {
+            "lost in transit (sequence gaps)": self.missing,
+            "dropped at the intake": self.count("intake", "dropped"),
+            "held in the spool": self.count(*buffer, "depth"),
+            "evicted (drop_oldest)": self.count(*buffer, "dropped_oldest"),
+            "refused by the spool (block)": self.count("processor", "spool_refused"),
+            "dropped by the spool (drop_newest)": self.count("processor", "spool_dropped"),
+        }
+
+    def growth(self) -> float:
+        """The largest resident memory over the first one, after the warm-up."""
+        return max(self.rss_mb) / self.rss_mb[0]
+
+    def summary(self) -> str:
+        return (
+            f"{self.policy}: published {self.published}, "
+            + ", ".join(f"{k} {v}" for k, v in self.accounted().items())
+            + f"; edge RSS {self.rss_mb[0]:.0f} -> {max(self.rss_mb):.0f} MB (x{self.growth():.3f})"
+        )
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def run_soak(
+    tmp: Path,
+    policy: str,
+    *,
+    robots: int = 10,
+    hz: float = 500.0,
+    seconds: float = 20.0,
+    warmup_s: float = 6.0,
+) -> Soak:
+    """Robots publish ``robots * hz`` Imu messages/s for ``seconds`` into a 4 MiB spool with full
+    policy ``policy``; memory is sampled after ``warmup_s`` (the spool fills in two or three)."""
+    spool = {"segment_bytes": "1MiB", "max_bytes": "4MiB", "policy": policy, "block_timeout": "500ms"}
+    return run_fleet(
+        tmp, policy, robots=robots, topics=1, hz=hz, seconds=seconds, warmup_s=warmup_s, spool=spool
+    )
+
+
+def run_fleet(
+    tmp: Path,
+    name: str,
+    *,
+    robots: int,
+    topics: int,
+    hz: float,
+    seconds: float,
+    warmup_s: float,
+    spool: dict[str, Any],
+    block: bool = False,
+) -> Soak:
+    """``robots`` robots publish ``topics`` topics each at ``hz`` for ``seconds`` (``block``:
+    reliable, blocking publishers) into an edge with the ``spool`` settings, the WAN cut."""
+    result = Soak(name)
+    with ExitStack() as stack:
+        cloud = stack.enter_context(ZenohRouter())
+        wan = stack.enter_context(TcpRelay(cloud.port))
+        wan.set_mode("blackhole")  # the WAN is cut from the start: nothing leaves the spool
+        site = stack.enter_context(ZenohRouter(connect=(wan.endpoint,)))
+        stats_file = tmp / "edge-stats.json"
+        config = {
+            "site": "soak",
+            "edge_id": "edge-1",
+            "zenoh": {"mode": "client", "connect": [site.endpoint]},
+            "robot_types": {
+                "bench": {
+                    "match": "/r*",
+                    "mappings": [
+                        {
+                            "name": topic,
+                            "from": f"/{{robot}}/{topic}",
+                            "to": f"soak.{topic}",
+                            "type": typename,
+                        }
+                        for topic, typename, _bag_topic, _bag in TOPICS[:topics]
+                    ],
+                }
+            },
+            "spool": {"dir": str(tmp / "spool"), **spool},
+            "wan": {"ack_timeout": "2s"},
+        }
+        edge_yaml = tmp / "edge.yaml"
+        edge_yaml.write_text(yaml.safe_dump(config))
+        edge = Process(
+            "edge",
+            [
+                "edge",
+                "run",
+                "-c",
+                str(edge_yaml),
+                "--stats-file",
+                str(stats_file),
+                "--stats-interval",
+                "0.25",
+            ],
+            tmp / "edge.log",
+        ).start()
+        stack.callback(edge.terminate, 10)
+        argv = [sys.executable, "-m", "bench.fleet_publisher", "--connect", site.endpoint]
+        argv += ["--robots", str(robots), "--topics", str(topics), "--hz", str(hz), "--seconds", str(seconds)]
+        pub = subprocess.Popen(
+            [*argv, *(["--block"] if block else [])],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+        )
+        stack.callback(pub.kill)
+        assert pub.stdout is not None
+        assert pub.stdin is not None
+        assert pub.stdout.readline().strip() == "ready", "the robots did not start"
+
+        def stats() -> dict[str, Any]:
+            try:
+                data: dict[str, Any] = json.loads(stats_file.read_text())
+            except (OSError, ValueError):
+                return {}
+            return data
+
+        deadline = time.monotonic() + 60
+        while (
+            len(stats().get("subscriptions", {})) < robots * topics or len(stats().get("robots", {})) < robots
+        ):
+            if time.monotonic() > deadline or edge.proc is None or edge.proc.poll() is not None:
+                raise AssertionError(f"the edge did not take the {robots} robots:\n{edge.tail()}")
+            time.sleep(0.2)
+        time.sleep(0.5)
+        result.registrations = robots
+        began = time.monotonic()
+        pub.stdin.write("go\n")
+        pub.stdin.flush()
+        time.sleep(warmup_s)
+        assert edge.proc is not None
+        while time.monotonic() - began < seconds:
+            result.rss_mb.append(_rss_mb(edge.proc.pid))
+            time.sleep(0.5)
+        done = pub.stdout.readline().split()
+        result.published = int(done[1])
+
+        def settled() -> bool:
+            data = stats()
+            return bool(data) and data.get("intake", {}).get("queued", 1) == 0
+
+        deadline = time.monotonic() + 30
+        time.sleep(1.0)
+        while not settled() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        time.sleep(0.6)  # one more stats write after the last take
+        result.stats = stats()
+        pub.stdin.write("bye\n")
+        pub.stdin.flush()
+    return result
