@@ -26,6 +26,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.cli.certs",
     "fleetlink.cli.routers",
     "fleetlink.cli.edge",
+    "fleetlink.cli.spool",
     "fleetlink.cli.uplink",
     "fleetlink.cli.repeater",
     "fleetlink.cli.probe",
