@@ -78,7 +78,12 @@ def test_a_changed_byte_changes_the_signature() -> None:
     other_key = signed_headers("PUT", "/b/l", host=HOST, payload_sha256=EMPTY_SHA256, creds=AWS, when=WHEN)
     other_body = signed_headers("PUT", "/b/k", host=HOST, payload_sha256="0" * 64, creds=AWS, when=WHEN)
     later = signed_headers(
-        "PUT", "/b/k", host=HOST, payload_sha256=EMPTY_SHA256, creds=AWS, when=datetime(2013, 5, 25, tzinfo=UTC)
+        "PUT",
+        "/b/k",
+        host=HOST,
+        payload_sha256=EMPTY_SHA256,
+        creds=AWS,
+        when=datetime(2013, 5, 25, tzinfo=UTC),
     )
     signatures = {h["Authorization"] for h in (base, other_key, other_body, later)}
     assert len(signatures) == 4

@@ -32,7 +32,9 @@ def image_cdr(width: int = 64, height: int = 48, *, seed: int = 0, encoding: str
     t = ts.types
     pixels = frame(width, height, seed)
     msg = t[IMAGE](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="cam"),
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="cam"
+        ),
         height=height,
         width=width,
         encoding=encoding,

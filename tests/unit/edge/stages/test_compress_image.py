@@ -146,7 +146,9 @@ def test_output_schema_is_compressed_image_and_fits_the_value() -> None:
 
 def test_refuses_other_types() -> None:
     ts = load_typestore("jazzy")
-    with pytest.raises(StageConfigError, match="takes sensor_msgs/msg/Image messages, not ros.sensor_msgs.msg.Imu"):
+    with pytest.raises(
+        StageConfigError, match=r"takes sensor_msgs/msg/Image messages, not ros\.sensor_msgs\.msg\.Imu"
+    ):
         CompressImageStage().output_schema(avro_schema(ts, "sensor_msgs/msg/Imu", "jazzy"))
     pipeline = build_pipeline(_specs([{"type": "compress_image"}]))
     with pytest.raises(StageConfigError, match=r"stage 0 \(compress_image\): compress_image takes"):
