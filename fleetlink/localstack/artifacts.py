@@ -225,24 +225,29 @@ def _apicurio_jar(home: Path) -> Path:
 
 def fetch_s3proxy(root: Path | None = None, version: str = S3PROXY_VERSION) -> Path:
     """Fetch s3proxy's runnable jar (``org.gaul:s3proxy``, classifier jar-with-dependencies)."""
-    home = (root or cache_root()) / f"s3proxy-{version}"
+    root = root or cache_root()
+    home = root / f"s3proxy-{version}"
     jar = home / f"s3proxy-{version}-jar-with-dependencies.jar"
     done = home / ".complete"
     if done.exists() and jar.exists():
         return jar
-    home.mkdir(parents=True, exist_ok=True)
-    _run_mvn(
-        [
-            "dependency:copy",
-            f"-Dartifact=org.gaul:s3proxy:{version}:jar:jar-with-dependencies",
-            f"-DoutputDirectory={home}",
-        ],
-        home,
-        f"s3proxy {version}",
-    )
-    if not jar.exists():
-        raise StackError(f"Maven reported success but {jar.name} is not in {home}")
-    done.touch()
+    with cache_lock(root):
+        if done.exists() and jar.exists():  # fetched by another process while this one waited
+            return jar
+        shutil.rmtree(home, ignore_errors=True)  # what an interrupted fetch left
+        home.mkdir(parents=True)
+        _run_mvn(
+            [
+                "dependency:copy",
+                f"-Dartifact=org.gaul:s3proxy:{version}:jar:jar-with-dependencies",
+                f"-DoutputDirectory={home}",
+            ],
+            home,
+            f"s3proxy {version}",
+        )
+        if not jar.exists():
+            raise StackError(f"Maven reported success but {jar.name} is not in {home}")
+        done.touch()
     return jar
 
 

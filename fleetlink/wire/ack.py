@@ -104,7 +104,8 @@ def decode_ack(data: bytes) -> Ack:
     if name == "need_schemas":
         (n_missing,) = r.unpack(U16, "missing schema count")
         missing = tuple(r.take(8, "missing schema fingerprint") for _ in range(n_missing))
-    (max_record_bytes,) = r.unpack(U32, "max record bytes")
+    # an uplink from before the limit was told ends here: 0, "not said"
+    (max_record_bytes,) = r.unpack(U32, "max record bytes") if r.end > r.pos else (0,)
     r.done("the ack")
     return Ack(
         edge_id=edge_id,

@@ -239,3 +239,39 @@ def test_bad_configs_name_the_yaml_path(tmp_path: Path, text: str, expected: str
     with pytest.raises(ConfigError) as info:
         load(tmp_path, text)
     assert expected in str(info.value)
+
+
+CAMERA = """\
+site: warehouse-a
+spool: {dir: /var/lib/fleetlink/spool}
+robot_types:
+  turtlebot4:
+    match: "/tb4_*"
+    mappings:
+      - name: camera
+        from: "/{robot}/oakd/rgb/preview/image_raw"
+        to: fleet.images
+        stages: [{type: compress_image, format: jpeg, quality: 85}]
+        claim_check: {above: 64KiB}
+"""
+
+
+def test_a_claim_check_without_an_object_store_names_the_mapping(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"robot_types\.turtlebot4\.mappings\[0\]\.claim_check"):
+        load(tmp_path, CAMERA)
+
+
+def test_a_camera_mapping_with_an_object_store_loads(tmp_path: Path) -> None:
+    config = load(
+        tmp_path,
+        CAMERA
+        + "objects: {endpoint: 'http://127.0.0.1:9000', bucket: fleet-images, access_key_id: k, "
+        + "secret_access_key: s}\nwan: {oversize: drop, max_record_bytes: 500KB}\n",
+    )
+    [mapping] = config.robot_types["turtlebot4"].mappings
+    assert mapping.claim_check is not None
+    assert int(mapping.claim_check.above) == 64 << 10
+    assert config.wan.oversize == "drop"
+    assert config.wan.max_record_bytes == 500_000
+    with pytest.raises(ConfigError, match=r"wan\.oversize"):
+        load(tmp_path, BASE + "wan: {oversize: split}\n")

@@ -363,6 +363,7 @@ def test_ack_invariants() -> None:
     said = encode_ack(ACKS[1])
     assert said[-4:] == (1_000_000).to_bytes(4, "little")  # the limit ends the ack
     assert decode_ack(said).max_record_bytes == 1_000_000
+    assert decode_ack(said[:-4]).max_record_bytes == 0  # an uplink from before the limit was told
     good = encode_ack(ACKS[0])
     with pytest.raises(WireError, match="not a fleetlink ack"):
         decode_ack(b"XXX" + good[3:])
