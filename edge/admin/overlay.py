@@ -83,9 +83,14 @@ class Overlay(BaseModel):
         return self.model_copy(update={"robot_types": types, "mappings": kept, "removed_robot_types": gone})
 
 
+REVEAL_SECRETS = {"reveal_secrets": True}
+"""The dump context in which secret fields dump their value, not ``**********``."""
+
+
 def config_data(config: BaseModel) -> dict[str, Any]:
-    """A validated config as plain data that validates to the same config again."""
-    return config.model_dump(mode="json", by_alias=True)
+    """A validated config as plain data that validates to the same config again (secrets such
+    as ``objects.secret_access_key`` included: ``REVEAL_SECRETS``)."""
+    return config.model_dump(mode="json", by_alias=True, context=REVEAL_SECRETS)
 
 
 def mapping_body(mapping: dict[str, Any]) -> dict[str, Any]:

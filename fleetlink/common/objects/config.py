@@ -6,7 +6,15 @@ import os
 import re
 from pathlib import Path
 
-from pydantic import ByteSize, Field, SecretStr, field_validator, model_validator
+from pydantic import (
+    ByteSize,
+    Field,
+    SecretStr,
+    SerializationInfo,
+    field_serializer,
+    field_validator,
+    model_validator,
+)
 
 from fleetlink.common.configfile import Section
 from fleetlink.common.durations import Seconds
@@ -56,6 +64,17 @@ class ObjectStoreSection(Section):
     retry_backoff_max: Seconds = Field(
         default=30.0, gt=0, le=3600, description="longest pause between two attempts of a failed upload"
     )
+
+    @field_serializer("secret_access_key", when_used="json")
+    def _dump_secret(self, value: SecretStr | None, info: SerializationInfo) -> str | None:
+        """``**********``, except in a dump that is to validate again (the edge's admin overlay
+        dumps the file's config with ``{"reveal_secrets": True}``)."""
+        if value is None:
+            return None
+        context = info.context
+        if isinstance(context, dict) and context.get("reveal_secrets"):
+            return value.get_secret_value()
+        return str(value)
 
     @field_validator("endpoint")
     @classmethod

@@ -275,3 +275,17 @@ def test_a_camera_mapping_with_an_object_store_loads(tmp_path: Path) -> None:
     assert config.wan.max_record_bytes == 500_000
     with pytest.raises(ConfigError, match=r"wan\.oversize"):
         load(tmp_path, BASE + "wan: {oversize: split}\n")
+
+
+def test_the_admin_overlay_keeps_the_object_stores_inline_secret(tmp_path: Path) -> None:
+    from fleetlink.edge.admin.overlay import config_data
+
+    config = load(
+        tmp_path,
+        BASE + "objects: {endpoint: 'http://127.0.0.1:9000', bucket: b1b, access_key_id: k, "
+        "secret_access_key: s3cr3t}\n",
+    )
+    again = EdgeConfig.model_validate(config_data(config))
+    assert again.objects is not None
+    assert again.objects.resolve_secret() == "s3cr3t"
+    assert "s3cr3t" not in str(config.model_dump(mode="json"))  # shown nowhere else
