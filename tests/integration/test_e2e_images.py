@@ -146,8 +146,8 @@ def test_the_edge_learns_the_uplinks_limit_and_keeps_larger_records_off_the_wan(
             site=site_name,
             robot_types={"cam": {"match": "/cam_*", "mappings": mappings}},
         )
+        assert not (tmp_path / "spool" / "record_limit.json").exists()  # nothing learned before
         with EdgeAgent(config) as agent, camera_robot(router.endpoint, "cam_02") as camera:
-            assert agent.snapshot()["record_limit"]["learned"] is None
             chatter = camera.node.create_publisher(
                 "/cam_02/chatter", "std_msgs/msg/String", congestion="block"
             )
