@@ -20,6 +20,10 @@ LIGHTRING = "irobot_create_msgs/msg/LightringLeds"
 ODOMETRY = "nav_msgs/msg/Odometry"
 IMU = "sensor_msgs/msg/Imu"
 BATTERY = "sensor_msgs/msg/BatteryState"
+IMAGE = "sensor_msgs/msg/Image"
+CAMERA_TOPIC = "oakd/rgb/preview/image_raw"
+"""A TurtleBot 4's camera (OAK-D preview: 250x250 rgb8), under the robot's namespace."""
+CAMERA_SIZE = 250
 
 _HAZARD_FRAMES = {1: "bump_front_center", 2: "cliff_front_left", 4: "wheel_drop_left"}
 
@@ -35,6 +39,26 @@ class MessageFactory:
         nanosec = min(round((stamp - sec) * 1e9), 999_999_999)
         return self.t["std_msgs/msg/Header"](
             stamp=self.t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame
+        )
+
+    def camera_image(self, stamp: float, number: int) -> Any:
+        """A 250x250 rgb8 picture: a gradient tinted by the robot's name, with noise, and a bar as
+        wide as the picture's number (so two pictures differ)."""
+        size = CAMERA_SIZE
+        y, x = np.mgrid[0:size, 0:size]
+        tint = sum(self.robot.encode()) % 128
+        pixels = np.stack([x * 255 // size, y * 255 // size, np.full_like(x, tint)], -1)
+        rng = np.random.default_rng(number)
+        pixels = (pixels + rng.integers(0, 6, pixels.shape)).clip(0, 255).astype(np.uint8)
+        pixels[: size // 10, : min(size, 10 * number)] = 255
+        return self.t[IMAGE](
+            header=self.header(stamp, "oakd_rgb_camera_optical_frame"),
+            height=size,
+            width=size,
+            encoding="rgb8",
+            is_bigendian=0,
+            step=size * 3,
+            data=pixels.reshape(-1),
         )
 
     def ir_intensity(self, r: Readings) -> Any:

@@ -5,7 +5,9 @@ name (under ``/<robot>``)      type                            what it does to t
 =============================  ==============================  ====================================
 ``e_stop``                     irobot_create_msgs/srv/EStop    motors off (``e_stop_on``) or on
 ``reset_pose``                 irobot_create_msgs/srv/ResetPose  the pose estimate becomes the given one
-``take_picture``               std_srvs/srv/Trigger            counts a picture ("picture 3 of tb4_02")
+``take_picture``               std_srvs/srv/Trigger            publishes a picture (sensor_msgs/Image,
+                                                               250x250 rgb8) on the camera's topic
+                                                               ``oakd/rgb/preview/image_raw``
 ``enable_motors``              std_srvs/srv/SetBool            motors enabled or not
 ``dock`` (action)              irobot_create_msgs/action/Dock  after ``dock_seconds`` the robot is on
                                                                its dock: standing still, put down
@@ -31,12 +33,14 @@ from typing import TYPE_CHECKING, Any
 from fleetlink.roswire.action import GoalHandle, RosActionServer
 from fleetlink.roswire.action_goals import GoalStatus
 from fleetlink.roswire.service import RosServiceServer, ServiceCall
+from fleetlink.roswire.sim.messages import CAMERA_TOPIC, IMAGE, MessageFactory
 from fleetlink.roswire.sim.model import LINEAR_SPEED, RobotModel
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
     from fleetlink.roswire.node import RosNode
+    from fleetlink.roswire.publisher import RosPublisher
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +96,8 @@ class RobotServices:
         self.on_event = on_event
         self.calls: dict[str, int] = {}
         self._servers: list[RosServiceServer | RosActionServer] = []
+        self._camera: RosPublisher | None = None
+        self._factory = MessageFactory(ts, name)
 
     def start(self) -> RobotServices:
         handlers: dict[str, Callable[[Any], Any]] = {
@@ -100,6 +106,7 @@ class RobotServices:
             "take_picture": self._take_picture,
             "enable_motors": self._enable_motors,
         }
+        self._camera = self.node.create_publisher(f"/{self.name}/{CAMERA_TOPIC}", IMAGE)
         for service, typename in SERVICES.items():
             self._servers.append(
                 RosServiceServer(
@@ -163,6 +170,8 @@ class RobotServices:
         with self.lock:
             self.model.pictures += 1
             number = self.model.pictures
+        if self._camera is not None:
+            self._camera.publish(self._factory.camera_image(time.time(), number))
         self._event(f"picture {number} taken")
         return self.ts.types[f"{TRIGGER}_Response"](success=True, message=f"picture {number} of {self.name}")
 
