@@ -131,6 +131,10 @@ class Processor:
         self.intake = intake
         self.maker = maker
         self.uploader = uploader
+        self._held: dict[bytes, list[int]] = {}
+        """Publisher GID -> sequence numbers of its samples whose records wait for an upload."""
+        self._held_jobs: dict[int, tuple[bytes, int]] = {}
+        self._released: list[tuple[bytes, int]] = []
         """Where claim-checked payloads go; without one they are dead-lettered."""
         self.buffers = buffers
         self._on_appended = on_appended or _nothing
@@ -217,7 +221,7 @@ class Processor:
                         out.extend(self.maker.tick(now))
                     if self.maker.claims:
                         out.extend(self._hand_over(self.maker.drain_claims()))
-                self._append(out, taken, _marks_of(items, taken))
+                self._append(out, taken, self._marks(items, taken))
             except Exception as exc:  # noqa: BLE001 - one bad chunk must not stop the edge; logged, counted
                 self.stats.errors += 1
                 self._limiter.log(
@@ -243,15 +247,18 @@ class Processor:
             elif isinstance(item, Rejected):
                 out.extend(self.maker.rejected_sample(item.topic, item.error, item.received_ns))
             elif isinstance(item, Claimed):
+                self._release(item.job)
                 out.extend(self.maker.finish_claim(item))
             else:
                 out.extend(item.records)
             if self.maker.claims:  # in order: a claim job's record may come back at once
-                out.extend(self._hand_over(self.maker.drain_claims()))
+                source = item if isinstance(item, RosSample) else None
+                out.extend(self._hand_over(self.maker.drain_claims(), source))
         return out
 
-    def _hand_over(self, jobs: Sequence[ClaimJob]) -> list[Outgoing]:
-        """Give claim jobs to the uploader; the records of those finished at once."""
+    def _hand_over(self, jobs: Sequence[ClaimJob], source: RosSample | None = None) -> list[Outgoing]:
+        """Give claim jobs to the uploader; the records of those finished at once. A job that
+        waits for its upload holds back its publisher's spool mark (``_marks``)."""
         out: list[Outgoing] = []
         for job in jobs:
             done = (
@@ -261,7 +268,42 @@ class Processor:
             )
             if done is not None:
                 out.extend(self.maker.finish_claim(done))
+            elif source is not None and source.gid is not None and source.seq is not None:
+                self._held_jobs[id(job)] = (source.gid, source.seq)
+                self._held.setdefault(source.gid, []).append(source.seq)
         return out
+
+    def _release(self, job: ClaimJob) -> None:
+        """A held job came back: its record enters the spool now, and with it its mark."""
+        held = self._held_jobs.pop(id(job), None)
+        if held is None:
+            return
+        gid, seq = held
+        seqs = self._held.get(gid)
+        if seqs is not None:
+            seqs.remove(seq)
+            if not seqs:
+                del self._held[gid]
+        self._released.append(held)
+
+    def _marks(self, items: Sequence[Item], taken: Taken) -> list[tuple[bytes, int]]:
+        """The chunk's marks (``_marks_of``), those of the claim-checked records it spools, and
+        none past a sample whose record still waits for its upload: a crash loses that record,
+        so the restart must count it (``lost_at_restart``)."""
+        found = dict(_marks_of(items, taken))
+        for gid, seq in self._released:
+            known = found.get(gid)
+            if known is None or seq > known:
+                found[gid] = seq
+        self._released = []
+        for gid, seqs in self._held.items():
+            known = found.get(gid)
+            if known is not None and known >= min(seqs):
+                if min(seqs) > 0:
+                    found[gid] = min(seqs) - 1
+                else:
+                    del found[gid]
+        return list(found.items())
 
     def _append(self, out: list[Outgoing], taken: Taken, marks: list[tuple[bytes, int]]) -> None:
         payloads: dict[Delivery, list[bytes]] = {}

@@ -8,6 +8,7 @@ from functools import cache
 
 import pytest
 
+from fleetlink.edge.claim_check import Claimed, ClaimJob
 from fleetlink.edge.errors import SpoolFullError
 from fleetlink.edge.mapping import MappingSpec, MappingTable
 from fleetlink.edge.runtime.intake import Intake
@@ -269,3 +270,39 @@ def test_marks_of_a_chunk_with_nothing_durable_wait_for_the_next_append() -> Non
     with processor:
         wait_until(lambda: processor.stats.appended == 1, 5)
     assert durable.calls == [("marks", [(G1, 5)])]
+
+
+class HoldingUploader:
+    """Keeps every claim job waiting, as an object store that is down does."""
+
+    def __init__(self) -> None:
+        self.jobs: list[ClaimJob] = []
+
+    def submit(self, job: ClaimJob) -> Claimed | None:
+        self.jobs.append(job)
+        return None
+
+
+def test_a_record_waiting_for_its_upload_holds_back_its_publishers_mark() -> None:
+    """A crash loses a record still waiting for its object: the spool's mark must not claim it,
+    so that the restart counts it in ``lost_at_restart``."""
+    from tests.unit.edge.runtime.camera import image_cdr, image_sample
+    from tests.unit.edge.runtime.test_records import maker_for
+    from tests.unit.edge.runtime.test_records_claims import camera
+
+    made, _, _ = maker_for([camera(above=0)])
+    durable, memory = CallLog("durable"), CallLog("memory")
+    uploader = HoldingUploader()
+    intake: Intake[Item] = Intake()
+    processor = Processor(intake, made, {"at_least_once": durable, "best_effort": memory}, uploader=uploader)
+    payload = image_cdr(32, 24)
+    with processor:
+        for seq in (3, 4):
+            intake.offer(image_sample("/cam_1/image_raw", payload, seq=seq)._replace(gid=G1))
+        wait_until(lambda: len(uploader.jobs) == 2, 5)
+        wait_until(lambda: ("marks", [(G1, 2)]) in durable.calls, 5)  # not 3, not 4: both wait
+        processor.post(Claimed(uploader.jobs[0], error="refused"))
+        wait_until(lambda: ("marks", [(G1, 3)]) in durable.calls, 5)  # 3's dead letter is spooled
+        processor.post(Claimed(uploader.jobs[1], error="refused"))
+        wait_until(lambda: ("marks", [(G1, 4)]) in durable.calls, 5)
+    assert all(m[1][0][1] <= 4 for m in durable.calls if isinstance(m, tuple))
