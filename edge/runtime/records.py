@@ -30,7 +30,6 @@ from fleetlink.edge.claim_check import (
     ClaimCheckError,
     Claimed,
     ClaimJob,
-    ObjectRef,
     Upload,
     claim_schema,
     content_type_for,
@@ -152,21 +151,6 @@ class ClaimContext:
     payload: bytes
 
 
-@dataclass(frozen=True, slots=True)
-class LatestPayload:
-    """The newest payload of a robot's claim-checking mapping, for the console."""
-
-    robot: str
-    mapping: str
-    stamp_ns: int
-    content_type: str
-    size: int
-    sha256: str
-    ref: ObjectRef | None
-    """Where it is stored; None when it stayed inline (then ``data`` holds it)."""
-    data: bytes | None
-
-
 @dataclass(slots=True)
 class ClaimStats:
     inline: int = 0
@@ -222,8 +206,6 @@ class RecordMaker:
         self.claims: list[ClaimJob] = []
         """Jobs made since the last ``drain_claims``."""
         self.claim_stats = ClaimStats()
-        self.latest: dict[tuple[str, str], LatestPayload] = {}
-        """(robot, mapping) -> the newest payload of a claim-checking mapping."""
 
     def set_record_limit(self, max_record_bytes: int) -> None:
         """The largest Kafka record the uplink produces (``edge.runtime.limits.RecordLimit``)."""
@@ -579,17 +561,6 @@ class RecordMaker:
                 self._dead("encode", str(exc), replace(origin, raw=ctx.payload), bound, out)
                 return out
         self._finish(bound, (ctx.topic, ctx.key, encoded), origin, out)
-        if bound.robot:
-            self.latest[(bound.robot, bound.name)] = LatestPayload(
-                robot=bound.robot,
-                mapping=bound.name,
-                stamp_ns=origin.stamp_ns,
-                content_type=claimed.ref.content_type if claimed.ref else content_type_for(ctx.value),
-                size=len(ctx.payload),
-                sha256=claimed.ref.sha256 if claimed.ref else hashlib.sha256(ctx.payload).hexdigest(),
-                ref=claimed.ref,
-                data=None if claimed.ref else ctx.payload,
-            )
         return out
 
     # -- routes ----------------------------------------------------------------------------------
