@@ -87,6 +87,7 @@ def test_wan_cut_hang_style(
         generate(b, gen, 1200)  # about 5 s of cut in all
         depth = b.durable()["buffer"]["depth"]
         assert depth >= 1500
+        b.assert_memory_bounded()
         b.relay.set_mode("pass")
         generate(b, gen, 200)
         sent = gen.pause()
