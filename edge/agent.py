@@ -36,6 +36,7 @@ from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
 from fleetlink.edge.runtime.processor import Emit, Item, Processor
 from fleetlink.edge.runtime.records import RecordMaker
+from fleetlink.edge.runtime.robot_log import RobotLog
 from fleetlink.edge.runtime.registration import (
     EVENT_FINGERPRINT,
     EVENT_SCHEMA_JSON,
@@ -111,6 +112,8 @@ class EdgeAgent:
         self._source: NativeSource | None = None
         self._registrar: Registrar | None = None
         self.robot_errors = 0
+        self.robot_log = RobotLog()
+        """When each robot registered and how; each robot's last registration changes."""
         self._gc_before = gc.get_threshold()
 
     # -- lifecycle -------------------------------------------------------------------------------
@@ -307,6 +310,7 @@ class EdgeAgent:
                 self.table.add_robot(change.robot, change.robot_type)
             else:
                 self.table.remove_robot(change.robot)
+            self.robot_log.record(change)
         except MappingError as exc:
             self.robot_errors += 1
             log.warning("robot %s: %s", change.robot, exc)
@@ -363,6 +367,8 @@ class EdgeAgent:
             "robots": self.table.robots(),
             "intake": self._source.intake_stats() if self._source is not None else {},
             "robot_errors": self.robot_errors,
+            "robot_details": self.robot_log.details(),
+            "robot_history": self.robot_log.history(),
         }
         if self._processor is not None:
             out.update(self._processor.counters())

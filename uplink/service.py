@@ -20,7 +20,13 @@ from typing import Any, Protocol
 
 import zenoh
 
-from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
+from fleetlink.common.metrics import (
+    CounterDeltas,
+    NullMetrics,
+    PrometheusMetrics,
+    serve_metrics,
+    split_listen,
+)
 from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.common.zenoh_options import ZenohOptions
@@ -76,6 +82,7 @@ class Uplink:
             else NullMetrics()
         )
         self._metrics_server: HttpServer | None = None
+        self._registry_deltas = CounterDeltas()
         self._gc_before: tuple[int, int, int] | None = None
         self._zenoh_options = zenoh_options or config.zenoh.options()
         self.stats = IngestStats()
@@ -134,7 +141,7 @@ class Uplink:
             ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
-            self._metrics_server = serve_metrics(host, port, self.metrics)
+            self._metrics_server = serve_metrics(host, port, self.metrics, refresh=self._refresh_metrics)
         for make in self.extension_factories:
             extension = make(self)
             extension.start()
@@ -188,6 +195,14 @@ class Uplink:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
+
+    def _refresh_metrics(self) -> None:
+        """Before a scrape: the registry's failures and the command lag (pull model)."""
+        if self._ids is not None:
+            for reason, total in self._ids.error_totals().items():
+                self.metrics.on_registry_error(reason, self._registry_deltas.delta(reason, total))
+        router = self._commands
+        self.metrics.set_command_lag(router.lag_s() if router is not None else 0.0)
 
     @property
     def metrics_url(self) -> str | None:
