@@ -36,7 +36,6 @@ from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
 from fleetlink.edge.runtime.processor import Emit, Item, Processor
 from fleetlink.edge.runtime.records import RecordMaker
-from fleetlink.edge.runtime.robot_log import RobotLog
 from fleetlink.edge.runtime.registration import (
     EVENT_FINGERPRINT,
     EVENT_SCHEMA_JSON,
@@ -44,6 +43,7 @@ from fleetlink.edge.runtime.registration import (
     RobotChange,
     event_record,
 )
+from fleetlink.edge.runtime.robot_log import RobotLog
 from fleetlink.edge.runtime.schema_book import SchemaBook
 from fleetlink.edge.runtime.sender import SenderOptions, WanSender
 from fleetlink.edge.runtime.subscriptions import SubscriptionManager

@@ -11,8 +11,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
-from fleetlink.edge.config import EdgeConfig
 from fleetlink.common.metrics.buckets import EMPTY, BucketTotals
+from fleetlink.edge.config import EdgeConfig
 from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
 from fleetlink.edge.spool import SpoolStats
 from fleetlink.roswire.graph import TopicInfo

@@ -62,12 +62,12 @@ class PrometheusMetrics(FamilyMetrics):
         metric = self._metric(fam, ())
         if not isinstance(metric, Histogram):
             return
-        buckets = metric._buckets  # noqa: SLF001 - prometheus_client has no bulk observe
+        buckets = metric._buckets  # prometheus_client has no bulk observe: its own buckets
         for i, n in enumerate(counts[: len(buckets)]):
             if n > 0:
                 buckets[i].inc(n)
         if total > 0:
-            metric._sum.inc(total)  # noqa: SLF001
+            metric._sum.inc(total)
 
     def render(self) -> bytes:
         """The registry in the Prometheus text format (``CONTENT_TYPE``)."""
