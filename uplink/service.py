@@ -37,6 +37,8 @@ from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.registrations import RegistrationsReader
 from fleetlink.uplink.commands.router import CommandRouter
 from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.delivery_board import DeliveryBoard, acked_topics
+from fleetlink.uplink.delivery_status import DeliveryStatus
 from fleetlink.uplink.diversion import Diversion
 from fleetlink.uplink.identity import source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats
@@ -101,6 +103,9 @@ class Uplink:
         """Which site holds each robot: read from the registrations topic, claimed at ingest."""
         self.delivery_latency = DeliveryLatency()
         """Per site: from a batch's arrival to Kafka's last delivery report (shown by the console)."""
+        self.delivery = DeliveryBoard()
+        """Per site: batches answered, records Kafka acknowledged per topic, dead letters."""
+        self._delivery_status = DeliveryStatus(config.id, self.delivery, self.delivery_latency)
         self.extension_factories = tuple(extensions)
         """Made and started at the end of ``start`` (the layer above passes the fleet console)."""
         self.extensions: list[UplinkExtension] = []
@@ -135,6 +140,7 @@ class Uplink:
             key = f"fleetlink/{site}/ingest/*"
             self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
             log.info("serving edge batches on %s", key)
+        self._delivery_status.start(self._session)
         if cfg.commands:
             self._commands = CommandRouter(
                 cfg, session=self._session, sink=self._sink, registry=self._registry, directory=self.directory
@@ -167,6 +173,7 @@ class Uplink:
         for queryable in self._queryables:
             queryable.undeclare()
         self._queryables.clear()
+        self._delivery_status.stop()
         if self._commands is not None:
             self._commands.stop()
             self._commands = None
@@ -269,6 +276,7 @@ class Uplink:
         if isinstance(verdict, Refused):
             self.refusals.batch(source, key, verdict.reason, verdict.detail)
             self.metrics.on_ingested(site_of(key), "refused", 0)
+            self.delivery.on_batch(site_of(key), "refused")
             self._finish(query, error=f"refused ({verdict.reason}): {verdict.detail}")
             return
         diversion = (
@@ -305,11 +313,13 @@ class Uplink:
             return
 
         def done(ack: Ack) -> None:
-            self.metrics.on_ingested(
-                batch.site, ack.status, len(batch.records), sum(f.dead_lettered for f in ack.failures)
-            )
+            dead = {f.seq for f in ack.failures if f.dead_lettered}
+            self.metrics.on_ingested(batch.site, ack.status, len(batch.records), len(dead))
             if ack.status == "ok":
                 self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
+                self.delivery.on_batch(batch.site, "ok", acked_topics(batch.records, dead), len(dead))
+            else:
+                self.delivery.on_batch(batch.site, ack.status)
             if ack.status == "error":
                 self._limiter.log(
                     logging.WARNING,

@@ -46,6 +46,7 @@ from fleetlink.console.auth import (
     may_change,
     token_matches,
 )
+from fleetlink.console.delivery import delivery_view
 from fleetlink.console.envelope import Envelope
 from fleetlink.console.errors import FormError
 from fleetlink.console.forms import MappingForm, field_errors, mapping_body, refusal_fields
@@ -292,10 +293,18 @@ def _api_routes(app: FastAPI, console: _Console) -> None:
 
     @app.get("/api/sites/{site}", dependencies=read)
     def api_site(site: SiteParam) -> JSONResponse:
-        view = site_view(site, sites.read(site), console.board, now=console.clock())
-        view["latency"] = sites.latency(site)
+        parts = sites.read(site)
+        view = site_view(site, parts, console.board, now=console.clock(), delivery=sites.delivery(site))
         view["process"] = sites.process
         return _json(view)
+
+    @app.get("/api/delivery", dependencies=read)
+    def api_delivery() -> JSONResponse:
+        answers = sites.delivery(None)
+        if answers is None:
+            return _json({"process": sites.process, "available": False})
+        view = delivery_view(console.board, answers, now=console.clock())
+        return _json({"process": sites.process, "available": True, "at": console.clock(), **view})
 
     @app.get("/api/commands", dependencies=read)
     def api_commands() -> JSONResponse:

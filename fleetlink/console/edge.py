@@ -79,6 +79,7 @@ class EdgeConsole:
     # -- the status key --------------------------------------------------------------------------
     def start(self, session: zenoh.Session) -> EdgeConsole:
         self._queryable.start(session, status_key(self.service.site))
+        self.site.session = session
         return self
 
     def stop(self) -> None:

@@ -10,7 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import zenoh
+
 from fleetlink.console.envelope import Envelope, failure, from_parts
+from fleetlink.console.remote import delivery_answers
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
 from fleetlink.edge.admin.service import AdminService
@@ -25,6 +28,9 @@ class LocalSite:
         self.service = service
         self.edge_id = edge_id
         self._status = status
+        self.session: zenoh.Session | None = None
+        """The edge's Zenoh session, once started: the uplinks' delivery figures for this site."""
+        self.timeout_s = 1.0
 
     @property
     def process(self) -> Process:
@@ -53,9 +59,10 @@ class LocalSite:
         status, part = execute(self.service, found[0], body)
         return from_parts(status, part, site=site, edge_id=self.edge_id)
 
-    def latency(self, site: str) -> dict[str, Any] | None:
-        del site
-        return None
+    def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        if self.session is None:
+            return None
+        return delivery_answers(self.session, self.site if site is None else site, self.timeout_s)
 
     def commands(self) -> dict[str, Any]:
         return {"available": False, "reason": NOT_HERE}

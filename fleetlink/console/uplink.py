@@ -1,13 +1,12 @@
 """``UplinkConsole``: the fleet-wide console the uplink serves (every site, over Zenoh).
 
-    console = UplinkConsole(settings, session=session, router=lambda: uplink.commands,
-                            latency=uplink.delivery_latency).start()
+    console = UplinkConsole(settings, session=session, router=lambda: uplink.commands).start()
     console.url            # http://127.0.0.1:8490 ; pages under /console/
     console.stop()
 
-Sites are found and changed through their Zenoh admin space (``ZenohSites``); Kafka delivery
-latency per site comes from the uplink's own measurements; command status from its command
-router (``command_view``).
+Sites are found and changed through their Zenoh admin space (``ZenohSites``); what Kafka
+acknowledged comes from every uplink's delivery figures (``fleetlink/<site>/delivery/<uplink>``,
+this one's included); command status from its command router (``command_view``).
 """
 
 from __future__ import annotations
@@ -29,7 +28,6 @@ from fleetlink.console.app import create_console_app
 from fleetlink.console.auth import load_console_token
 from fleetlink.console.errors import ConsoleError
 from fleetlink.console.remote import ZenohSites
-from fleetlink.uplink.latency import DeliveryLatency
 
 if TYPE_CHECKING:
     from fleetlink.uplink.commands.router import CommandRouter
@@ -77,13 +75,11 @@ class UplinkConsole:
         *,
         session: zenoh.Session,
         router: Callable[[], CommandRouter | None] = lambda: None,
-        latency: DeliveryLatency | None = None,
         token: SecretStr | None = None,
     ) -> None:
         self.settings = settings
         self.session = session
         self._router = router
-        self.latency = latency
         self._token = token
         self.http: HttpServer | None = None
 
@@ -97,7 +93,6 @@ class UplinkConsole:
             self.session,
             token=token,
             timeout_s=s.query_timeout,
-            latency=self.latency,
             commands=lambda: command_view(self._router()),
         )
         app = FastAPI(title="fleetlink fleet console", docs_url=None, redoc_url=None, openapi_url=None)
@@ -146,7 +141,6 @@ def uplink_console(
             settings,
             session=uplink.session,
             router=lambda: uplink.commands,
-            latency=uplink.delivery_latency,
             token=token,
         )
 

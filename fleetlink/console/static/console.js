@@ -142,7 +142,35 @@
   }
 
   // -- fleet page ------------------------------------------------------------------------------
+  async function refreshFleetDelivery() {
+    const box = document.getElementById("fleet-delivery");
+    if (!box) return;
+    const { status, data } = await api("GET", "api/delivery");
+    if (status !== 200 || !data.available) {
+      replaceChildren(box, el("span", { text: data.error || "not available on this process" }));
+      return;
+    }
+    box.className = "";
+    const head = deliveryLines(data, data.latency);
+    const rows = (data.uplinks || []).map((u) => el("tr", { dataset: { uplink: u.uplink, site: u.site } },
+      el("td", {}, el("code", { text: u.uplink })), el("td", { text: u.site }),
+      el("td", { class: "num", text: fmtInt((u.batches || {}).ok) }),
+      el("td", { class: "num", text: fmtInt(u.records) }), el("td", { class: "num", text: fmtInt(u.dead_lettered) })));
+    const topics = Object.entries(data.topics || {}).map(([topic, t]) => el("tr", { dataset: { topic } },
+      el("td", {}, el("code", { text: topic })), el("td", { class: "num", text: fmtInt(t.acked) }),
+      el("td", { class: "num", text: fmtRate(t.rate) })));
+    replaceChildren(box, el("div", { class: "cards" }, card("All uplinks", "fleet-delivery-total", ...head)),
+      el("h3", { text: "Per uplink and site" }),
+      el("table", { class: "table compact", id: "fleet-uplinks" }, el("thead", {}, el("tr", {},
+        ["Uplink", "Site", "Batches acked", "Records in Kafka", "Dead-lettered"].map((h) => el("th", { text: h })))),
+        el("tbody", {}, rows)),
+      el("h3", { text: "Per Kafka topic" }),
+      el("table", { class: "table compact", id: "fleet-topics" }, el("thead", {}, el("tr", {},
+        ["Kafka topic", "Records acknowledged", "rec/s"].map((h) => el("th", { text: h })))), el("tbody", {}, topics)));
+  }
+
   function fleetPage() {
+    loop(refreshFleetDelivery, Math.max(POLL_MS, 2000));
     const tbody = document.querySelector("#sites tbody");
     loop(async () => {
       const { status, data } = await api("GET", "api/sites");
@@ -164,6 +192,24 @@
   // -- site page: health -----------------------------------------------------------------------
   function card(title, id, ...lines) {
     return el("div", { class: "card", id }, el("h3", { text: title }), lines.map((l) => el("div", {}, l)));
+  }
+
+  /* every uplink's figures added up: batches, records in Kafka, latency of the last minute */
+  function deliveryLines(d, l) {
+    if (!d) return [el("span", { class: "muted", text: "not available: this process cannot ask the uplinks" })];
+    const lines = [];
+    const ok = (d.batches || {}).ok || 0;
+    lines.push(el("strong", { id: "delivered-batches", text: ok ? `${fmtInt(ok)} batches acknowledged` : "no batch delivered yet" }),
+      `${fmtInt(d.records)} records in Kafka, now ${fmtRate(d.rate)}/s · ${fmtInt(d.dead_lettered)} dead-lettered`,
+      el("span", { class: "muted", text: `from ${d.uplink_count} uplink(s)` +
+        (d.batches && d.batches.error ? ` · ${fmtInt(d.batches.error)} batches to retry` : "") }));
+    if (l) {
+      lines.push(`median ${l.p50_ms} ms · p95 ${l.p95_ms} ms · max ${l.max_ms} ms`,
+        el("span", { class: "muted", text: `${fmtInt(l.batches)} batches, last ${l.window_s} s` }));
+    } else {
+      lines.push(el("span", { class: "muted", text: "no batch delivered in the last minute" }));
+    }
+    return lines;
   }
 
   function renderHealth(view) {
@@ -200,17 +246,7 @@
       spool.push(el("span", { class: "muted", text: "depth and age: not reported by this site" }));
     }
     cards.push(card("Spool", "health-spool", ...spool));
-    let latency;
-    if (view.latency) {
-      const l = view.latency;
-      latency = [`median ${l.p50_ms} ms · p95 ${l.p95_ms} ms · max ${l.max_ms} ms`,
-        el("span", { class: "muted", text: `${fmtInt(l.batches)} batches, last ${l.window_s} s` })];
-    } else if (view.process === "edge") {
-      latency = [el("span", { class: "muted", text: "measured by the uplink: see the fleet console" })];
-    } else {
-      latency = [el("span", { class: "muted", text: "no batch of this site delivered in the last minute" })];
-    }
-    cards.push(card("Kafka delivery", "health-latency", ...latency));
+    cards.push(card("Kafka delivery", "health-latency", ...deliveryLines(view.delivery, view.latency)));
     const registered = (view.robots || []).filter((r) => r.state === "registered").length;
     cards.push(card("Robots", "health-robots", `${registered} registered`,
       (view.robots || []).length > registered ? `${view.robots.length - registered} lost` : null));
@@ -236,7 +272,28 @@
     el("div", { class: "label", text: n.label }), lines.map((l) => el("div", { class: "line" }, l)));
   }
 
-  function renderGraph(graph) {
+  /* what the filter box and the "unmapped topics" switch leave visible (robots, topics, mappings) */
+  const view = { filter: "", unmapped: false };
+
+  function matches(...texts) {
+    const wanted = view.filter.trim().toLowerCase();
+    return !wanted || texts.some((t) => String(t || "").toLowerCase().includes(wanted));
+  }
+
+  function visibleGraph(graph) {
+    const topics = graph.topics.filter((t) => (view.unmapped || t.mapped) &&
+      matches(t.label, t.robot.slice(2)));
+    const robotsWithTopics = new Set(topics.map((t) => t.robot));
+    const robots = graph.robots.filter((r) => robotsWithTopics.has(r.id) || (!view.filter.trim() ?
+      true : matches(r.label)));
+    const shown = new Set([...robots, ...topics, ...graph.mappings, ...graph.kafka].map((n) => n.id));
+    const edges = graph.edges.filter((e) => shown.has(e.from) && shown.has(e.to));
+    const hidden = graph.topics.length - topics.length;
+    return { ...graph, robots, topics, edges, hidden };
+  }
+
+  function renderGraph(full) {
+    const graph = visibleGraph(full);
     const cols = {};
     for (const col of document.querySelectorAll("#graph .col")) cols[col.dataset.col] = col.querySelector(".nodes");
     replaceChildren(cols.robots, graph.robots.map((n) => node(n, [n.detail], null)));
@@ -244,10 +301,32 @@
       [el("span", { class: "rate", text: n.mapped ? `${fmtRate(n.rate)} msg/s` : "not mapped" })], n.rate)));
     replaceChildren(cols.mappings, graph.mappings.map((n) => node(n, [
       el("span", { class: "rate", text: `in ${fmtRate(n.in)}/s · out ${fmtRate(n.out)}/s` }),
-      el("span", { class: n.drop ? "rate drop" : "rate", text: `dropped ${fmtRate(n.drop)}/s` +
-        (n.dead ? ` · dead-lettered ${fmtRate(n.dead)}/s` : "") })], n.out)));
-    replaceChildren(cols.kafka, graph.kafka.map((n) => node(n,
-      [el("span", { class: "rate", text: `${n.approx ? "≈ " : ""}${fmtRate(n.rate)} rec/s` })], n.rate)));
+      n.filtered ? el("span", { class: "rate muted", text: `filtered by its stages ${fmtRate(n.filtered)}/s` }) : null,
+      (n.drop || n.dead) ? el("span", { class: "rate drop", text: `lost ${fmtRate(n.drop)}/s` +
+        (n.dead ? ` · dead-lettered ${fmtRate(n.dead)}/s` : "") }) : null], n.out)));
+    const backlog = full.backlog;
+    const head = [];
+    if (backlog && backlog.records > 0) {
+      head.push(el("div", { class: `backlog ${backlog.oldest_age_s > 5 ? "bad" : ""}`, id: "kafka-backlog" },
+        `${fmtInt(backlog.records)} record(s) waiting in the spool, oldest ${fmtSeconds(backlog.oldest_age_s)}`));
+    }
+    if (!full.kafka_reported) {
+      head.push(el("div", { class: "muted small", id: "kafka-unreported", text: "no uplink reported what Kafka acknowledged" }));
+    }
+    replaceChildren(cols.kafka, head, graph.kafka.map((n) => node(n, [
+      el("span", { class: "rate", text: n.rate === null || n.rate === undefined ? "… in Kafka" :
+        `${n.approx ? "≈ " : ""}${fmtRate(n.rate)} rec/s in Kafka` }),
+      el("span", { class: "rate muted small", text: `mapped ${fmtRate(n.mapped)}/s` })], n.rate)));
+    const notes = [];
+    if (graph.hidden) notes.push(`${graph.hidden} topic(s) hidden by the filter or as not mapped`);
+    const elsewhere = Object.entries(full.elsewhere || {});
+    if (elsewhere.length) {
+      notes.push(`${elsewhere.length} other ROS namespace(s) seen on the network, not registered at this site: ` +
+        elsewhere.map(([ns, n]) => `${ns} (${n})`).join(", "));
+    }
+    const box = document.getElementById("graph-notes");
+    if (box) box.textContent = notes.join(" · ");
+    return graph;
   }
 
   /* curves between the nodes, in the graph box's own coordinates (measured now: layout is
@@ -281,13 +360,24 @@
   }
 
   // -- site page: robots and mappings ----------------------------------------------------------
-  function renderRobots(robots) {
+  function fmtTime(seconds) {
+    if (seconds === null || seconds === undefined) return "not known";
+    return new Date(seconds * 1000).toLocaleString("en-GB", { hour12: false });
+  }
+
+  function renderRobots(robots, site) {
     const tbody = document.querySelector("#robots tbody");
-    const rows = robots.map((r) => el("tr", { dataset: { robot: r.robot } },
-      el("td", { text: r.robot }), el("td", { text: r.robot_type }), el("td", {}, badge(r.state)),
-      el("td", { text: r.registered_since || "not known" }),
+    const shown = robots.filter((r) => matches(r.robot, r.robot_type, r.state));
+    const rows = shown.map((r) => el("tr", { dataset: { robot: r.robot } },
+      el("td", {}, el("a", { href: `${BASE}sites/${encodeURIComponent(site)}/robots/${encodeURIComponent(r.robot)}`,
+        text: r.robot })),
+      el("td", { text: r.robot_type }), el("td", {}, badge(r.state)),
+      el("td", { text: fmtTime(r.registered_at) }),
       el("td", { text: r.explicit ? "registered explicitly" : "discovered" })));
-    if (!rows.length) rows.push(el("tr", {}, el("td", { colspan: 5, class: "muted", text: "no robot registered" })));
+    if (!rows.length) {
+      rows.push(el("tr", {}, el("td", { colspan: 5, class: "muted",
+        text: robots.length ? "no robot matches the filter" : "no robot registered" })));
+    }
     replaceChildren(tbody, rows);
   }
 
@@ -301,7 +391,7 @@
 
   function renderMappings(view, editor) {
     const tbody = document.querySelector("#mappings tbody");
-    const rows = view.mappings.map((m) => {
+    const rows = view.mappings.filter((m) => matches(m.name, m.from, m.to, m.robot_type)).map((m) => {
       const r = m.rates || {};
       const c = m.counters || {};
       const confirming = removal.name === m.name && Date.now() < removal.until;
@@ -316,7 +406,9 @@
         el("td", {}, (m.stages || []).map((s) => el("div", {}, el("code", { text: stageText(s) }))), stageCounts),
         el("td", { class: "num", text: fmtRate(r.received) }),
         el("td", { class: "num", text: fmtRate(r.emitted) }),
-        el("td", { class: r.dropped ? "num drop" : "num", text: fmtRate(r.dropped) }),
+        el("td", { class: "num" }, el("span", { class: "muted", title: "left out by its stages, as configured",
+          text: fmtRate(r.filtered) }), " · ", el("span", { class: r.dropped ? "drop" : "", title: "lost (stage errors, other ROS types)",
+          text: fmtRate(r.dropped) })),
         el("td", { class: "small totals" }, `${fmtInt(c.received)} in · ${fmtInt(c.emitted)} out`,
           el("br"), `${fmtInt(c.dropped)} dropped · ${fmtInt(c.dead_lettered)} dead-lettered`),
         el("td", { class: "actions" },
@@ -397,7 +489,9 @@
       const { data } = await api("POST", `api/sites/${enc}/dry-run`, values());
       if (!data.ok) { refused(data); dry.hidden = true; return; }
       const matches = data.result.matches || [];
-      say(`dry run: ${matches.length} topic(s) would be mapped now`);
+      const named = matches.slice(0, 4).map((m) => `${m.topic} → ${m.kafka_topic} (key ${m.key})`);
+      if (matches.length > 4) named.push(`and ${matches.length - 4} more`);
+      say(`dry run: ${matches.length} topic(s) would be mapped now${named.length ? `: ${named.join(", ")}` : ""}`);
       dry.hidden = false;
       replaceChildren(dry, el("h3", { text: `Dry run of ${data.result.mapping}` }),
         el("table", { class: "table compact", id: "dry-run-table" },
@@ -468,16 +562,29 @@
       last = data;
       editor.robotTypes(data.robot_types || []);
       renderHealth(data);
-      renderGraph(data.graph);
-      renderRobots(data.robots || []);
+      const shown = renderGraph(data.graph);
+      renderRobots(data.robots || [], site);
       renderMappings(data, editor);
-      drawEdges(data.graph);
+      drawEdges(shown);
       setUpdated(`updated ${new Date().toLocaleTimeString()}`);
     };
     editor = mappingEditor(site, () => refresh().catch((err) => setUpdated(String(err), true)));
+    const filter = document.getElementById("filter");
+    const unmapped = document.getElementById("show-unmapped");
+    const rerender = () => {
+      view.filter = filter.value;
+      view.unmapped = unmapped.checked;
+      if (!last) return;
+      const shown = renderGraph(last.graph);
+      renderRobots(last.robots || [], site);
+      renderMappings(last, editor);
+      drawEdges(shown);
+    };
+    filter.addEventListener("input", rerender);
+    unmapped.addEventListener("change", rerender);
     loop(refresh, POLL_MS);
     loop(refreshCommands, Math.max(POLL_MS, 3000));
-    new ResizeObserver(() => { if (last) drawEdges(last.graph); }).observe(document.getElementById("graph"));
+    new ResizeObserver(() => { if (last) drawEdges(visibleGraph(last.graph)); }).observe(document.getElementById("graph"));
   }
 
   const pages = { fleet: fleetPage, site: sitePage };

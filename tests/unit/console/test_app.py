@@ -201,6 +201,7 @@ def test_the_site_view_with_rates_between_polls(w: World) -> None:
     assert view["mappings"][1]["rates"] == {
         "received": 20.0,
         "emitted": 4.0,
+        "filtered": 0.0,
         "dropped": 16.0,
         "dead_lettered": 0.0,
     }
@@ -341,8 +342,21 @@ class FixedFleet:
         self.asked.append((site, path, op, body))
         return failure(504, f"no edge of site {site!r} answered within 3 s", site=site)
 
-    def latency(self, site: str) -> dict[str, Any] | None:
-        return {"batches": 1, "p50_ms": 5.0, "p95_ms": 5.0, "max_ms": 5.0, "window_s": 60.0}
+    def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        """Two uplinks, each having delivered some of site a's batches."""
+        answers = [
+            {
+                "uplink": uplink,
+                "site": "a",
+                "batches": {"ok": n},
+                "records": 10 * n,
+                "dead_lettered": 0,
+                "topics": {"fleet.ir": 10 * n},
+                "latency": {"batches": n, "max_ms": 9.0, "samples_ms": [5.0] * n, "window_s": 60.0},
+            }
+            for uplink, n in (("up-1", 3), ("up-2", 2))
+        ]
+        return [a for a in answers if site in (None, a["site"])]
 
     def commands(self) -> dict[str, Any]:
         return {"available": True, "records": 3}
@@ -357,6 +371,14 @@ def test_the_fleet_pages() -> None:
     assert client.get("/api/sites", headers=BEARER).json()["sites"][1]["error"] == "timeout"
     view = client.get("/api/sites/a", headers=BEARER).json()
     assert (view["process"], view["latency"]["p50_ms"], view["health"]) == ("uplink", 5.0, {"state": "ok"})
+    assert view["latency"]["batches"] == 5  # every uplink's batches, not one uplink's
+    assert (view["delivery"]["batches"], view["delivery"]["uplink_count"]) == ({"ok": 5}, 2)
+    fleetwide = client.get("/api/delivery", headers=BEARER).json()
+    assert (fleetwide["available"], fleetwide["records"], fleetwide["topics"]["fleet.ir"]["acked"]) == (
+        True,
+        50,
+        50,
+    )
     assert client.get("/api/commands", headers=BEARER).json() == {
         "process": "uplink",
         "available": True,
