@@ -21,6 +21,8 @@ of a warm one); then parts 1 and 3 alternate ``--repeat`` times and their median
 (the machine's other load varies); every Kafka topic is created before its run; records are
 read back one ``poll`` at a time for latency (receive times to the millisecond), in 5 ms batches
 for throughput. Part 2 runs last. Environment: ``BENCH_LINGER`` (the edge's ``wan.linger``, default 10ms),
+``BENCH_KAFKA_LINGER`` / ``BENCH_KAFKA_COMPRESSION`` (the uplink's ``kafka.linger`` and
+``kafka.compression``, default 5ms and lz4),
 ``BENCH_METRICS=1`` (the uplink's Prometheus metrics on: every delivery report counted).
 """
 
@@ -136,7 +138,11 @@ class Pipeline:
     def __init__(self, work: Path, bootstrap: str, registry: str, topic: str, stack: ExitStack) -> None:
         self.cloud_port, self.site_port = free_port(), free_port()
         uplink: dict[str, Any] = {
-            "kafka": {"bootstrap_servers": bootstrap, "linger": "5ms"},
+            "kafka": {
+                "bootstrap_servers": bootstrap,
+                "linger": os.environ.get("BENCH_KAFKA_LINGER", "5ms"),
+                "compression": os.environ.get("BENCH_KAFKA_COMPRESSION", "lz4"),
+            },
             "registry": {"url": registry},
             "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.cloud_port}"]},
         }

@@ -8,7 +8,10 @@ Spool (300-byte records, a fresh spool in a temp dir on the same disk as the rep
 * ``read+ack``: the sender's path, batches of 500;
 * ``writer+sender``: one thread appending, one reading and acking, at the same time, flat out
   and at a steady rate (append->read latency; the append time has millisecond resolution);
-* ``reopen``: recovery time of a spool holding ``--reopen-mb`` of unacked records.
+* ``reopen``: recovery time of a spool holding ``--reopen-mb`` of unacked records;
+* ``--compare``: the same appends, read+ack and a kill -9 recovery with SQLite in WAL mode (per
+  record and per group, ``synchronous=NORMAL`` and ``FULL``) and LMDB (``bench/spool_alternatives.py``),
+  for the decision in docs/spool.md.
 
 WAN batches: 500 records of the real Husky IMU bag (``/imu/data``), converted to Avro
 single-object values, encoded with ``fleetlink.wire.encode_batch_payloads`` per codec.
@@ -21,17 +24,23 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
+import subprocess
+import sys
 import tempfile
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from fleetlink.edge.spool import MemoryBuffer, Spool, SpoolOptions
 from fleetlink.wire import Codec, Record, decode_batch, encode_batch_payloads, encode_payload
-from tests.paths import HUSKY
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.paths import HUSKY  # noqa: E402
 
 
 def rate(count: int, seconds: float) -> str:
@@ -260,6 +269,119 @@ def bench_wan(repeat: int) -> None:
         )
 
 
+def bench_alternatives(base: Path, n: int, repeat: int) -> None:
+    """Per store: ``append`` (one record, one commit), ``append_group`` of a ready group of 100
+    records (what the edge's data plane hands the spool), and read+ack of batches of 500."""
+    from bench.spool_alternatives import HAVE_LMDB, LmdbGroups, SpoolStore, SqliteGroups, SqliteRows
+    from fleetlink.wire.groups import encode_group
+
+    payload = os.urandom(300)
+    payloads = [payload] * 100
+    group = encode_group(payloads)
+    makers: list[tuple[Callable[[Path], Any], bool]] = [
+        (SpoolStore, False),
+        (lambda d: SqliteRows(d, "NORMAL"), False),
+        (lambda d: SqliteRows(d, "FULL"), True),
+        (lambda d: SqliteGroups(d, "NORMAL"), False),
+        (lambda d: SqliteGroups(d, "FULL"), True),
+    ]
+    if HAVE_LMDB:
+        makers += [(lambda d: LmdbGroups(d, sync=False), False), (lambda d: LmdbGroups(d, sync=True), True)]
+    else:
+        print("  (lmdb is not installed: pip install lmdb)")
+    print(
+        f"alternatives: 300-byte records, {n:,} per run (fsync per commit: {max(n // 200, 200):,}), "
+        f"best of {repeat}; records/s"
+    )
+    print(f"  {'store':<40} {'append':>12}    {'append_group(100)':>17}    {'read+ack 500':>14}")
+    for make, synced in makers:
+        count = max(n // 200, 200) if synced else n
+
+        def run(step: Callable[[Any], int], make: Callable[[Path], Any] = make) -> tuple[str, int]:
+            directory = Path(tempfile.mkdtemp(dir=base))
+            store = make(directory)
+            try:
+                return store.name, step(store)
+            finally:
+                store.close()
+                shutil.rmtree(directory)
+
+        def single(count: int = count) -> int:
+            def step(store: Any) -> int:
+                for _ in range(count):
+                    store.append(payload)
+                return count
+
+            return run(step)[1]
+
+        def grouped(count: int = count) -> int:
+            def step(store: Any) -> int:
+                if isinstance(store, SqliteRows) and not isinstance(store, SqliteGroups):
+                    for _ in range(count // 100):
+                        store.append_many(payloads)  # a row per record: the group is unpacked
+                else:
+                    for _ in range(count // 100):
+                        store.append_group(group, 100)
+                return count // 100 * 100
+
+            return run(step)[1]
+
+        def read_ack(count: int = count) -> tuple[str, int]:
+            def step(store: Any) -> int:
+                for _ in range(count // 100):
+                    store.append_many(payloads)
+                start = time.perf_counter()
+                done = 0
+                while groups := store.read_groups(500):
+                    done += sum(g[1] for g in groups)
+                    store.ack(groups[-1][0] + groups[-1][1] - 1)
+                return int(done / (time.perf_counter() - start))
+
+            return run(step)
+
+        s_done, s_s = timed(single, repeat)
+        g_done, g_s = timed(grouped, repeat)
+        name, reads = read_ack()
+        print(f"  {name:<40} {rate(s_done, s_s)}  {rate(g_done, g_s)}  {reads:>12,} /s")
+    print("kill -9 while appending groups of 10 flat out (2 s), then reopen")
+    kinds = ["spool", "sqlite-rows", "sqlite-groups"] + (["lmdb"] if HAVE_LMDB else [])
+    for kind in kinds:
+        recovery(base, kind)
+
+
+def recovery(base: Path, kind: str) -> None:
+    from bench.spool_alternatives import open_store
+
+    directory = Path(tempfile.mkdtemp(dir=base))
+    child = subprocess.Popen(
+        [sys.executable, "-m", "bench.spool_alternatives", kind, str(directory)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    taken: list[int] = []
+    reader = threading.Thread(target=lambda: taken.extend(int(line) for line in child.stdout or ()))
+    reader.start()
+    time.sleep(2.0)
+    child.send_signal(signal.SIGKILL)
+    child.wait()
+    reader.join()
+    size = sum(p.stat().st_size for p in directory.rglob("*") if p.is_file())
+    start = time.perf_counter()
+    store: Any = open_store(kind, directory)
+    held = store.count()
+    opened = time.perf_counter() - start
+    seqs = store.seqs()
+    store.close()
+    last = taken[-1] if taken else 0
+    lost = sum(1 for s in range(1, last + 1) if s not in seqs)
+    print(
+        f"  {kind:<14} {last:>9,} records taken, {size / (1 << 20):6.1f} MiB on disk; reopen + count "
+        f"{opened * 1000:7.1f} ms; {held:,} held, {lost} taken and lost"
+    )
+    shutil.rmtree(directory)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--dir", type=Path, default=ROOT / ".cache", help="where temp spools go")
@@ -267,11 +389,16 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--reopen-mb", type=int, default=256)
     parser.add_argument("--quick", action="store_true", help="small sizes, one run each")
+    parser.add_argument("--compare", action="store_true", help="only the SQLite / LMDB comparison")
     args = parser.parse_args()
     if args.quick:
         args.records, args.repeat, args.reopen_mb = 20_000, 1, 16
     args.dir.mkdir(parents=True, exist_ok=True)
     print(f"machine: {os.cpu_count()} CPUs; spool directory under {args.dir}")
+    if args.compare:
+        bench_appends(args.dir, args.records, args.repeat)
+        bench_alternatives(args.dir, args.records, args.repeat)
+        return
     bench_appends(args.dir, args.records, args.repeat)
     print("spool sender side")
     bench_sender(args.dir, args.records)

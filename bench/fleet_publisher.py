@@ -56,6 +56,9 @@ def main() -> int:
     parser.add_argument("--topics", type=int, default=len(TOPICS))
     parser.add_argument("--hz", type=float, required=True, help="messages/s per topic")
     parser.add_argument("--seconds", type=float, required=True)
+    parser.add_argument(
+        "--block", action="store_true", help="reliable and blocking publishers: nothing dropped on the way"
+    )
     args = parser.parse_args()
 
     ts = load_typestore("jazzy")
@@ -68,7 +71,10 @@ def main() -> int:
         node = RosNode("driver", f"/r{i:04d}", config=config, typestore=ts).start()
         nodes.append(node)
         for name, typename, _bag_topic, _bag in topics:
-            pubs.append((node.create_publisher(f"/r{i:04d}/{name}", typename), payloads[name]))
+            congestion = "block" if args.block else None
+            pubs.append(
+                (node.create_publisher(f"/r{i:04d}/{name}", typename, congestion=congestion), payloads[name])
+            )
     gc.freeze()
     print("ready", flush=True)
     sys.stdin.readline()

@@ -63,6 +63,9 @@ from fleetlink.wire import ingest_key
 log = logging.getLogger(__name__)
 
 _NS = 1_000_000_000
+ROBOT_PRIME_S = 2.0
+"""At start, how long the edge waits at most for the robots alive on the network (a liveliness
+query the router answers at once)."""
 _RECORD_MARGIN = 64 << 10
 """Room left in a spool frame for a record's topic, key and headers around its value."""
 
@@ -180,15 +183,20 @@ class EdgeAgent:
             on_schema=book.add,
         )
         session_config = edge_session_config(self.zenoh_options)
+        plane_config = python_config_json(session_config)
+        # the edge's session first: a router-mode edge's data plane connects to its listeners
+        self._session = session = open_session(session_config)
         self._source = source = NativeSource(
-            python_config_json(session_config),
+            plane_config,
             max_items=config.intake.max_samples,
             max_bytes=int(config.intake.max_bytes),
             max_value_bytes=self._maker.max_value_bytes,
             group_records=group_records,
             group_bytes=group_bytes,
         )
-        self._session = session = open_session(session_config)
+        # what each publisher had in the spool when the last run stopped: its first sample now
+        # tells what never reached the spool (lost_at_restart, docs/spool.md "Loss before the spool")
+        source.seed(self._spool.marks())
         transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
         options = SenderOptions.from_wan(config.wan)
         self._senders = {
@@ -235,8 +243,12 @@ class EdgeAgent:
         self._processor.start()
         for sender in self._senders.values():
             sender.start()
-        self._subscriptions.start()
+        # robots alive now are registered before anything is received: a sample of a robot not
+        # registered yet makes no record, and after a restart it would be lost without a count
         self._registrar.start()
+        if registration.discover:
+            self._registrar.prime(ROBOT_PRIME_S)
+        self._subscriptions.start()
 
     @staticmethod
     def _robot_type(name: str, match: str) -> RobotType:
@@ -351,6 +363,17 @@ class EdgeAgent:
             self._subscriptions.refresh()
         return gone
 
+    def spool_damage(self) -> list[dict[str, Any]]:
+        """Every damage finding of the durable spool (acknowledged ones too)."""
+        return [] if self._spool is None else [f.as_dict() for f in self._spool.damage()]
+
+    def acknowledge_spool_damage(self) -> list[dict[str, Any]]:
+        """An operator looked at the spool's damage findings: acknowledge them (the edge stops
+        reporting ``degraded`` for them); returns them."""
+        if self._spool is None:
+            raise RuntimeSetupError("the edge agent is not started")
+        return [f.as_dict() for f in self._spool.acknowledge_damage()]
+
     # -- state -----------------------------------------------------------------------------------
     def subscribed_topics(self) -> dict[str, str | None]:
         return {} if self._subscriptions is None else self._subscriptions.topics()
@@ -376,6 +399,7 @@ class EdgeAgent:
         out["memory"] = {"rss_bytes": resident_bytes(), "bound_bytes": self.config.memory_bound()}
         if self._subscriptions is not None:
             out["subscriptions"] = self._subscriptions.snapshot()
+            out["lost_before_spool"] = lost_before_spool(out["subscriptions"], self.table)
         if self._registrar is not None:
             out["registration"] = {
                 "events": self._registrar.events,
@@ -390,6 +414,8 @@ class EdgeAgent:
             if buffer is None:
                 continue
             entry: dict[str, Any] = {"buffer": _stats_dict(buffer)}
+            if isinstance(buffer, Spool):
+                entry["damage"] = [f.as_dict() for f in buffer.damage() if f.acknowledged_ms is None]
             sender = self._senders.get(delivery)
             if sender is not None:
                 entry["sender"] = sender.snapshot()
@@ -425,6 +451,21 @@ def gc_restore(threshold: tuple[int, int, int]) -> None:
     """Undo ``gc_for_throughput`` (an embedding process, or a test, may start agents again)."""
     gc.set_threshold(*threshold)
     gc.unfreeze()
+
+
+def lost_before_spool(subscriptions: dict[str, Any], table: MappingTable) -> dict[str, dict[str, int]]:
+    """Robot -> ROS topic -> samples lost before the spool across restarts (``lost_at_restart``
+    of the subscriptions' counters); topics of no robot come under ``""``."""
+    out: dict[str, dict[str, int]] = {}
+    for topic, counters in subscriptions.items():
+        lost = counters.get("lost_at_restart", 0) if isinstance(counters, dict) else 0
+        if not lost:
+            continue
+        robots = {m.robot for m in table.match(topic) if m.robot}
+        parts = topic.strip("/").split("/")
+        robot = min(robots) if robots else parts[0] if len(parts) > 1 else ""  # (a robot gone since)
+        out.setdefault(robot, {})[topic] = int(lost)
+    return out
 
 
 def resident_bytes() -> int:

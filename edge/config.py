@@ -56,7 +56,8 @@ class RosSection(Section):
     distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "jazzy"
     """Decides type hashes and the rmw_zenoh wire details."""
     message_paths: list[Path] = []
-    """Folders of custom ``.msg`` packages (e.g. irobot_create_msgs)."""
+    """Folders of your own packages (each holding ``msg/``, ``srv/``, ``action/``); the standard
+    ones and irobot_create_msgs ship with fleetlink (a folder here replaces a package of its name)."""
     attachment: Literal["auto", "v1", "v2"] = "auto"
 
 

@@ -7,7 +7,7 @@
       state_dir: /var/lib/fleetlink/repeater
       command_keys: [/etc/fleetlink/command-signing.pem]   # the uplink's public key
       dead_man: 30s                  # optional cap; default: each command's own lease
-    ros: {domain_id: 0, distro: jazzy, message_paths: [msgs/irobot_create_msgs]}
+    ros: {domain_id: 0, distro: jazzy}      # message_paths: [your own packages' folders]
     zenoh: {mode: peer, connect: [tcp/127.0.0.1:7447]}   # the site router
 
 Durations are ``"250ms"``, ``"1s"``, ``"2m"``, ``"1h"`` or a number of seconds
@@ -59,7 +59,8 @@ class RosSection(Section):
     distro: Distro = "jazzy"
     """Decides type hashes (and so the data keys robots subscribe on)."""
     message_paths: list[Path] = []
-    """Folders of custom ``.msg`` packages the commands use (e.g. irobot_create_msgs)."""
+    """Folders of your own packages the commands use; the standard ones and irobot_create_msgs ship
+    with fleetlink (a folder here replaces a package of its name)."""
 
 
 class RepeaterConfig(Section):

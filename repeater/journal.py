@@ -131,17 +131,18 @@ def _apply(state: JournalState, obj: Any) -> None:
 class Journal:
     """The journal file of one state directory; open with :meth:`open`, close with :meth:`close`."""
 
-    def __init__(self, state_dir: Path) -> None:
+    def __init__(self, state_dir: Path, filename: str = FILENAME) -> None:
         self.state_dir = state_dir
-        self.path = state_dir / FILENAME
+        self.path = state_dir / filename
         self._file: IO[bytes] | None = None
         self.lines = 0
 
-    def open(self) -> JournalState:
+    def open(self, *, read: bool = True) -> JournalState:
+        """Open for appending; with ``read``, first replay the command journal already there."""
         state = JournalState()
         try:
             self.state_dir.mkdir(parents=True, exist_ok=True)
-            if self.path.exists():
+            if read and self.path.exists():
                 with self.path.open("rb") as existing:
                     state = replay(line for line in existing if line.strip())
             self._file = self.path.open("ab")

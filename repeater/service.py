@@ -15,6 +15,11 @@ It puts together four jobs, each in its own module, around the state they share
 
 A :class:`~repeater.status_link.StatusLink` sends status events (:mod:`~repeater.statuses`) to
 the uplink and is the pulse the dead-man watches.
+
+Service calls and action goals (docs/services.md) come on ``fleetlink/<site>/call/**``
+(:mod:`~repeater.call_intake`), run as an rmw_zenoh client (:mod:`~repeater.call_runner`),
+are journalled in ``calls.journal`` (:mod:`~repeater.call_store`) and their outcomes go to the
+uplink on a second link, ``fleetlink/<site>/call-outcome/<id>``.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -34,6 +40,9 @@ from fleetlink.common.errors import FleetlinkError
 from fleetlink.common.metrics import Health, NullMetrics, PrometheusMetrics, serve_metrics, split_listen
 from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.zenoh_options import ZenohOptions
+from fleetlink.repeater.call_intake import CallIntake, final_outcome
+from fleetlink.repeater.call_runner import CallRunner
+from fleetlink.repeater.call_store import CallStore
 from fleetlink.repeater.config import RepeaterConfig
 from fleetlink.repeater.converter import Converter
 from fleetlink.repeater.errors import RepeaterConfigError
@@ -52,6 +61,7 @@ from fleetlink.roswire.node import RosNode
 from fleetlink.roswire.session import open_session, ros_session_config
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.schemas.typestore import load_typestore
+from fleetlink.wire.calls import CallEnvelope, Outcome, OutcomeBatch, encode_outcomes, outcome_key
 from fleetlink.wire.command_auth import key_id
 from fleetlink.wire.commands import CommandEnvelope, CommandReply
 from fleetlink.wire.keys import site_prefix
@@ -90,6 +100,12 @@ class Repeater:
         self._node: RosNode | None = None
         self._watcher: GraphWatcher | None = None
         self._queryable: Any = None
+        self.calls = CallStore(config.repeater.state_dir)
+        self._call_link: StatusLink | None = None
+        self._runner: CallRunner | None = None
+        self._call_queryable: Any = None
+        self.call_intake: CallIntake | None = None
+        self.feedback_dropped = 0
         self.metrics: PrometheusMetrics | NullMetrics = (
             PrometheusMetrics("repeater") if config.metrics is not None else NullMetrics()
         )
@@ -148,11 +164,70 @@ class Repeater:
         if self.config.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(self.config.metrics.listen)
             self._metrics_server = serve_metrics(host, port, self.metrics, self.health)
+        self._start_calls(typestore)
         log.info("repeater %s serving %s (%d commands resumed)", self.id, key, len(self.schedule.active()))
         return self
 
+    def _start_calls(self, typestore: Any) -> None:
+        """Service calls and action goals: the outcome link, the runner, the queryable."""
+        if self._session is None or self._node is None:
+            raise RepeaterConfigError("repeater not started")
+        cfg, shared = self.config.repeater, self._shared
+        self.calls.open()
+        self._call_link = StatusLink(
+            self._session,
+            self.site,
+            self.id,
+            heartbeat=cfg.heartbeat,
+            timeout=cfg.status_timeout,
+            on_link=lambda _up: None,
+            on_acked=self._on_outcomes_acked,
+            key=outcome_key(self.site, self.id),
+            encode=lambda outcomes: encode_outcomes(OutcomeBatch(self.id, self.site, outcomes)),
+            heartbeats=False,
+        )
+        for number, out in sorted(self.calls.pending.items()):
+            self._call_link.submit(number, out)
+        self._call_link.start()
+        runner = self._runner = CallRunner(self._node, self._emit, clock=shared.clock)
+        self.call_intake = CallIntake(
+            shared,
+            self.calls,
+            typestore,
+            run=runner.submit,
+            emit=self._emit,
+            keys=trusted_keys(cfg.command_keys),
+            on_forged=self.metrics.on_forged_command,
+        )
+        self._restore_calls(runner)
+        self._call_queryable = self._session.declare_queryable(
+            f"{site_prefix(self.site)}/call/**", self.call_intake.on_query
+        )
+
+    def _restore_calls(self, runner: CallRunner) -> None:
+        """Goals accepted before a restart are followed again; any other unfinished call is
+        reported as an error (it may or may not have reached the robot: it is not made again)."""
+        now = self._shared.clock()
+        unfinished: list[CallEnvelope] = [c.envelope for c in self.calls.calls.values() if not c.done]
+        for env in unfinished:
+            if env.kind == "goal" and env.deadline_ms > now * 1000:
+                runner.submit(env, resume=True)
+                continue
+            detail = "the repeater restarted during the call: it may or may not have reached the robot"
+            self._emit(final_outcome(env, "error", detail, int(now * 1000)), True)
+
     def stop(self) -> None:
         shared = self._shared
+        if self._call_queryable is not None:
+            self._call_queryable.undeclare()
+            self._call_queryable = None
+        if self._runner is not None:
+            self._runner.stop()
+            self._runner = None
+        if self._call_link is not None:
+            self._call_link.stop()
+            self._call_link = None
+        self.calls.close()
         if self._metrics_server is not None:
             self._metrics_server.stop()
             self._metrics_server = None
@@ -194,6 +269,28 @@ class Repeater:
             raise RepeaterConfigError("repeater not started")
         return self._intake.accept(env)
 
+    def _emit(self, out: Outcome, final: bool) -> None:
+        """Journal an outcome (feedback only in memory) and queue it for the uplink."""
+        link = self._call_link
+        with self._shared.lock:
+            if out.kind == "feedback" and link is not None and link.pending() >= MAX_PENDING_FEEDBACK:
+                self.feedback_dropped += 1
+                return
+            out = replace(out, site=self.site)
+            number = self.calls.outcome(out)
+            if final:
+                kind = {"reply": "service", "result": "goal", "cancel": "cancel"}[out.kind]
+                self.calls.done((kind, out.call_id, out.robot))
+                self.calls.forget_before(int(self._shared.clock() * 1000))
+        if out.kind != "feedback":
+            self.calls.sync()
+        if link is not None:
+            link.submit(number, out)
+
+    def _on_outcomes_acked(self, numbers: list[int]) -> None:
+        with self._shared.lock:
+            self.calls.acked(numbers)
+
     def _on_acked(self, numbers: list[int]) -> None:
         with self._shared.lock:
             self.store.acked(numbers)
@@ -231,6 +328,10 @@ class Repeater:
 
     def pending_statuses(self) -> int:
         return self._shared.link.pending() if self._shared.link is not None else 0
+
+
+MAX_PENDING_FEEDBACK = 1_000
+"""Feedback waiting for the uplink at most; more is dropped (counted: ``feedback_dropped``)."""
 
 
 def trusted_keys(paths: list[Path]) -> dict[bytes, Ed25519PublicKey]:

@@ -15,11 +15,12 @@ import threading
 import time
 from collections.abc import Callable
 from types import TracebackType
+from typing import Any
 
 import zenoh
 
 from fleetlink.common.ratelimit import LogLimiter
-from fleetlink.wire.commands import StatusBatch, StatusEvent, decode_status_ack, encode_status_batch
+from fleetlink.wire.commands import StatusBatch, decode_status_ack, encode_status_batch
 from fleetlink.wire.errors import EnvelopeError
 from fleetlink.wire.keys import site_prefix
 
@@ -46,18 +47,25 @@ class StatusLink:
         on_link: LinkCallback,
         on_acked: AckCallback,
         linger: float = 0.1,
+        key: str | None = None,
+        encode: Callable[[tuple[Any, ...]], bytes] | None = None,
+        heartbeats: bool = True,
     ) -> None:
+        """``key`` and ``encode`` send other events than command statuses (call outcomes) the
+        same way; without ``heartbeats`` nothing is sent while nothing is pending."""
         self._session = session
         self._site = site
         self._id = repeater_id
-        self._key = status_key(site, repeater_id)
+        self._key = key or status_key(site, repeater_id)
+        self._encode = encode or self._encode_statuses
+        self._heartbeats = heartbeats
         self._heartbeat = heartbeat
         self._timeout = timeout
         self._on_link = on_link
         self._on_acked = on_acked
         self._linger = linger
         self._oldest: float | None = None  # when the oldest unsent event was submitted (monotonic)
-        self._pending: dict[int, StatusEvent] = {}
+        self._pending: dict[int, Any] = {}
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -87,7 +95,7 @@ class StatusLink:
     ) -> None:
         self.stop()
 
-    def submit(self, number: int, event: StatusEvent) -> None:
+    def submit(self, number: int, event: Any) -> None:
         with self._cond:
             self._pending[number] = event
             if self._oldest is None:
@@ -106,6 +114,8 @@ class StatusLink:
             with self._cond:
                 if backoff > 0 or not self._pending:
                     self._cond.wait(backoff if backoff > 0 else self._heartbeat)
+                if not self._heartbeats and not self._pending:
+                    continue
                 # linger a little so events close in time share one batch (one query on the WAN)
                 while (
                     self._pending
@@ -134,8 +144,11 @@ class StatusLink:
             else:
                 backoff = min(max(backoff * 2, 0.2), self._heartbeat)
 
-    def _send(self, events: tuple[StatusEvent, ...]) -> bool:
-        payload = encode_status_batch(StatusBatch(self._id, self._site, events))
+    def _encode_statuses(self, events: tuple[Any, ...]) -> bytes:
+        return encode_status_batch(StatusBatch(self._id, self._site, events))
+
+    def _send(self, events: tuple[Any, ...]) -> bool:
+        payload = self._encode(events)
         problem = "no uplink answered"
         contact = False
         try:

@@ -66,6 +66,18 @@ class GraphWatcher:
         )
         return self
 
+    def prime(self, timeout_s: float = 2.0) -> int:
+        """Ask for every token alive now and apply the answers before returning (the history of
+        ``start``'s subscriber arrives a little later, asynchronously; what it repeats changes
+        nothing). Returns the tokens received."""
+        replies = self.session.liveliness().get(liveliness_prefix(self.domain_id), timeout=timeout_s)
+        count = 0
+        for reply in replies:
+            if reply.ok is not None:
+                self._on_token(reply.ok)
+                count += 1
+        return count
+
     def stop(self) -> None:
         if self._sub is not None:
             self._sub.undeclare()

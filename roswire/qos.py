@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from enum import IntEnum
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from fleetlink.roswire.errors import QosParseError
 
@@ -176,3 +176,74 @@ TRANSIENT_LOCAL = QoS(durability=Durability.TRANSIENT_LOCAL, depth=1)
 
 SERVICES = QoS()
 """Services and clients: ``::,10:,:,:,,``."""
+
+
+# --- readable form (``fleetlink ros graph``, ``--qos``) ---------------------------------------
+
+PROFILES: dict[str, QoS] = {
+    "default": DEFAULT,
+    "sensor_data": SENSOR_DATA,
+    "transient_local": TRANSIENT_LOCAL,
+    "services": SERVICES,
+}
+"""Named profiles ``--qos`` takes, as rclcpp names them."""
+
+_WORDS: dict[str, dict[str, Any]] = {
+    "reliable": {"reliability": Reliability.RELIABLE},
+    "best_effort": {"reliability": Reliability.BEST_EFFORT},
+    "volatile": {"durability": Durability.VOLATILE},
+    "transient_local": {"durability": Durability.TRANSIENT_LOCAL},
+    "keep_all": {"history": History.KEEP_ALL},
+}
+
+
+def _seconds(value: Duration) -> str:
+    return f"{value.to_ns() / 1e9:g}s"
+
+
+def describe(qos: QoS) -> str:
+    """``reliable, volatile, keep_last 10`` (plus deadline, lifespan, liveliness when set)."""
+    parts = [qos.reliability.name.lower(), qos.durability.name.lower()]
+    parts.append(f"keep_last {qos.depth}" if qos.history == History.KEEP_LAST else qos.history.name.lower())
+    if not qos.deadline.is_infinite:
+        parts.append(f"deadline {_seconds(qos.deadline)}")
+    if not qos.lifespan.is_infinite:
+        parts.append(f"lifespan {_seconds(qos.lifespan)}")
+    if qos.liveliness != Liveliness.AUTOMATIC or not qos.lease.is_infinite:
+        lease = "" if qos.lease.is_infinite else f" {_seconds(qos.lease)}"
+        parts.append(f"liveliness {qos.liveliness.name.lower()}{lease}")
+    return ", ".join(parts)
+
+
+def parse_profile(text: str) -> QoS:
+    """A named profile (``sensor_data``) or words as :func:`describe` writes them, e.g.
+    ``best_effort, transient_local, keep_last 5``; what is not said stays as in ``default``."""
+    name = text.strip().lower()
+    if name in PROFILES:
+        return PROFILES[name]
+    qos = DEFAULT
+    for raw in name.split(","):
+        words = raw.split()
+        if not words:
+            continue
+        if words[0] in ("keep_last", "depth") and len(words) == 2 and words[1].isdigit():
+            qos = replace(qos, history=History.KEEP_LAST, depth=int(words[1]))
+        elif len(words) == 1 and words[0] in _WORDS:
+            qos = replace(qos, **_WORDS[words[0]])
+        else:
+            known = ", ".join([*PROFILES, *_WORDS, "keep_last N"])
+            raise QosParseError(text, f"{raw.strip()!r} is not a QoS setting (known: {known})")
+    return qos
+
+
+def adapted(publishers: list[QoS]) -> QoS:
+    """What a subscriber should ask for to hear every one of these publishers, as ``ros2 topic
+    echo`` adapts: best effort if any publisher is, transient local only if all are."""
+    if not publishers:
+        return DEFAULT
+    reliability = Reliability.BEST_EFFORT if any(q.best_effort for q in publishers) else Reliability.RELIABLE
+    durability = (
+        Durability.TRANSIENT_LOCAL if all(q.transient_local for q in publishers) else Durability.VOLATILE
+    )
+    depth = max(q.depth for q in publishers) if durability == Durability.TRANSIENT_LOCAL else DEFAULT.depth
+    return replace(DEFAULT, reliability=reliability, durability=durability, depth=depth)

@@ -10,6 +10,7 @@ from typing import Any
 from fleetlink.roswire.errors import KeyParseError
 from fleetlink.roswire.graph import TopicInfo
 from fleetlink.roswire.names import parse_data_key
+from fleetlink.roswire.qos import describe
 from fleetlink.roswire.robots import Robot
 from fleetlink.roswire.tokens import EndpointInfo, NodeInfo
 
@@ -42,7 +43,8 @@ def _endpoint(ep: EndpointInfo) -> dict[str, Any]:
         "zid": ep.zid,
         "type": ep.ros_type,
         "type_hash": ep.type_hash,
-        "qos": ep.qos.to_keyexpr(),
+        "qos": describe(ep.qos),
+        "qos_wire": ep.qos.to_keyexpr(),
         "gid": ep.gid.hex(),
     }
 
@@ -111,7 +113,7 @@ def render_text(report: Mapping[str, Any]) -> str:
         rate = f" {t['rate_hz']:.1f} Hz" if "rate_hz" in t else ""
         lines.append(
             f"  {t['name']:<32} {', '.join(t['types'])}  pub={len(t['publishers'])} "
-            f"sub={len(t['subscribers'])}{rate}" + (f"  qos={' '.join(qos)}" if qos else "")
+            f"sub={len(t['subscribers'])}{rate}" + "".join(f"  [{q}]" for q in qos)
         )
     lines.append(f"services ({len(report['services'])}):")
     lines += [

@@ -130,6 +130,10 @@ class RobotWatcher:
     ) -> None:
         self.stop()
 
+    def prime(self, timeout_s: float = 2.0) -> int:
+        """Register the robots whose tokens are alive now before returning (``GraphWatcher.prime``)."""
+        return 0 if self.watcher is None else self.watcher.prime(timeout_s)
+
     def robots(self) -> list[Robot]:
         with self._lock:
             return self.registry.robots()

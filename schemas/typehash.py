@@ -5,7 +5,8 @@ The hash is the SHA-256 of a JSON type description built from the IDL form of th
 message without fields has the member ``structure_needs_at_least_one_member: uint8``, and a
 service ``pkg/srv/Name`` is a struct of ``request_message``, ``response_message`` and
 ``event_message`` (``Name_Event``: ``info: service_msgs/msg/ServiceEventInfo``,
-``request: Name_Request[<=1]``, ``response: Name_Response[<=1]``). Humble has no type hashes:
+``request: Name_Request[<=1]``, ``response: Name_Response[<=1]``); an action's services
+``pkg/action/Name_SendGoal`` and ``Name_GetResult`` are built the same way. Humble has no type hashes:
 its rmw_zenoh uses the literal ``TypeHashNotSupported``.
 """
 
@@ -99,9 +100,11 @@ def _fields(ts: Typestore, name: str, parent: str | None) -> Fielddefs:
 def _service_parts(ts: Typestore, name: str) -> Fielddefs | None:
     """Fields of the types rosidl synthesises for a service: ``pkg/srv/Name`` and ``Name_Event``."""
     parts = name.split("/")
-    if len(parts) != 3 or parts[1] != "srv":
+    if len(parts) != 3 or parts[1] not in ("srv", "action"):
         return None
     base = name.removesuffix("_Event")
+    if parts[1] == "action" and not base.endswith(("_SendGoal", "_GetResult")):
+        return None  # an action's services are its SendGoal and GetResult
     request, response = f"{base}_Request", f"{base}_Response"
     for half in (request, response):
         if half not in ts.fielddefs and _store_name(half) not in ts.fielddefs:

@@ -1,22 +1,28 @@
 """The type store: standard types of a ROS 2 distro, custom packages and types embedded in bags.
 
-Built on rosbags' ``Typestore``. Type names are ROS 2 style (``pkg/msg/Name``); the two halves
-of a service ``pkg/srv/Name`` are registered as messages ``pkg/srv/Name_Request`` and
-``pkg/srv/Name_Response``. Every type referenced by a loaded type must be present: a missing
+Built on rosbags' ``Typestore`` (the distro's messages), plus the interface packages fleetlink
+ships (services and actions of the standard packages, irobot_create_msgs: :mod:`.bundled`).
+Type names are ROS 2 style (``pkg/msg/Name``); the two halves of a service ``pkg/srv/Name`` are
+registered as messages ``pkg/srv/Name_Request`` and ``pkg/srv/Name_Response``; an action
+``pkg/action/Name`` as the messages rosidl makes of it: ``Name_Goal``, ``Name_Result``,
+``Name_Feedback``, ``Name_FeedbackMessage`` and the halves of the services ``Name_SendGoal``
+and ``Name_GetResult``. Every type referenced by a loaded type must be present: a missing
 nested type is an :class:`~schemas.errors.UnknownTypeError` naming it, never a silent skip.
 """
 
 from __future__ import annotations
 
+import functools
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, get_args
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
 
+from fleetlink.schemas.bundled import bundled_packages, excluded_interfaces
 from fleetlink.schemas.errors import TypeDefinitionError, UnknownTypeError
 
 if TYPE_CHECKING:
@@ -39,21 +45,41 @@ _SRV_SEPARATOR = re.compile(r"^\s*---\s*$", re.MULTILINE)
 
 
 def load_typestore(
-    distro: Distro = "jazzy", msg_paths: Sequence[Path] = (), bags: Sequence[Path] = ()
+    distro: Distro = "jazzy",
+    msg_paths: Sequence[Path] = (),
+    bags: Sequence[Path] = (),
+    *,
+    bundled: bool = True,
 ) -> Typestore:
-    """Standard types of ``distro`` plus custom packages and the definitions stored in bags.
+    """Standard types of ``distro``, the bundled packages, custom packages and the definitions
+    stored in bags.
 
-    ``msg_paths`` are package folders (holding ``msg/*.msg`` and ``srv/*.srv``); ``bags`` are
-    rosbag2 directories or files (sqlite3 or MCAP).
+    ``msg_paths`` are package folders (holding ``msg/*.msg``, ``srv/*.srv``, ``action/*.action``);
+    a package given here replaces the bundled package of the same name. ``bags`` are rosbag2
+    directories or files (sqlite3 or MCAP).
     """
     if distro not in _STORES:
         raise TypeDefinitionError(str(distro), "distro", f"unknown distro, expected one of {DISTROS}")
     ts = get_typestore(_STORES[distro])
+    own = {package_name(Path(folder)) for folder in msg_paths if Path(folder).is_dir()}
+    if bundled:
+        for name, (folder, types) in _bundled_types(distro).items():
+            if name not in own:
+                register_types(ts, types, str(folder))
     for folder in msg_paths:
         register_types(ts, types_from_package(Path(folder)), str(folder))
     for bag in bags:
         register_types(ts, types_from_bag(Path(bag)), str(bag))
     return ts
+
+
+@functools.cache
+def _bundled_types(distro: Distro) -> dict[str, tuple[Path, Typesdict]]:
+    """The bundled packages' definitions, parsed once per process (registering copies nothing)."""
+    skip = excluded_interfaces(distro)
+    return {
+        name: (folder, types_from_package(folder, skip=skip)) for name, folder in bundled_packages().items()
+    }
 
 
 def message_types(ts: Typestore) -> list[str]:
@@ -149,6 +175,41 @@ def types_from_srv(text: str, typename: str) -> Typesdict:
     return out
 
 
+def types_from_action(text: str, typename: str) -> Typesdict:
+    """Parse a ``.action`` definition of ``pkg/action/Name`` into the messages rosidl makes of it."""
+    pkg, kind, name = _split_name(typename)
+    if kind != "action":
+        raise TypeDefinitionError(typename, "action", "an action type name looks like pkg/action/Name")
+    parts = _SRV_SEPARATOR.split(text)
+    if len(parts) != 3:
+        raise TypeDefinitionError(typename, "action", "expected exactly two '---' lines")
+    out: Typesdict = {}
+    for suffix, part in zip(("Goal", "Result", "Feedback"), parts, strict=True):
+        parsed = types_from_msg(part, f"{pkg}/msg/{name}_{suffix}")
+        out[f"{typename}_{suffix}"] = parsed.pop(f"{pkg}/msg/{name}_{suffix}")
+        out.update(parsed)
+    uuid = (Nodetype.NAME, "unique_identifier_msgs/msg/UUID")
+
+    def message(*fields: tuple[str, Any]) -> Any:  # rosbags' (constants, fields) pair
+        return [], list(fields)
+
+    out[f"{typename}_SendGoal_Request"] = message(
+        ("goal_id", uuid), ("goal", (Nodetype.NAME, f"{typename}_Goal"))
+    )
+    out[f"{typename}_SendGoal_Response"] = message(
+        ("accepted", (Nodetype.BASE, ("bool", 0))),
+        ("stamp", (Nodetype.NAME, "builtin_interfaces/msg/Time")),
+    )
+    out[f"{typename}_GetResult_Request"] = message(("goal_id", uuid))
+    out[f"{typename}_GetResult_Response"] = message(
+        ("status", (Nodetype.BASE, ("int8", 0))), ("result", (Nodetype.NAME, f"{typename}_Result"))
+    )
+    out[f"{typename}_FeedbackMessage"] = message(
+        ("goal_id", uuid), ("feedback", (Nodetype.NAME, f"{typename}_Feedback"))
+    )
+    return out
+
+
 def _split_name(typename: str) -> tuple[str, str, str]:
     parts = typename.split("/")
     if len(parts) != 3 or not all(parts):
@@ -156,22 +217,36 @@ def _split_name(typename: str) -> tuple[str, str, str]:
     return parts[0], parts[1], parts[2]
 
 
-def types_from_package(folder: Path) -> Typesdict:
-    """Read ``msg/*.msg`` and ``srv/*.srv`` of one ROS package folder."""
+_READERS = (("msg", types_from_msg), ("srv", types_from_srv), ("action", types_from_action))
+
+
+def types_from_package(folder: Path, *, skip: frozenset[str] = frozenset()) -> Typesdict:
+    """Read ``msg/*.msg``, ``srv/*.srv`` and ``action/*.action`` of one ROS package folder,
+    leaving out the interfaces (``pkg/kind/Name``) in ``skip``."""
     if not folder.is_dir():
         raise TypeDefinitionError(str(folder), "msg path", "not a directory")
-    pkg = _package_name(folder)
+    pkg = package_name(folder)
     out: Typesdict = {}
-    for path in sorted((folder / "msg").glob("*.msg")):
-        out.update(types_from_msg(_read(path), f"{pkg}/msg/{path.stem}"))
-    for path in sorted((folder / "srv").glob("*.srv")):
-        out.update(types_from_srv(_read(path), f"{pkg}/srv/{path.stem}"))
-    if not out:
-        raise TypeDefinitionError(pkg, str(folder), "no msg/*.msg or srv/*.srv files")
+    found = False
+    for kind, reader in _READERS:
+        for path in sorted((folder / kind).glob(f"*.{kind}")):
+            found = True
+            name = f"{pkg}/{kind}/{path.stem}"
+            if name not in skip:
+                out.update(reader(_read(path), name))
+    if not found:
+        inside = sorted(
+            p.name for p in folder.iterdir() if p.is_dir() and p.name not in ("msg", "srv", "action")
+        )
+        hint = ""
+        if any((folder / sub / kind).is_dir() for sub in inside for kind in ("msg", "srv", "action")):
+            hint = f"; it holds packages ({', '.join(inside)}): give each package's folder instead"
+        raise TypeDefinitionError(pkg, str(folder), f"no msg/*.msg, srv/*.srv or action/*.action files{hint}")
     return out
 
 
-def _package_name(folder: Path) -> str:
+def package_name(folder: Path) -> str:
+    """The package's name: ``<name>`` of its package.xml, else the folder's name."""
     manifest = folder / "package.xml"
     if manifest.is_file():
         try:

@@ -14,6 +14,8 @@ from fleetlink.common.durations import Seconds
 from fleetlink.common.metrics_config import MetricsSection
 from fleetlink.common.names import KafkaTopic, KeyChunk, Site, host_id, site_problem
 from fleetlink.common.zenoh_options import ZenohSection
+from fleetlink.schemas.typestore import Distro
+from fleetlink.uplink.calls.mapping import ActionMapping, ServiceMapping, unique_call_names
 from fleetlink.uplink.commands.mapping import CommandMapping, unique_names
 from fleetlink.uplink.kafka_settings import KafkaSection
 from fleetlink.uplink.policy import pattern_problem
@@ -39,6 +41,11 @@ class TopicsSection(Section):
 class IngestSection(Section):
     sites: list[str] = Field(default=["*"], description="sites served (Zenoh key chunks; * = all)")
     max_concurrent_batches: int = Field(default=64, ge=1, le=10_000)
+    native: bool = Field(
+        default=True,
+        description="produce records through the native path (librdkafka without the GIL, decisions "
+        "per tail); false: every record through Python",
+    )
 
     @field_validator("sites")
     @classmethod
@@ -93,6 +100,13 @@ class CommandSigningSection(Section):
     )
 
 
+class UplinkRosSection(Section):
+    distro: Distro = "jazzy"
+    """The robots' ROS distro: decides the request, response, goal, feedback and result types."""
+    message_paths: list[Path] = []
+    """Folders of interface packages the service and action mappings use beyond the bundled ones."""
+
+
 __all__ = ["MetricsSection", "UplinkConfig"]
 
 
@@ -121,7 +135,13 @@ class UplinkConfig(Section):
     ownership: OwnershipSection = OwnershipSection()
     """When a robot may move to another site (docs/security.md)."""
     command_signing: CommandSigningSection | None = None
-    """The key commands are signed with; required with command mappings (docs/commands.md)."""
+    """The key commands and calls are signed with; required with command, service and action mappings."""
+    services: list[ServiceMapping] = []
+    """Service mappings: Kafka requests -> ROS service calls, replies to Kafka (docs/services.md)."""
+    actions: list[ActionMapping] = []
+    """Action mappings: Kafka goals -> ROS action goals, feedback and results to Kafka (docs/services.md)."""
+    ros: UplinkRosSection = UplinkRosSection()
+    """The ROS types of the service and action mappings (docs/services.md)."""
 
     @field_validator("commands")
     @classmethod
@@ -130,9 +150,11 @@ class UplinkConfig(Section):
 
     @model_validator(mode="after")
     def _signing_key_for_commands(self) -> UplinkConfig:
-        if self.commands and self.command_signing is None:
+        if (self.commands or self.services or self.actions) and self.command_signing is None:
             raise ValueError(
-                "command_signing.key_file is required with command mappings: repeaters accept "
-                "only signed commands (make a key with 'fleetlink certs command-key DIR')"
+                "command_signing.key_file is required with command, service and action mappings: "
+                "repeaters accept only signed commands and calls "
+                "(make a key with 'fleetlink certs command-key DIR')"
             )
+        unique_call_names(self.services, self.actions)
         return self

@@ -80,6 +80,15 @@ class IngestStats:
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
 
+def count_outcome(stats: IngestStats, status: str) -> None:
+    """Count a batch answered ``status``."""
+    with stats.lock:
+        if status == "ok":
+            stats.batches_ok += 1
+        else:
+            stats.batches_failed += 1
+
+
 class BatchJob:
     """Produce one batch; ``on_done(ack)`` is called once, when every record is settled."""
 
@@ -95,8 +104,11 @@ class BatchJob:
         dead_letter_max_bytes: int = 900_000,
         on_delivery: Callable[[str, bool, float], None] | None = None,
         diversion: Diversion | None = None,
+        counted: bool = True,
     ) -> None:
         self._batch = batch
+        self._counted = counted
+        """False for a part of a batch (``native_ingest``): the whole batch is counted there."""
         self._diversion = diversion
         """Records of topics the policy does not let out as they are (``uplink.diversion``)."""
         self._sink = sink
@@ -114,9 +126,10 @@ class BatchJob:
 
     def run(self) -> None:
         records = self._batch.records
-        with self._stats.lock:
-            self._stats.batches += 1
-            self._stats.records += len(records)
+        if self._counted:
+            with self._stats.lock:
+                self._stats.batches += 1
+                self._stats.records += len(records)
         if not records:
             self._finish()
             return
@@ -254,11 +267,8 @@ class BatchJob:
         failures = tuple(sorted(self._dead + self._retry, key=lambda f: f.seq))
         status: Literal["ok", "error"] = "error" if self._retry else "ok"
         detail = self._retry[0].reason if self._retry else ""
-        with self._stats.lock:
-            if status == "ok":
-                self._stats.batches_ok += 1
-            else:
-                self._stats.batches_failed += 1
+        if self._counted:
+            count_outcome(self._stats, status)
         self._on_done(
             Ack(
                 edge_id=batch.edge_id,

@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 import zenoh
 
+from fleetlink._native import ScannedBatch
 from fleetlink.common.metrics import (
     CounterDeltas,
     NullMetrics,
@@ -32,18 +33,20 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.schemas.registry import SchemaRegistry
 from fleetlink.uplink.admission import Admission, Refused
+from fleetlink.uplink.calls.convert import load_call_types
 from fleetlink.uplink.commands.decode import CommandDecoder
 from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.registrations import RegistrationsReader
 from fleetlink.uplink.commands.router import CommandRouter
 from fleetlink.uplink.config import UplinkConfig
-from fleetlink.uplink.delivery_board import DeliveryBoard, acked_topics
+from fleetlink.uplink.delivery_board import DeliveryBoard, acked_scanned, acked_topics
 from fleetlink.uplink.delivery_status import DeliveryStatus
 from fleetlink.uplink.diversion import Diversion
 from fleetlink.uplink.identity import source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats
 from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
+from fleetlink.uplink.native_ingest import NativeIngest, NativeJob, view
 from fleetlink.uplink.ordered import KeyedSerialExecutor
 from fleetlink.uplink.policy import InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
@@ -51,7 +54,7 @@ from fleetlink.uplink.refusals import Refusals
 from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.topics import ensure_topics
-from fleetlink.wire import Ack, WireError, decode_batch, encode_ack
+from fleetlink.wire import Ack, Batch, WireError, decode_batch, decode_batch_head, encode_ack
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +94,7 @@ class Uplink:
         self._session: zenoh.Session | None = None
         self._queryables: list[Any] = []
         self._sink: KafkaSink | None = None
+        self._native: NativeIngest | None = None
         self._registry: SchemaRegistry | None = None
         self._ids: SchemaIds | None = None
         self._pool: ThreadPoolExecutor | None = None
@@ -122,6 +126,7 @@ class Uplink:
 
     def start(self) -> Uplink:
         cfg = self.config
+        call_types = load_call_types(cfg)  # before any socket: a missing type names its YAML path
         check_kafka_access(cfg.kafka)
         ensure_topics(cfg.kafka, cfg.topics)
         self._registry = SchemaRegistry(cfg.registry.url)
@@ -133,6 +138,11 @@ class Uplink:
         ).start()
         self._registrations = RegistrationWriter(self._registry, cfg.topics.registrations, self.directory)
         self._sink = KafkaSink(cfg.kafka).start()
+        if cfg.ingest.native:
+            try:
+                self._native = NativeIngest(cfg.kafka.producer_config())
+            except (RuntimeError, ValueError) as exc:
+                log.warning("the native ingest path cannot start (%s); every record goes through Python", exc)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uplink-batch")
         self._serial = KeyedSerialExecutor(self._pool)
         self._session = zenoh.open(self._zenoh_options.to_config())
@@ -141,9 +151,14 @@ class Uplink:
             self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
             log.info("serving edge batches on %s", key)
         self._delivery_status.start(self._session)
-        if cfg.commands:
+        if cfg.commands or cfg.services or cfg.actions:
             self._commands = CommandRouter(
-                cfg, session=self._session, sink=self._sink, registry=self._registry, directory=self.directory
+                cfg,
+                session=self._session,
+                sink=self._sink,
+                registry=self._registry,
+                directory=self.directory,
+                call_types=call_types,
             ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
@@ -183,17 +198,24 @@ class Uplink:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=False)
             self._pool = None
-        if self._sink is not None:
-            left = self._sink.stop()
-            if left:
-                log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
-            self._sink = None
+        self._stop_producers()
         if self._session is not None:
             self._session.close()
             self._session = None
         if self._registry is not None:
             self._registry.stop()
             self._registry = None
+
+    def _stop_producers(self) -> None:
+        left = 0
+        if self._native is not None:
+            left += self._native.stop()
+            self._native = None
+        if self._sink is not None:
+            left += self._sink.stop()
+            self._sink = None
+        if left:
+            log.warning("%d records were still unacknowledged by Kafka at stop; their edges resend", left)
 
     def __enter__(self) -> Uplink:
         return self.start()
@@ -252,10 +274,43 @@ class Uplink:
         key = str(query.key_expr)
         serial.submit(key, partial(self._ingest, query, payload.to_bytes(), time.monotonic()))
 
+    def _answered(self, batch: Batch, scanned: ScannedBatch | None, ack: Ack, arrived: float) -> None:
+        """Count a batch's answer: metrics, the site's delivery figures, a warning on errors."""
+        dead = {f.seq for f in ack.failures if f.dead_lettered}
+        records = len(scanned) if scanned is not None else len(batch.records)
+        self.metrics.on_ingested(batch.site, ack.status, records, len(dead))
+        if ack.status == "ok":
+            self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
+            acked = acked_scanned(scanned, dead) if scanned is not None else acked_topics(batch.records, dead)
+            self.delivery.on_batch(batch.site, "ok", acked, len(dead))
+        else:
+            self.delivery.on_batch(batch.site, ack.status)
+        if ack.status == "error":
+            self._limiter.log(
+                logging.WARNING,
+                "batch-error",
+                "batch %s/%s %d..%d not fully delivered: %s",
+                ack.edge_id,
+                ack.stream,
+                ack.first_seq,
+                ack.last_seq,
+                ack.detail,
+            )
+
     def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> None:
         """On a worker: decode the batch and produce it; the reply comes with the last delivery report."""
+        scanned: ScannedBatch | None = None
         try:
-            batch = decode_batch(data)
+            if self._native is not None:
+                parsed = decode_batch_head(data)
+                try:
+                    scanned = ScannedBatch.scan(parsed.body, parsed.groups_at)
+                    batch = view(parsed.head, scanned)
+                except ValueError:
+                    batch = decode_batch(data)  # says exactly what is wrong (WireError)
+                    scanned = None
+            else:
+                batch = decode_batch(data)
         except WireError as exc:
             self._limiter.log(
                 logging.ERROR, "bad-batch", "refused a malformed batch on %s: %s", str(query.key_expr), exc
@@ -288,6 +343,7 @@ class Uplink:
         )
         # ---------------------------------------------------------------------------------------
         missing = ids.unknown(batch.site, batch.elided) if batch.elided else ()
+        last_seq = scanned.seqs()[-1] if scanned is not None else batch.last_seq
         if missing:  # before anything is produced: the edge sends the batch again, with them
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
             log.info(
@@ -295,7 +351,7 @@ class Uplink:
                 batch.edge_id,
                 batch.stream,
                 batch.first_seq,
-                batch.last_seq,
+                last_seq,
                 len(missing),
             )
             self._finish(
@@ -304,7 +360,7 @@ class Uplink:
                     edge_id=batch.edge_id,
                     stream=batch.stream,
                     first_seq=batch.first_seq,
-                    last_seq=batch.last_seq,
+                    last_seq=last_seq,
                     status="need_schemas",
                     missing_schemas=missing,
                     detail="send the batch again with these schemas",
@@ -313,37 +369,36 @@ class Uplink:
             return
 
         def done(ack: Ack) -> None:
-            dead = {f.seq for f in ack.failures if f.dead_lettered}
-            self.metrics.on_ingested(batch.site, ack.status, len(batch.records), len(dead))
-            if ack.status == "ok":
-                self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
-                self.delivery.on_batch(batch.site, "ok", acked_topics(batch.records, dead), len(dead))
-            else:
-                self.delivery.on_batch(batch.site, ack.status)
-            if ack.status == "error":
-                self._limiter.log(
-                    logging.WARNING,
-                    "batch-error",
-                    "batch %s/%s %d..%d not fully delivered: %s",
-                    ack.edge_id,
-                    ack.stream,
-                    ack.first_seq,
-                    ack.last_seq,
-                    ack.detail,
-                )
+            self._answered(batch, scanned, ack, arrived)
             self._finish(query, ack)
 
         metered = not isinstance(self.metrics, NullMetrics)
-        BatchJob(
-            batch,
+        on_delivery = self.metrics.on_delivered if metered else None
+        job = partial(
+            BatchJob,
             sink=sink,
             schema_ids=ids,
             dead_letter_topic=self.config.topics.dead_letter,
-            on_done=done,
             stats=self.stats,
             dead_letter_max_bytes=self._dlq_max,
-            on_delivery=self.metrics.on_delivered if metered else None,
+            on_delivery=on_delivery,
             diversion=diversion,
+        )
+        native = self._native
+        if scanned is None or native is None:
+            job(batch, on_done=done).run()
+            return
+        NativeJob(
+            batch,
+            scanned,
+            native=native,
+            sink=sink,
+            schema_ids=ids,
+            routes=verdict.routes,
+            job=partial(job, counted=False),
+            on_done=done,
+            stats=self.stats,
+            on_delivery=on_delivery,
         ).run()
 
     def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:
@@ -368,5 +423,11 @@ def _policy(cfg: UplinkConfig) -> TopicPolicy:
     topics = cfg.topics
     owned = {topics.command_dead_letter, topics.command_status, topics.refused}
     owned.update(mapping.from_ for mapping in cfg.commands)
+    for service in cfg.services:
+        owned.update((service.from_, service.reply_to))
+    for action in cfg.actions:
+        owned.update((action.from_, action.feedback_to, action.result_to))
+        if action.cancel_from is not None:
+            owned.add(action.cancel_from)
     internal = InternalTopics(topics.registrations, topics.dead_letter, frozenset(owned))
     return TopicPolicy(cfg.policy.patterns(), cfg.policy.default.topics, internal)

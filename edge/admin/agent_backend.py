@@ -80,7 +80,11 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
     }
     capacity = {"durable": int(config.spool.max_bytes), "memory": int(config.memory.max_bytes)}
     buffers, wan, healthy = [], {}, []
+    damage: dict[str, list[Mapping[str, Any]]] = {}
     for stream, entry in _dict(data.get("streams")).items():
+        found = _dict(entry).get("damage")
+        if isinstance(found, list) and found:
+            damage[str(stream)] = [f for f in found if isinstance(f, Mapping)]
         buffer = _dict(_dict(entry).get("buffer"))
         if buffer:
             fields: dict[str, Any] = {k: buffer[k] for k in SpoolStats.__dataclass_fields__ if k in buffer}
@@ -126,6 +130,11 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
         wan_link_up=all(healthy) if healthy else None,
         sequence_gaps=gaps,
         failure=None if running is not False else "the edge agent is not running",
+        lost_before_spool={
+            str(robot): {str(topic): _int(n) for topic, n in _dict(topics).items()}
+            for robot, topics in _dict(data.get("lost_before_spool")).items()
+        },
+        spool_damage=damage,
         intake=intake_state,
     )
 
@@ -206,3 +215,9 @@ class AgentBackend:
 
     def snapshot(self) -> EdgeSnapshot:
         return snapshot_from_agent(self.agent.snapshot(), self.agent.config)
+
+    def spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        return self.agent.spool_damage()
+
+    def acknowledge_spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        return self.agent.acknowledge_spool_damage()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 from fleetlink.common.metrics.buckets import EMPTY, BucketTotals
 from fleetlink.edge.config import EdgeConfig
@@ -121,6 +121,11 @@ class EdgeSnapshot:
     """ROS topic -> messages missing so far (running total)."""
     failure: str | None = None
     """Set when the agent cannot do its job (spool unwritable, a worker thread died)."""
+    lost_before_spool: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
+    """Robot -> ROS topic -> samples that never reached the spool because the edge was stopped or
+    crashed (running total since start, counted from each publisher's first sample)."""
+    spool_damage: Mapping[str, Sequence[Mapping[str, Any]]] = field(default_factory=dict)
+    """Stream -> the damage findings awaiting an operator's acknowledgement."""
     intake: IntakeState = field(default_factory=IntakeState)
 
 
@@ -145,3 +150,11 @@ class AdminBackend(Protocol):
     def robots(self) -> Sequence[RobotStatus]: ...
 
     def snapshot(self) -> EdgeSnapshot: ...
+
+    def spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        """Every damage finding of the durable spool (``edge.spool.damage``), acknowledged or not."""
+        ...
+
+    def acknowledge_spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        """Acknowledge the durable spool's damage findings; returns those that were waiting."""
+        ...

@@ -6,7 +6,8 @@ Rules (thresholds in ``HealthRules``):
 - degraded, per mapping: the runtime reports an issue (``unknown_type``, ``setup``), or the
   mapping dead-lettered records in the last minute (``dead_letters``);
 - degraded, per buffer: filled over 80 % of its capacity (``spool_filling``), or appenders are
-  blocked waiting for room (``spool_full``);
+  blocked waiting for room (``spool_full``), or damage was found in it that no operator has
+  acknowledged yet (``spool_damage``, until ``POST /spool/damage/acknowledge``);
 - degraded: the WAN link is down (``wan_down``: records are held in the buffers);
 - degraded: overloaded, samples wait longer than ``intake.lag_alarm`` between receipt and spool
   (``lagging``), or the intake is over 90 % full (``intake_full``: samples are being dropped,
@@ -80,6 +81,15 @@ def assess(
                     f"record is {stats.oldest_age_ms(now_ms) / 1000:.1f} s old",
                 )
             )
+        if stats.damage_unacknowledged > 0:
+            problems.append(
+                Problem(
+                    "spool",
+                    stats.stream,
+                    "spool_damage",
+                    _damage_detail(stats.damage_unacknowledged, snapshot),
+                )
+            )
     if snapshot.wan_link_up is False:
         held = sum(b.stats.depth for b in snapshot.buffers)
         problems.append(
@@ -92,6 +102,17 @@ def assess(
         )
     problems.extend(_intake_problems(snapshot))
     return Health.of(problems, spool_fill=fill, wan_link_up=snapshot.wan_link_up, robots=robots)
+
+
+def _damage_detail(count: int, snapshot: EdgeSnapshot) -> str:
+    found = [f for findings in snapshot.spool_damage.values() for f in findings]
+    lost = sum(int(f.get("records", 0) or 0) for f in found)
+    first = found[0] if found else None
+    where = f"; first: {first.get('reason')} in {first.get('file')}" if first is not None else ""
+    return (
+        f"{count} damage finding(s) ({lost} record(s) lost){where}; see GET /spool/damage, "
+        "then POST /spool/damage/acknowledge"
+    )
 
 
 def _intake_problems(snapshot: EdgeSnapshot) -> list[Problem]:

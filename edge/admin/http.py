@@ -36,6 +36,8 @@ from fleetlink.edge.admin.problems import document_path, message_of
 from fleetlink.edge.admin.service import AdminService
 from fleetlink.edge.admin.views import (
     ChangeView,
+    DamageAckView,
+    DamageView,
     DryRunView,
     ErrorView,
     MappingView,
@@ -192,6 +194,17 @@ def _routes(router: APIRouter, service: AdminService) -> None:
     def delete_robot_type(name: NameParam) -> ChangeView:
         """Remove a robot type and its mappings (its robots are deregistered)."""
         return service.remove_robot_type(name)
+
+    @router.get("/spool/damage", tags=["spool"])
+    def get_spool_damage() -> list[DamageView]:
+        """Damage found in the durable spool (missing or corrupt segments, lost ledger files):
+        what, where, which records; acknowledged ones too."""
+        return service.spool_damage()
+
+    @router.post("/spool/damage/acknowledge", tags=["spool"])
+    def acknowledge_spool_damage() -> DamageAckView:
+        """Acknowledge every finding awaiting it: health stops reporting ``spool_damage``."""
+        return service.acknowledge_spool_damage()
 
     @router.get("/overlay", tags=["mappings"])
     def get_overlay() -> Overlay:

@@ -24,6 +24,8 @@ from fleetlink.edge.admin.store import OverlayStore
 from fleetlink.edge.admin.telemetry import EdgeTelemetry
 from fleetlink.edge.admin.views import (
     ChangeView,
+    DamageAckView,
+    DamageView,
     DryRunView,
     MappingView,
     RobotTypeView,
@@ -110,6 +112,16 @@ class AdminService:
         with self._lock:
             config, name = changes.candidate_mapping(self._base, self._overlay, body)
         return dry_run_matches(config, name, self.backend.topics(), self.backend.mapping_table())
+
+    def spool_damage(self) -> list[DamageView]:
+        """Every damage finding of the durable spool, acknowledged or not."""
+        return [DamageView.model_validate(dict(f)) for f in self.backend.spool_damage()]
+
+    def acknowledge_spool_damage(self) -> DamageAckView:
+        """An operator looked at the spool's damage: the edge stops reporting it as degraded."""
+        done = [DamageView.model_validate(dict(f)) for f in self.backend.acknowledge_spool_damage()]
+        log.info("admin: %d spool damage finding(s) acknowledged", len(done))
+        return DamageAckView(acknowledged=done)
 
     def health(self) -> Health:
         return self.telemetry.observe(self._snapshot(), robots=len(self.backend.mapping_table().robots()))

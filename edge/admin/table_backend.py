@@ -9,7 +9,7 @@ change, the robots of the graph that a (new) robot type's ``match`` takes.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 from fleetlink.edge.admin.backend import EdgeSnapshot, RobotStatus
 from fleetlink.edge.config import EdgeConfig
@@ -32,6 +32,8 @@ class TableBackend:
         robots: Callable[[], Sequence[RobotStatus]] | None = None,
         on_install: Callable[[EdgeConfig], object] | None = None,
         register_robots: bool = False,
+        spool_damage: Callable[[], Sequence[Mapping[str, Any]]] | None = None,
+        acknowledge_spool_damage: Callable[[], Sequence[Mapping[str, Any]]] | None = None,
     ) -> None:
         self.table = table
         self.graph = graph
@@ -39,6 +41,8 @@ class TableBackend:
         self._robots = robots
         self._on_install = on_install
         self.register_robots = register_robots
+        self._damage = spool_damage or tuple
+        self._acknowledge = acknowledge_spool_damage or tuple
         self.installs = 0
 
     def install(
@@ -80,3 +84,9 @@ class TableBackend:
 
     def snapshot(self) -> EdgeSnapshot:
         return self._snapshot()
+
+    def spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        return self._damage()
+
+    def acknowledge_spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        return self._acknowledge()

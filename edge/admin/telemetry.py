@@ -21,6 +21,7 @@ _SPOOL_DROPS = (
     ("dropped_oldest", "dropped_oldest"),
     ("dropped_newest", "dropped_newest"),
     ("corrupt_skipped", "corrupt"),
+    ("lost_missing", "missing"),
     ("block_timeouts", "block_timeout"),
 )
 
@@ -99,6 +100,9 @@ class EdgeTelemetry:
             m.on_ack_latencies(latency.counts, latency.sum_s)
         for topic, missing in snapshot.sequence_gaps.items():
             m.on_gap(topic, d(("gap", topic), missing))
+        for robot, topics in snapshot.lost_before_spool.items():
+            for topic, lost in topics.items():
+                m.on_lost_before_spool(robot, topic, d(("lost_before_spool", robot, topic), lost))
 
     def _gauges(self, snapshot: EdgeSnapshot, now: float, robots: int) -> None:
         now_ms = int(now * 1000)
@@ -111,6 +115,7 @@ class EdgeTelemetry:
                 depth=stats.depth,
                 in_flight=stats.in_flight,
                 oldest_age_s=stats.oldest_age_ms(now_ms) / 1000,
+                damage_unacknowledged=stats.damage_unacknowledged,
             )
         in_flight = sum(w.in_flight for w in snapshot.wan.values())
         if snapshot.wan_link_up is not None or snapshot.wan:

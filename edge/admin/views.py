@@ -139,3 +139,22 @@ class ChangeView(_View):
     kind: Literal["mapping", "robot_type"]
     name: str
     overlay: str | None = Field(description="the file the change was saved to (null: not persisted)")
+
+
+class DamageView(_View):
+    """One damage finding of the durable spool (docs/spool.md, "Damage")."""
+
+    reason: str = Field(description="corrupt, truncated, segment_missing, ledger_missing or torn_tail")
+    file: str = Field(description="the file's name in the spool directory")
+    offset: int
+    end: int
+    first_seq: int | None = Field(default=None, description="the first seq lost (null: none or not known)")
+    last_seq: int | None = None
+    records: int = Field(description="records lost (not acknowledged by Kafka when found)")
+    detail: str
+    found_ms: int
+    acknowledged_ms: int | None = Field(default=None, description="null: awaiting an operator")
+
+
+class DamageAckView(_View):
+    acknowledged: list[DamageView] = Field(description="the findings that awaited an acknowledgement")

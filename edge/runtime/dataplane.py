@@ -54,17 +54,20 @@ _ANY_HOST = re.compile(r"^(tcp|tls|udp|quic)/(0\.0\.0\.0|\[::\])(:\d+)$")
 
 
 def dataplane_config(python_config: dict[str, Any]) -> dict[str, Any]:
-    """The data plane's Zenoh config, from the edge session's (as JSON): a client of the routers
-    the edge connects to, else of the edge's own listeners (a router-mode edge); the rest (TLS,
-    timeouts) as configured. Raises ``RuntimeSetupError`` when there is nothing to connect to."""
+    """The data plane's Zenoh config, from the edge session's (as JSON): a client of the router
+    the robots' data flows through. A router-mode edge is that router itself (its listeners
+    face the robots; what it connects to is the cloud, which carries no robot data), so the data
+    plane connects to its own listeners; any other edge to the routers it connects to. The rest
+    (TLS, timeouts) as configured. Raises ``RuntimeSetupError`` when there is nothing to connect
+    to."""
     config: dict[str, Any] = json.loads(json.dumps(python_config))  # a deep copy
-    connect = list(_endpoints(config.get("connect")))
-    if not connect:
-        connect = [
-            _loopback(endpoint)
-            for endpoint in _endpoints(config.get("listen"))
-            if not endpoint.endswith(":0") and not endpoint.startswith("unixsock")
-        ]
+    own = [
+        _loopback(endpoint)
+        for endpoint in _endpoints(config.get("listen"))
+        if not endpoint.endswith(":0") and not endpoint.startswith("unixsock")
+    ]
+    routers = list(_endpoints(config.get("connect")))
+    connect = (own or routers) if config.get("mode") == "router" else (routers or own)
     if not connect:
         raise RuntimeSetupError(
             "zenoh: the edge's receive path needs a router to connect to: give zenoh.connect, "

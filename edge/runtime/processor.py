@@ -8,6 +8,11 @@ chunk with one ``append_many`` per buffer. A full spool under the ``block`` poli
 thread wait (up to the spool's ``block_timeout``) while the source's intake fills up and then
 drops, counted: the Zenoh callbacks never wait. Without a source (unit tests) samples come
 through the ``Intake`` too.
+
+Each chunk's publisher marks (the last sequence number of every publisher whose samples it held)
+go to the ``at_least_once`` buffer just before its last append of the chunk, so the durable spool
+writes them with those records (``edge.spool.marks``): after a crash they say exactly which
+samples reached the spool.
 """
 
 from __future__ import annotations
@@ -193,7 +198,7 @@ class Processor:
                     if now - last_tick >= tick_ns:
                         last_tick = now
                         out.extend(self.maker.tick(now))
-                self._append(out, taken)
+                self._append(out, taken, _marks_of(items, taken))
             except Exception as exc:  # noqa: BLE001 - one bad chunk must not stop the edge; logged, counted
                 self.stats.errors += 1
                 self._limiter.log(
@@ -222,7 +227,7 @@ class Processor:
                 out.extend(item.records)
         return out
 
-    def _append(self, out: list[Outgoing], taken: Taken) -> None:
+    def _append(self, out: list[Outgoing], taken: Taken, marks: list[tuple[bytes, int]]) -> None:
         payloads: dict[Delivery, list[bytes]] = {}
         lingers: dict[Delivery, float] = {}  # per buffer, the shortest linger of what it got
         default = self.default_linger_s
@@ -236,14 +241,25 @@ class Processor:
             if linger < lingers.get(delivery, linger + 1):
                 lingers[delivery] = linger
             pending.append(payload)
+        durable = self.buffers.get("at_least_once")
         for delivery in {*taken.groups, *payloads}:
             buffer = self.buffers[delivery]
-            for group in taken.groups.get(delivery, ()):
+            groups = taken.groups.get(delivery, ())
+            records = payloads.get(delivery)
+            for n, group in enumerate(groups):
+                if marks and buffer is durable and records is None and n == len(groups) - 1:
+                    buffer.note_marks(marks)  # written with this last group
+                    marks = []
                 self._append_group(delivery, buffer, group)
-            if delivery in payloads:
-                self.stats.records += len(payloads[delivery])
-                self._append_to(delivery, buffer, payloads[delivery])
+            if records is not None:
+                if marks and buffer is durable:
+                    buffer.note_marks(marks)
+                    marks = []
+                self.stats.records += len(records)
+                self._append_to(delivery, buffer, records)
             self._on_appended(delivery, lingers.get(delivery, default))
+        if marks and durable is not None:  # nothing durable this time: written with the next append
+            durable.note_marks(marks)
 
     def _append_group(self, delivery: Delivery, buffer: RecordBuffer, group: bytes) -> None:
         stats = self.stats
@@ -300,6 +316,18 @@ class Processor:
         taken = sum(1 for r in results if r is not None)
         stats.appended += taken
         stats.spool_dropped += len(results) - taken
+
+
+def _marks_of(items: Sequence[Item], taken: Taken) -> list[tuple[bytes, int]]:
+    """The last ``(publisher GID, seq)`` of each publisher in a chunk: the data plane's marks
+    and those of the samples on the general path."""
+    found = dict(taken.marks)
+    for sample in (*items, *taken.samples):
+        if isinstance(sample, RosSample) and sample.gid is not None and sample.seq is not None:
+            known = found.get(sample.gid)
+            if known is None or sample.seq > known:
+                found[sample.gid] = sample.seq
+    return list(found.items())
 
 
 def _nothing(_delivery: Delivery, _linger_s: float) -> None:

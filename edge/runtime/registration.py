@@ -146,6 +146,10 @@ class Registrar:
         self._watcher.start()
         return self
 
+    def prime(self, timeout_s: float = 2.0) -> int:
+        """Register the robots alive now before returning (what ``start`` finds asynchronously)."""
+        return self._watcher.prime(timeout_s)
+
     def stop(self) -> None:
         self._watcher.stop()
         for entity in (self._subscriber, self._publisher):

@@ -109,6 +109,12 @@ class SpoolStats:
     next_seq: int
     blocked_appenders: int = 0
     """Appenders waiting for room right now (``block`` policy)."""
+    lost_missing: int = 0
+    """Records lost because their segment file is gone (found at open, counted exactly from the
+    ledger's segment table)."""
+    damage_unacknowledged: int = 0
+    """Damage findings (``edge.spool.damage``) awaiting an operator's acknowledgement, across
+    restarts: the edge reports ``degraded`` while there are any."""
 
     def oldest_age_ms(self, now_ms: int) -> int:
         return 0 if self.oldest_append_ms is None else max(0, now_ms - self.oldest_append_ms)
@@ -190,6 +196,12 @@ class RecordBuffer(Protocol):
 
     def release_all(self) -> int:
         """Everything in flight must be sent again (e.g. after a reconnect); returns batches."""
+        ...
+
+    def note_marks(self, marks: Sequence[tuple[bytes, int]]) -> None:
+        """The last ``(publisher GID, seq)`` of samples whose records are appended next (or that
+        made none for this buffer): the durable spool writes them with the last group of its
+        next append call (``edge.spool.marks``); the memory buffer keeps nothing."""
         ...
 
     def stats(self) -> SpoolStats: ...

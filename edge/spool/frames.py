@@ -6,7 +6,9 @@ A segment file is a 16-byte header (``FLSPOOL1`` + first seq, u64 LE) then frame
 
 all little-endian. With flag bit 0 (``FLAG_GROUP``, what the spool writes) the payload is a record
 group (``fleetlink.wire.groups``: ``count`` records with seqs ``seq .. seq + count - 1``); without
-it, one record payload with seq ``seq`` (read, never written).
+it, one record payload with seq ``seq`` (read, never written). With flag bit 1 (``FLAG_MARKS``,
+only beside ``FLAG_GROUP``) a marks block (``edge.spool.marks``: the last sequence number of each
+publisher whose samples the write held) follows the group.
 
 ``crc`` is CRC-32 (zlib's, the IEEE polynomial: C-fast everywhere; CRC-32C would need an extra
 package) over the payload followed by the 24 header bytes before it, so
@@ -21,11 +23,14 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from fleetlink.edge.spool.marks import MarksError, marks_block_size
 from fleetlink.wire.groups import HEAD_SIZE as GROUP_HEAD_SIZE
 from fleetlink.wire.groups import encode_group, group_count
 
 FRAME_MAGIC = 0x5BF1
 FLAG_GROUP = 0x0001
+FLAG_MARKS = 0x0002
+KNOWN_FLAGS = FLAG_GROUP | FLAG_MARKS
 MAGIC_BYTES = struct.pack("<H", FRAME_MAGIC)
 _PREFIX = struct.Struct("<HHIQq")
 _FRAME = struct.Struct("<HHIQqI")
@@ -65,9 +70,20 @@ def peek_timestamp(header: bytes) -> int | None:
     return int(ts) if magic == FRAME_MAGIC else None
 
 
-def encode_group_frame(first_seq: int, timestamp_ms: int, group: bytes) -> bytes:
-    """The frame of a record group whose first record has seq ``first_seq``."""
+def encode_group_frame(first_seq: int, timestamp_ms: int, group: bytes, marks: bytes = b"") -> bytes:
+    """The frame of a record group whose first record has seq ``first_seq``, with a marks block
+    (``edge.spool.marks.encode_marks``) when ``marks`` is given."""
+    if marks:
+        return encode_frame(first_seq, timestamp_ms, group + marks, flags=FLAG_GROUP | FLAG_MARKS)
     return encode_frame(first_seq, timestamp_ms, group, flags=FLAG_GROUP)
+
+
+def group_end(frame: bytes) -> int:
+    """Where the group ends in a frame this spool wrote (before any marks block)."""
+    flags = int.from_bytes(frame[2:4], "little")
+    if flags & FLAG_MARKS:
+        return len(frame) - marks_block_size(frame)
+    return len(frame)
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +97,8 @@ class Frame:
     count: int = 1
     """Records in the frame (a group frame holds one or more)."""
     grouped: bool = False
+    marks: bytes = b""
+    """The frame's marks block (``edge.spool.marks``), empty when it has none (always copied)."""
 
     @property
     def last_seq(self) -> int:
@@ -112,13 +130,31 @@ class _NeedMore:
 def _header_problem(magic: int, flags: int, length: int, max_len: int) -> str | None:
     if magic != FRAME_MAGIC:
         return "bad frame magic"
-    if flags & ~FLAG_GROUP:
+    if flags & ~KNOWN_FLAGS or (flags & FLAG_MARKS and not flags & FLAG_GROUP):
         return f"unknown frame flags 0x{flags:04x}"
     if flags & FLAG_GROUP and length < GROUP_HEAD_SIZE:
         return f"group frame of {length} bytes is shorter than a group header"
     if length > max_len:
         return f"frame length {length} exceeds the {max_len}-byte limit"
     return None
+
+
+def _contents(payload: memoryview, flags: int) -> tuple[memoryview, bytes, int] | str:
+    """``(group or record payload, marks block, records)`` of a frame whose checksum holds,
+    else why it is bad."""
+    marks = b""
+    if flags & FLAG_MARKS:
+        try:
+            size = marks_block_size(payload)
+        except MarksError as exc:
+            return str(exc)
+        if len(payload) - size < GROUP_HEAD_SIZE:
+            return "no record group before the marks block"
+        payload, marks = payload[: len(payload) - size], bytes(payload[len(payload) - size :])
+    count = group_count(payload) if flags & FLAG_GROUP else 1
+    if count < 1:
+        return "empty record group"
+    return payload, marks, count
 
 
 def frame_at(buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True) -> Frame | _NeedMore | str:
@@ -136,10 +172,10 @@ def frame_at(buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True)
     payload = view[off + HEADER_SIZE : stop]
     if zlib.crc32(view[off : off + 24], zlib.crc32(payload)) != crc:
         return "checksum mismatch"
-    grouped = bool(flags & FLAG_GROUP)
-    count = group_count(payload) if grouped else 1
-    if count < 1:
-        return "empty record group"
+    contents = _contents(payload, flags)
+    if isinstance(contents, str):
+        return contents
+    payload, marks, count = contents
     return Frame(
         offset=off,
         end=stop,
@@ -147,7 +183,8 @@ def frame_at(buf: bytes, off: int, end: int, max_len: int, *, copy: bool = True)
         timestamp_ms=ts,
         payload=bytes(payload) if copy else b"",
         count=count,
-        grouped=grouped,
+        grouped=bool(flags & FLAG_GROUP),
+        marks=marks,
     )
 
 

@@ -1,4 +1,4 @@
-"""The spool's ledger: an append-only file of checksummed 16-byte entries.
+"""The spool's ledger: append-only files of checksummed 16-byte entries, kept twice.
 
 Entries: ``kind u8 | 3 zero bytes | value u64 | crc u32`` (CRC-32 of the first 12 bytes).
 
@@ -7,10 +7,20 @@ Entries: ``kind u8 | 3 zero bytes | value u64 | crc u32`` (CRC-32 of the first 1
   and fsynced before any seq reaches it, so a restart after power loss never re-uses a seq
   that might already be in Kafka.
 - ``CLEAN`` value = the next seq, written last by a clean ``close()``.
+- ``SEGMENT`` value = the first seq of a segment just created (fsynced before it holds records).
+- ``EXTENT`` value = the last seq the newest ``SEGMENT`` holds as far as it was fsynced
+  (written after each fsync of the active segment and when it is sealed).
+- ``GONE`` value = the first seq of a segment deleted on purpose (acknowledged or evicted).
 
-Reading stops at the first entry that fails its checksum (a torn tail): never a half-written
-ledger. At open the ledger is rewritten (temp file, fsync, rename, fsync of the directory) with
-just the current state, and again whenever it grows past ``COMPACT_BYTES``.
+``SEGMENT``/``EXTENT``/``GONE`` are the segment table: what the segment files hold, so a
+segment that disappears, or holds less than it did, is found and its records counted exactly.
+
+Every entry goes to two files, ``ledger`` and ``ledger.copy``: losing one (deleted, emptied)
+loses nothing; opening reads both and merges them (the highest ack mark and reservation, the
+union of the segment tables). Reading a file stops at the first entry that fails its checksum
+(a torn tail): never a half-written ledger. At open both files are rewritten (temp file, fsync,
+rename, fsync of the directory) with just the current state, and again whenever they grow past
+``COMPACT_BYTES``.
 """
 
 from __future__ import annotations
@@ -21,16 +31,19 @@ import logging
 import os
 import struct
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 log = logging.getLogger(__name__)
 
 _BODY = struct.Struct("<B3xQ")
 ENTRY_SIZE = _BODY.size + 4
-ACK, RESERVE, CLEAN = 1, 2, 3
+ACK, RESERVE, CLEAN, SEGMENT, EXTENT, GONE = 1, 2, 3, 4, 5, 6
+KINDS = frozenset({ACK, RESERVE, CLEAN, SEGMENT, EXTENT, GONE})
 COMPACT_BYTES = 64 * 1024
 SPACE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+LEDGER_NAME = "ledger"
+COPY_NAME = "ledger.copy"
 
 
 def encode_entry(kind: int, value: int) -> bytes:
@@ -47,11 +60,20 @@ class LedgerState:
     damaged_at: int | None = None
     """Offset of the first entry that failed its checksum, if any."""
     fresh: bool = False
-    """There was no ledger: a new spool."""
+    """There was no ledger: a new spool (or a lost one: see ``missing``)."""
+    segments: dict[int, int | None] = field(default_factory=dict)
+    """The segment table: first seq -> the last seq known to be in it (``None``: none yet)."""
+    gone: set[int] = field(default_factory=set)
+    """Segments deleted on purpose since the ledger was last rewritten."""
+    tracked: bool = False
+    """The ledger keeps a segment table (written by this version: a ``SEGMENT`` entry seen)."""
+    missing: tuple[str, ...] = ()
+    """Ledger files that were absent or empty while the other one had entries."""
 
 
 def parse_ledger(data: bytes) -> LedgerState:
     state = LedgerState(fresh=not data)
+    newest: int | None = None
     for off in range(0, len(data), ENTRY_SIZE):
         entry = data[off : off + ENTRY_SIZE]
         body = entry[: _BODY.size]
@@ -59,15 +81,51 @@ def parse_ledger(data: bytes) -> LedgerState:
             state.damaged_at = off
             break
         kind, value = _BODY.unpack(body)
+        if kind not in KINDS:
+            state.damaged_at = off
+            break
         state.clean_next_seq = value if kind == CLEAN else None
         if kind == ACK:
             state.ack_mark = max(state.ack_mark, value)
         elif kind == RESERVE:
             state.reserved = max(state.reserved, value)
-        elif kind != CLEAN:
-            state.damaged_at = off
-            break
+        elif kind == SEGMENT:
+            state.tracked = True
+            state.segments.setdefault(value, None)
+            newest = value
+        elif kind == EXTENT and newest is not None and newest in state.segments:
+            known = state.segments[newest]
+            state.segments[newest] = value if known is None else max(known, value)
+        elif kind == GONE:
+            state.segments.pop(value, None)
+            state.gone.add(value)
     return state
+
+
+def merge_states(first: LedgerState, second: LedgerState) -> LedgerState:
+    """One state from the two copies: the highest marks, the union of the segment tables (a
+    segment gone in either is gone), clean only when both say so."""
+    if first.fresh:
+        return second
+    if second.fresh:
+        return first
+    gone = first.gone | second.gone
+    segments = dict(first.segments)
+    for seq, extent in second.segments.items():
+        known = segments.get(seq)
+        segments[seq] = extent if known is None else known if extent is None else max(known, extent)
+    for seq in gone:
+        segments.pop(seq, None)
+    clean = first.clean_next_seq if first.clean_next_seq == second.clean_next_seq else None
+    return LedgerState(
+        ack_mark=max(first.ack_mark, second.ack_mark),
+        reserved=max(first.reserved, second.reserved),
+        clean_next_seq=clean,
+        damaged_at=first.damaged_at if first.damaged_at is not None else second.damaged_at,
+        segments=dict(sorted(segments.items())),
+        gone=gone,
+        tracked=first.tracked or second.tracked,
+    )
 
 
 def fsync_dir(path: Path) -> None:
@@ -78,42 +136,47 @@ def fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-class Ledger:
-    """The ledger file of one spool directory. Not thread-safe: the spool holds its lock."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self._fd = -1
-        self._size = 0
-        self._ack_mark = 0
-        self._reserved = 1
-        self._needs_rewrite = False
-        self._dirty = False
-        self.failures = 0
-
-    def open(self) -> LedgerState:
-        tmp = self.path.with_suffix(".tmp")
-        tmp.unlink(missing_ok=True)
+def read_ledger(directory: Path) -> LedgerState:
+    """Both copies of a directory's ledger, merged (read only: for ``Ledger.open`` and offline
+    checks). ``missing`` names a copy that is absent or empty while the other has entries."""
+    states: list[LedgerState] = []
+    for name in (LEDGER_NAME, COPY_NAME):
+        path = directory / name
         try:
-            data = self.path.read_bytes()
+            data = path.read_bytes()
         except FileNotFoundError:
             data = b""
         state = parse_ledger(data)
         if state.damaged_at is not None:
             log.warning(
                 "spool ledger %s: entry at offset %d fails its checksum; %d trailing bytes ignored",
-                self.path,
+                path,
                 state.damaged_at,
                 len(data) - state.damaged_at,
             )
-        self._ack_mark, self._reserved = state.ack_mark, state.reserved
-        self._rewrite(strict=True)
-        return state
+        states.append(state)
+    merged = merge_states(states[0], states[1])
+    if not merged.fresh:
+        merged.missing = tuple(
+            name for name, state in zip((LEDGER_NAME, COPY_NAME), states, strict=True) if state.fresh
+        )
+    return merged
 
-    def _rewrite(self, *, strict: bool) -> bool:
-        """Replace the file by the current state, atomically. ``strict`` raises on failure."""
-        tmp = self.path.with_suffix(".tmp")
-        data = encode_entry(ACK, self._ack_mark) + encode_entry(RESERVE, self._reserved)
+
+class _LogFile:
+    """One of the two ledger files: its descriptor and size. A failed append is truncated away;
+    if even that fails, the next append rewrites the whole file instead."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd = -1
+        self.size = 0
+        self.needs_rewrite = False
+        self.dirty = False
+
+    def rewrite(self, data: bytes) -> None:
+        """Replace the file by ``data``, atomically; raises ``OSError``."""
+        tmp = self.path.with_name(self.path.name + ".tmp")
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
             try:
@@ -123,49 +186,120 @@ class Ledger:
             finally:
                 os.close(fd)
             os.replace(tmp, self.path)
-            fsync_dir(self.path.parent)
         except OSError:
             with contextlib.suppress(OSError):
                 tmp.unlink()
-            if strict:
-                raise
-            self.failures += 1
-            log.warning("spool ledger %s: rewrite failed; keeping the old file", self.path, exc_info=True)
-            return False
-        if self._fd >= 0:
-            os.close(self._fd)
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
-        self._size = len(data)
-        self._needs_rewrite = False
-        self._dirty = False
-        return True
+            raise
+        self.close()
+        self.fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
+        self.size = len(data)
+        self.needs_rewrite = False
+        self.dirty = False
 
-    def _append(self, kind: int, value: int, *, sync: bool) -> bool:
-        if self._needs_rewrite or self._size >= COMPACT_BYTES:
-            return self._rewrite(strict=False) and (not sync or self.sync())
-        entry = encode_entry(kind, value)
+    def append(self, entry: bytes) -> bool:
         try:
-            written = os.write(self._fd, entry)
+            written = os.write(self.fd, entry)
         except OSError as exc:
             if exc.errno not in SPACE_ERRORS:
                 raise
             written = -1
         if written != len(entry):
-            self.failures += 1
             try:
-                os.ftruncate(self._fd, self._size)
+                os.ftruncate(self.fd, self.size)
             except OSError:
-                self._needs_rewrite = True  # a partial entry may remain: replace the file next time
-            if self.failures == 1 or self.failures % 1000 == 0:  # a full disk must not flood the log
-                log.warning(
-                    "spool ledger %s: could not append an entry (disk full?); %d failures so far",
-                    self.path,
-                    self.failures,
-                )
+                self.needs_rewrite = True  # a partial entry may remain: replace the file next time
             return False
-        self._size += len(entry)
-        self._dirty = True
-        return not sync or self.sync()
+        self.size += len(entry)
+        self.dirty = True
+        return True
+
+    def sync(self) -> None:
+        if self.dirty and self.fd >= 0:
+            os.fsync(self.fd)
+            self.dirty = False
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
+class Ledger:
+    """The ledger files of one spool directory. Not thread-safe: the spool holds its lock."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        self.path = directory / LEDGER_NAME
+        self._files = (_LogFile(self.path), _LogFile(directory / COPY_NAME))
+        self._ack_mark = 0
+        self._reserved = 1
+        self._segments: dict[int, int | None] = {}
+        self._newest: int | None = None
+        self.failures = 0
+
+    def read(self) -> LedgerState:
+        """Both files merged, without changing anything (``open`` rewrites them after)."""
+        for log_file in self._files:
+            log_file.path.with_name(log_file.path.name + ".tmp").unlink(missing_ok=True)
+        return read_ledger(self.directory)
+
+    def open(self, state: LedgerState, segments: dict[int, int | None]) -> None:
+        """Start from ``state`` with the segment table ``segments`` (what recovery kept):
+        both files are rewritten with it. Raises ``OSError`` when that fails."""
+        self._ack_mark, self._reserved = state.ack_mark, state.reserved
+        self._segments = dict(segments)
+        self._newest = max(self._segments, default=None)
+        data = self._state_bytes()
+        for log_file in self._files:
+            log_file.rewrite(data)
+        fsync_dir(self.directory)
+
+    @property
+    def segments(self) -> dict[int, int | None]:
+        return dict(self._segments)
+
+    def _state_bytes(self) -> bytes:
+        parts = [encode_entry(ACK, self._ack_mark), encode_entry(RESERVE, self._reserved)]
+        for first, extent in sorted(self._segments.items()):
+            parts.append(encode_entry(SEGMENT, first))
+            if extent is not None:
+                parts.append(encode_entry(EXTENT, extent))
+        return b"".join(parts)
+
+    def _compact(self) -> bool:
+        data = self._state_bytes()
+        ok = True
+        for log_file in self._files:
+            try:
+                log_file.rewrite(data)
+            except OSError:
+                ok = False
+                self.failures += 1
+                log.warning(
+                    "spool ledger %s: rewrite failed; keeping the old file", log_file.path, exc_info=True
+                )
+        if ok:
+            with contextlib.suppress(OSError):
+                fsync_dir(self.directory)
+        return ok
+
+    def _append(self, kind: int, value: int, *, sync: bool) -> bool:
+        files = self._files
+        if any(f.needs_rewrite or f.size >= COMPACT_BYTES for f in files):
+            return self._compact() and (not sync or self.sync())
+        entry = encode_entry(kind, value)
+        ok = True
+        for log_file in files:
+            if not log_file.append(entry):
+                ok = False
+                self.failures += 1
+                if self.failures == 1 or self.failures % 1000 == 0:  # a full disk must not flood the log
+                    log.warning(
+                        "spool ledger %s: could not append an entry (disk full?); %d failures so far",
+                        log_file.path,
+                        self.failures,
+                    )
+        return ok and (not sync or self.sync())
 
     def record_ack(self, mark: int, *, sync: bool) -> bool:
         self._ack_mark = max(self._ack_mark, mark)
@@ -179,20 +313,42 @@ class Ledger:
     def record_clean(self, next_seq: int) -> bool:
         return self._append(CLEAN, next_seq, sync=True)
 
+    def record_segment(self, first_seq: int) -> bool:
+        """A segment was created (synced: the table must know it before it holds records)."""
+        self._segments[first_seq] = None
+        self._newest = first_seq
+        return self._append(SEGMENT, first_seq, sync=True)
+
+    def record_extent(self, first_seq: int, last_seq: int, *, sync: bool = False) -> bool:
+        """Segment ``first_seq`` (the newest) holds records up to ``last_seq`` on disk."""
+        if first_seq != self._newest or first_seq not in self._segments:
+            return True
+        known = self._segments[first_seq]
+        if known is not None and known >= last_seq:
+            return True
+        self._segments[first_seq] = last_seq
+        return self._append(EXTENT, last_seq, sync=sync)
+
+    def record_gone(self, first_seq: int) -> bool:
+        """Segment ``first_seq`` is deleted on purpose (synced before the file goes)."""
+        self._segments.pop(first_seq, None)
+        return self._append(GONE, first_seq, sync=True)
+
     def sync(self) -> bool:
-        """fsync the ledger if anything was appended since the last sync."""
-        if not self._dirty or self._fd < 0:
-            return self._fd >= 0
-        try:
-            os.fsync(self._fd)
-        except OSError:
-            self.failures += 1
-            log.warning("spool ledger %s: fsync failed", self.path, exc_info=True)
-            return False
-        self._dirty = False
-        return True
+        """fsync the ledger files if anything was appended since the last sync."""
+        ok = True
+        for log_file in self._files:
+            if log_file.fd < 0:
+                ok = False
+                continue
+            try:
+                log_file.sync()
+            except OSError:
+                ok = False
+                self.failures += 1
+                log.warning("spool ledger %s: fsync failed", log_file.path, exc_info=True)
+        return ok
 
     def close(self) -> None:
-        if self._fd >= 0:
-            os.close(self._fd)
-            self._fd = -1
+        for log_file in self._files:
+            log_file.close()

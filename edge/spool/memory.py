@@ -186,6 +186,9 @@ class MemoryBuffer:
             self._in_flight.clear()
             return count
 
+    def note_marks(self, marks: Sequence[tuple[bytes, int]]) -> None:
+        """Nothing survives a restart here: marks are not kept."""
+
     def stats(self) -> SpoolStats:
         with self._lock:
             heads = [g[0].timestamp_ms for g in (*self._in_flight.values(), *self._retry.values())]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from fleetlink.edge.spool.frames import HEADER_SIZE, Damage, Frame, scan
 from fleetlink.edge.spool.segments import Segment
@@ -21,6 +21,9 @@ class ReadResult:
     """Absolute offset just after what was consumed (frames and damage)."""
     lost: int = 0
     """Records lost to damage not seen before (now recorded in ``segment.damage``)."""
+    damaged: list[tuple[Damage, int, int]] = field(default_factory=list)
+    """That damage: ``(range, first seq lost, last seq lost)`` (the seqs up to the next frame
+    read; one record when no frame follows it in what was read)."""
 
 
 def _pread(path: os.PathLike[str] | str, size: int, offset: int) -> bytes:
@@ -57,7 +60,7 @@ def read_frames(
             if isinstance(event, Damage):
                 if not final and event.end == len(data):
                     break  # the damage may run past this chunk: re-read to the segment's end
-                pending = _note_damage(segment, start, event, result, pending)
+                pending = _note_damage(segment, start, event, result, pending, after_seq=after_seq)
                 result.end = start + event.end
                 continue
             full = records + event.count > max_records or total + len(event.payload) > max_bytes
@@ -65,6 +68,8 @@ def read_frames(
                 break
             if pending is not None:
                 result.lost += max(1, event.seq - after_seq - 1) - 1  # refine the gap estimate
+                damage, lo, _hi = result.damaged[-1]
+                result.damaged[-1] = (damage, lo, max(lo, event.seq - 1))
                 pending = None
             result.frames.append(
                 Frame(
@@ -87,13 +92,14 @@ def read_frames(
 
 
 def _note_damage(
-    segment: Segment, start: int, event: Damage, result: ReadResult, pending: Damage | None
+    segment: Segment, start: int, event: Damage, result: ReadResult, pending: Damage | None, *, after_seq: int
 ) -> Damage | None:
     absolute = Damage(start + event.offset, start + event.end, event.reason)
     if segment.damage_at(absolute.offset) is not None:
         return pending
     segment.damage.append(absolute)
     result.lost += 1
+    result.damaged.append((absolute, after_seq + 1, after_seq + 1))
     log.error(
         "spool: corrupt data in %s at offset %d (%d bytes: %s); skipped",
         segment.path,

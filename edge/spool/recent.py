@@ -15,7 +15,7 @@ from collections import deque
 from collections.abc import Sequence
 
 from fleetlink.edge.spool.api import SpoolGroup
-from fleetlink.edge.spool.frames import HEADER_SIZE
+from fleetlink.edge.spool.frames import HEADER_SIZE, group_end
 from fleetlink.edge.spool.segments import Segment
 
 Item = tuple[int, int, int, bytes]
@@ -84,7 +84,7 @@ class RecentFrames:
                 if groups and (records + count > max_records or total + size > max_bytes):
                     self.hits += 1
                     return groups, end
-                groups.append(SpoolGroup(first, count, ts, frame[HEADER_SIZE:]))
+                groups.append(SpoolGroup(first, count, ts, frame[HEADER_SIZE : group_end(frame)]))
                 total += size
                 records += count
                 end += len(frame)

@@ -1,20 +1,26 @@
 """Segment files: what the spool knows about each, and recovery of a directory at open.
 
-Recovery reads every segment once, checks every frame, and reports:
-- damaged ranges (checksum, torn frame, bad header), each logged once with file and offset and
-  counted as the records it lost (the seq gap around it, at least 1);
-- a torn tail of the newest segment is truncated away so appends continue on clean data;
-- segments wholly acknowledged, empty, or holding nothing valid are deleted;
-- where the sender resumes: the first record after the ack mark.
+``survey`` reads every segment once, checks every frame, compares each file with the ledger's
+segment table (``edge.spool.ledger``) and reports, as ``edge.spool.damage.Finding``s with file,
+byte range and seqs:
+- damaged ranges (checksum, torn frame, bad header), counted as the records they lost: the seqs
+  between the valid frames around them, or up to the last seq the ledger knew the file held;
+- segments that hold fewer records than the ledger knew (cut short, zeroed) and segment files
+  that are gone, counted from the ledger's table exactly;
+- ledger files that are gone.
+Seqs at or below the ack mark are in Kafka and never counted as lost. ``recover`` acts on the
+survey: a torn tail of the newest segment is truncated away so appends continue on clean data;
+segments wholly acknowledged, empty, holding nothing valid or deleted on purpose are deleted;
+the sender resumes at the first record after the ack mark.
 """
 
 from __future__ import annotations
 
-import logging
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from fleetlink.edge.spool.damage import Finding, lost_range
 from fleetlink.edge.spool.frames import (
     FLAG_GROUP,
     FRAME_HEADER,
@@ -26,11 +32,9 @@ from fleetlink.edge.spool.frames import (
     decode_segment_header,
     scan,
 )
-
-log = logging.getLogger(__name__)
+from fleetlink.edge.spool.ledger import LEDGER_NAME, LedgerState
 
 SEGMENT_NAME = re.compile(r"(\d{20})\.seg")
-MAX_DAMAGE_LOGS_PER_FILE = 10
 
 
 def segment_name(first_seq: int) -> str:
@@ -74,18 +78,46 @@ class Cursor:
 
 
 @dataclass(slots=True)
+class SegmentScan:
+    """One segment file as read at open: what it holds, what is damaged, what to cut off."""
+
+    segment: Segment
+    findings: list[Finding]
+    truncate_at: int | None = None
+    """A torn tail of the newest segment: the file is cut here so appends continue on clean data."""
+    marks: list[bytes] = field(default_factory=list)
+    """The marks blocks of its frames, in order."""
+
+
+@dataclass(slots=True)
+class Survey:
+    """What a spool directory holds, read without changing anything (``survey``)."""
+
+    scans: list[SegmentScan]
+    findings: list[Finding]
+    """Every finding, in seq order (ledger findings first)."""
+    last_seq: int
+    """The highest seq any segment holds or held (files and the ledger's table)."""
+    gone: list[Path]
+    """Segment files the ledger says were deleted on purpose (a crash came before the unlink)."""
+
+
+@dataclass(slots=True)
 class Recovery:
     segments: list[Segment]
     cursor: Cursor
     depth: int
     last_seq: int
-    corrupt_records: int
+    findings: list[Finding]
+    marks: list[bytes]
+    """The marks blocks of the segments kept, oldest first."""
 
 
-def _lost_between(before: int, after: int | None) -> int:
-    if after is None or before < 0:
-        return 1
-    return max(1, after - before - 1)
+def _lost(reason: str, path: Path, damage: Damage, seqs: tuple[int, int], ack_mark: int) -> Finding:
+    first, last, records = lost_range(seqs[0], seqs[1], ack_mark)
+    span = damage.end - damage.offset
+    detail = f"{span} bytes: {damage.reason}" if span else damage.reason
+    return Finding(reason, path.name, damage.offset, damage.end, first, last, records, detail)
 
 
 def _torn_records(data: bytes, offset: int, before: int) -> int | None:
@@ -104,17 +136,31 @@ def _torn_records(data: bytes, offset: int, before: int) -> int | None:
     return seq - before - 1 + count if count > 0 else None
 
 
-def _scan_file(
-    path: Path, first_seq: int, after_seq: int, max_len: int, *, newest: bool, next_first: int | None = None
-) -> tuple[Segment, int]:
-    """Scan one file; returns its segment and the records lost to damage in it. Losses come from
-    the seqs around the damage (the next frame's, else ``next_first``: the next segment's first
-    seq, else what is left of a torn frame's header)."""
-    data = path.read_bytes()
+def scan_segment(
+    path: Path,
+    data: bytes,
+    first_seq: int,
+    after_seq: int,
+    max_len: int,
+    *,
+    newest: bool,
+    extent: int | None,
+    next_first: int | None,
+    ack_mark: int,
+) -> SegmentScan:
+    """Read one segment file's bytes. ``extent`` is the last seq the ledger knew the segment
+    held (``None``: not known). The records a damaged range lost are the seqs from the valid
+    frame before it up to the next valid frame, else up to ``extent``; at the end of the newest
+    segment beyond ``extent``, what is left of a torn frame's header (at least one); without a
+    ledger table, up to ``next_first`` (the next segment's first seq). Seqs at or below
+    ``ack_mark`` are in Kafka: never counted as lost."""
     segment = Segment(path=path, first_seq=first_seq, size=len(data))
+    result = SegmentScan(segment, [])
     events: list[Frame | Damage] = []
     if decode_segment_header(data) is None:
-        events.append(Damage(0, min(len(data), SEGMENT_HEADER_SIZE), "not a spool segment header"))
+        residue = len(data) < SEGMENT_HEADER_SIZE and (extent is None or extent < first_seq)
+        if not residue:  # (a file cut before its header was written held nothing: a crash's trace)
+            events.append(Damage(0, min(len(data), SEGMENT_HEADER_SIZE), "not a spool segment header"))
     events.extend(
         scan(
             data,
@@ -126,69 +172,164 @@ def _scan_file(
             copy=False,
         )
     )
-    lost = 0
-    logged = 0
     previous = max(after_seq, first_seq - 1)
+    known_end = extent if extent is not None else -1
     for i, event in enumerate(events):
         if isinstance(event, Frame):
             segment.count += event.count
             segment.last_seq = previous = event.last_seq
             if segment.first_ts is None:
                 segment.first_ts = event.timestamp_ms
+            if event.marks:
+                result.marks.append(event.marks)
             continue
-        after = next((e.seq for e in events[i + 1 :] if isinstance(e, Frame)), next_first)
-        if event.offset == 0:
-            records = 0  # a bad segment header loses no record
-        elif after is None:
-            records = _torn_records(data, event.offset, previous) or 1
+        if event.offset == 0:  # a bad segment header loses no record
+            result.findings.append(_lost("corrupt", path, event, (0, -1), ack_mark))
+            segment.damage.append(event)
+            continue
+        after = next((e.seq for e in events[i + 1 :] if isinstance(e, Frame)), None)
+        if after is not None:
+            found = _lost("corrupt", path, event, (previous + 1, after - 1), ack_mark)
         else:
-            records = _lost_between(previous, after)
-        lost += records
-        at_end = event.end == len(data) and after is None
-        torn_tail = newest and at_end and event.offset >= SEGMENT_HEADER_SIZE
-        if logged < MAX_DAMAGE_LOGS_PER_FILE:
-            what = "torn tail" if torn_tail else "corrupt data"
-            log.error(
-                "spool: %s in %s at offset %d (%d bytes: %s); %d record(s) skipped",
-                what,
+            found = _at_end(
                 path,
-                event.offset,
-                event.end - event.offset,
-                event.reason,
-                records,
+                data,
+                event,
+                previous=previous,
+                known_end=known_end,
+                ack_mark=ack_mark,
+                newest=newest,
+                next_first=next_first,
             )
-            logged += 1
-        if torn_tail:
-            with path.open("r+b") as handle:
-                handle.truncate(event.offset)
+        result.findings.append(found)
+        if newest and event.end == len(data):
+            result.truncate_at = event.offset
             segment.size = event.offset
         else:
             segment.damage.append(event)
-    if logged < len(segment.damage):
-        log.error("spool: %s has %d damaged ranges in all", path, len(segment.damage))
-    return segment, lost
+    ends_damaged = bool(result.findings) and result.findings[-1].end == len(data) and len(data) > 0
+    if known_end > previous and not ends_damaged:
+        why = f"the file ends after seq {previous}; the ledger knew seqs up to {known_end}"
+        short = Damage(len(data), len(data), why)
+        result.findings.append(_lost("truncated", path, short, (previous + 1, known_end), ack_mark))
+    return result
 
 
-def recover(directory: Path, ack_mark: int, max_len: int) -> Recovery:
-    """Scan ``directory``'s segments (oldest first) and decide what stays."""
-    names = sorted(p for p in directory.iterdir() if SEGMENT_NAME.fullmatch(p.name))
-    segments: list[Segment] = []
-    corrupt = 0
-    last_seq = -1
-    for n, path in enumerate(names):
-        first_seq = int(path.name[:20])
-        next_first = int(names[n + 1].name[:20]) if n + 1 < len(names) else None
-        segment, lost = _scan_file(
-            path, first_seq, last_seq, max_len, newest=n == len(names) - 1, next_first=next_first
+def _at_end(
+    path: Path,
+    data: bytes,
+    event: Damage,
+    *,
+    previous: int,
+    known_end: int,
+    ack_mark: int,
+    newest: bool,
+    next_first: int | None,
+) -> Finding:
+    """The finding for damage with no valid frame after it in its file."""
+    if known_end > previous:  # damage within what the ledger knew the file held
+        reason = "truncated" if event.reason.startswith("truncated frame") else "corrupt"
+        return _lost(reason, path, event, (previous + 1, known_end), ack_mark)
+    if newest:  # beyond the last fsync of the newest segment: a write a crash cut short
+        records = _torn_records(data, event.offset, previous) or 1
+        return _lost("torn_tail", path, event, (previous + 1, previous + records), -1)
+    if known_end < 0 and next_first is not None:  # no ledger table: up to the next segment
+        return _lost("corrupt", path, event, (previous + 1, next_first - 1), ack_mark)
+    return _lost("corrupt", path, event, (previous + 1, previous + 1), ack_mark)
+
+
+def survey(directory: Path, state: LedgerState, max_len: int) -> Survey:
+    """Read every segment of ``directory`` (oldest first) against the ledger ``state``: what
+    each holds and every damage: damaged ranges, segments shorter than the ledger knew, segment
+    files gone, ledger files gone. Changes nothing (``recover`` acts on it)."""
+    ack_mark = state.ack_mark
+    findings: list[Finding] = []
+    files = {
+        int(p.name[:20]): p
+        for p in (directory.iterdir() if directory.exists() else ())
+        if SEGMENT_NAME.fullmatch(p.name)
+    }
+    table = state.segments if state.tracked else {}
+    for name in state.missing:
+        detail = "absent or empty; restored from the other copy"
+        findings.append(Finding("ledger_missing", name, 0, 0, None, None, 0, detail))
+    if state.fresh and files:
+        detail = (
+            "both ledger files are absent or empty beside segment files: what was acknowledged is not "
+            "known, every record in the segments is sent again (duplicates)"
         )
-        corrupt += lost
-        last_seq = max(last_seq, segment.last_seq)
-        if segment.count == 0 or segment.last_seq <= ack_mark:
-            path.unlink()
+        findings.append(Finding("ledger_missing", LEDGER_NAME, 0, 0, None, None, 0, detail))
+    gone = [files.pop(first) for first in sorted(state.gone) if first in files and first not in table]
+    firsts = sorted(set(files) | set(table))
+    scans: list[SegmentScan] = []
+    last_seq = -1
+    unclean = state.clean_next_seq is None and not state.fresh
+    for n, first in enumerate(firsts):
+        newest = n == len(firsts) - 1
+        extent = table.get(first)
+        path = files.get(first)
+        if path is None:
+            path = directory / segment_name(first)
+            hi = first - 1 if extent is None else extent
+            last_seq = max(last_seq, hi)
+            found = _lost(
+                "segment_missing", path, Damage(0, 0, "the segment file is gone"), (first, hi), ack_mark
+            )
+            if newest and unclean:
+                found = replace(
+                    found,
+                    detail=f"{found.detail}; records appended after seq {hi} in the last fsync interval "
+                    f"before the unclean stop are not counted (seqs stay below {state.reserved})",
+                )
+            elif not found.records:
+                continue  # acknowledged before it went
+            findings.append(found)
+            continue
+        next_first = firsts[n + 1] if n + 1 < len(firsts) else None
+        scanned = scan_segment(
+            path,
+            path.read_bytes(),
+            first,
+            last_seq,
+            max_len,
+            newest=newest,
+            extent=extent,
+            next_first=next_first,
+            ack_mark=ack_mark,
+        )
+        findings.extend(scanned.findings)
+        last_seq = max(last_seq, scanned.segment.last_seq, -1 if extent is None else extent)
+        scans.append(scanned)
+    return Survey(scans=scans, findings=findings, last_seq=last_seq, gone=gone)
+
+
+def recover(directory: Path, state: LedgerState, max_len: int) -> Recovery:
+    """Survey ``directory`` and act on it: cut torn tails, delete segments wholly acknowledged,
+    empty or deleted on purpose; find where the sender resumes."""
+    found = survey(directory, state, max_len)
+    for path in found.gone:
+        path.unlink()
+    segments: list[Segment] = []
+    marks: list[bytes] = []
+    for scanned in found.scans:
+        segment = scanned.segment
+        if scanned.truncate_at is not None:
+            with segment.path.open("r+b") as handle:
+                handle.truncate(scanned.truncate_at)
+        marks.extend(scanned.marks)
+        if segment.count == 0 or segment.last_seq <= state.ack_mark:
+            segment.path.unlink()
             continue
         segments.append(segment)
-    cursor, depth = _position(segments, ack_mark, max_len)
-    return Recovery(segments=segments, cursor=cursor, depth=depth, last_seq=last_seq, corrupt_records=corrupt)
+    cursor, depth = _position(segments, state.ack_mark, max_len)
+    return Recovery(
+        segments=segments,
+        cursor=cursor,
+        depth=depth,
+        last_seq=found.last_seq,
+        findings=found.findings,
+        marks=marks,
+    )
 
 
 def _position(segments: list[Segment], ack_mark: int, max_len: int) -> tuple[Cursor, int]:

@@ -22,8 +22,10 @@ from pathlib import Path
 
 from fleetlink.edge.errors import SpoolClosedError, SpoolError, SpoolFullError, SpoolLockedError
 from fleetlink.edge.spool.api import SpoolBatch, SpoolGroup, SpoolOptions, SpoolStats, check_payloads
+from fleetlink.edge.spool.damage import DamageReport, Finding
 from fleetlink.edge.spool.frames import (
     FLAG_GROUP,
+    FLAG_MARKS,
     HEADER_SIZE,
     SEGMENT_HEADER_SIZE,
     Frame,
@@ -32,6 +34,16 @@ from fleetlink.edge.spool.frames import (
 )
 from fleetlink.edge.spool.grouping import pack_groups
 from fleetlink.edge.spool.ledger import Ledger
+from fleetlink.edge.spool.marks import (
+    SNAPSHOT_NAME,
+    Mark,
+    MarkBook,
+    MarksError,
+    decode_marks,
+    encode_marks,
+    read_snapshot,
+    write_snapshot,
+)
 from fleetlink.edge.spool.reading import read_frames
 from fleetlink.edge.spool.recent import RecentFrames
 from fleetlink.edge.spool.segments import Cursor, Segment, recover
@@ -52,6 +64,7 @@ COUNTERS = (
     "dropped_oldest",
     "dropped_newest",
     "corrupt_skipped",
+    "lost_missing",
     "block_timeouts",
     "disk_full",
     "stale_acks",
@@ -86,7 +99,12 @@ class Spool:
         self._space = threading.Condition(self._lock)
         self._state = "new"
         self._max_len = self.options.segment_bytes - SEGMENT_HEADER_SIZE - HEADER_SIZE
-        self._ledger = Ledger(self.directory / "ledger")
+        # a group must fit one frame of a segment, with its per-record lengths and a marks block
+        self._group_bytes = max(1, min(self.options.group_bytes, self._max_len * 3 // 4))
+        self._ledger = Ledger(self.directory)
+        self._report = DamageReport(self.directory)
+        self._marks = MarkBook()
+        self._pending_marks: dict[bytes, int] = {}
         self._writer = SegmentWriter(self.directory)
         self._lock_fd = -1
         self._segments: list[Segment] = []
@@ -122,10 +140,14 @@ class Spool:
         except BlockingIOError:
             os.close(self._lock_fd)
             raise SpoolLockedError("the spool is open elsewhere", path=self.directory) from None
-        state = self._ledger.open()
-        found = recover(self.directory, state.ack_mark, self._max_len)
+        state = self._ledger.read()
+        found = recover(self.directory, state, self._max_len)
+        self._ledger.open(state, {s.first_seq: s.last_seq for s in found.segments})
         self._segments, self._tracker = found.segments, SendTracker(found.cursor)
-        self._depth, self._c["corrupt_skipped"] = found.depth, found.corrupt_records
+        self._depth = found.depth
+        self._report.load()
+        self._note_findings(found.findings)
+        self._restore_marks(found.marks)
         self._bytes = sum(s.size for s in self._segments)
         self._persisted_mark = state.ack_mark
         resume = max(found.last_seq, state.ack_mark) + 1
@@ -143,10 +165,52 @@ class Spool:
             " (after an unclean stop)" if state.clean_next_seq is None and not state.fresh else "",
         )
         self._state = "open"
-        if self.options.fsync != "always":
-            self._flusher = threading.Thread(target=self._flush_loop, name="spool-fsync", daemon=True)
-            self._flusher.start()
+        self._flusher = threading.Thread(target=self._flush_loop, name="spool-fsync", daemon=True)
+        self._flusher.start()
         return self
+
+    def _note_findings(self, findings: Sequence[Finding]) -> None:
+        """Log, count and report what recovery found; damage reported at an earlier open (still
+        on disk) is neither logged at ERROR nor counted again."""
+        new = self._report.add(findings, self._clock())
+        fresh = {f.key for f in new}
+        for finding in findings:
+            if finding.key not in fresh:
+                log.info(
+                    "spool: known damage in %s at offset %d (%s)",
+                    finding.file,
+                    finding.offset,
+                    finding.reason,
+                )
+                continue
+            if finding.reason == "segment_missing":
+                self._c["lost_missing"] += finding.records
+            else:
+                self._c["corrupt_skipped"] += finding.records
+            log_finding(self.directory, finding)
+        waiting = len(self._report.unacknowledged())
+        if waiting:
+            log.error(
+                "spool %s: %d damage finding(s) await an operator's acknowledgement (fleetlink spool check)",
+                self.directory,
+                waiting,
+            )
+
+    def _restore_marks(self, blocks: Sequence[bytes]) -> None:
+        snapshot = read_snapshot(self.directory / SNAPSHOT_NAME)
+        if snapshot is None:
+            log.warning(
+                "spool %s: the marks snapshot is damaged; publishers marked only in deleted segments "
+                "will not have what they lost while the edge was down counted",
+                self.directory,
+            )
+        self._marks.update(snapshot or ())
+        for block in blocks:
+            try:
+                self._marks.update(decode_marks(block))
+            except MarksError:  # (the frame's checksum held: only a bug writes such a block)
+                log.warning("spool %s: a marks block does not decode; ignored", self.directory)
+        self._marks.changed = False
 
     def close(self) -> None:
         """fsync, record a clean stop, release the directory. Idempotent."""
@@ -160,7 +224,10 @@ class Spool:
         if self._flusher is not None:
             self._flusher.join()
         with self._appending, self._lock:
-            self._writer.seal()
+            self._seal()
+            self._marks.update(self._pending_marks.items())  # processed, and nothing more comes
+            self._pending_marks.clear()
+            self._save_marks()
             self._ledger.record_ack(self._tracker.mark(), sync=False)
             self._ledger.record_clean(self._next_seq)
             self._ledger.close()
@@ -186,7 +253,7 @@ class Spool:
         """Take records in order (as groups: one write, one fsync when due). Under ``block`` a
         timeout raises ``SpoolFullError`` whose ``taken`` counts the leading records taken."""
         check_payloads(payloads, self._max_len)
-        groups = pack_groups(payloads, self.options.group_records, self.options.group_bytes)
+        groups = pack_groups(payloads, self.options.group_records, self._group_bytes)
         results: list[int | None] = []
         try:
             self._append_groups(groups, results)
@@ -199,8 +266,7 @@ class Spool:
         """Take a group made elsewhere (split when above the group limits); returns the records
         taken. Under ``block`` a timeout raises ``SpoolFullError`` with ``taken`` set."""
         groups = [
-            (g, group_count(g))
-            for g in split_group(group, self.options.group_records, self.options.group_bytes)
+            (g, group_count(g)) for g in split_group(group, self.options.group_records, self._group_bytes)
         ]
         for g, _count in groups:
             if len(g) > self._max_len:
@@ -220,9 +286,11 @@ class Spool:
             self._check_open()
             chunk: list[Item] = []
             size_in_chunk = 0
+            marks = self._marks_for(groups[-1][0]) if groups else b""
             try:
-                for (group, count), crc in zip(groups, crcs, strict=True):
-                    size = HEADER_SIZE + len(group)
+                for n, ((group, count), crc) in enumerate(zip(groups, crcs, strict=True)):
+                    extra = marks if n == len(groups) - 1 else b""
+                    size = HEADER_SIZE + len(group) + len(extra)
                     if not self._fits(size_in_chunk + size):
                         self._write_chunk(chunk, results)
                         chunk, size_in_chunk = [], 0
@@ -231,15 +299,46 @@ class Spool:
                             continue
                     first = self._take_seqs(count)
                     ts = self._clock()
-                    chunk.append((first, count, ts, encode_frame(first, ts, group, crc, flags=FLAG_GROUP)))
+                    if extra:  # the marks go with the last group: written with it or not at all
+                        frame = encode_frame(
+                            first, ts, group + extra, zlib.crc32(extra, crc), flags=FLAG_GROUP | FLAG_MARKS
+                        )
+                    else:
+                        frame = encode_frame(first, ts, group, crc, flags=FLAG_GROUP)
+                    chunk.append((first, count, ts, frame))
                     size_in_chunk += size
                     results.extend(range(first, first + count))
                 self._write_chunk(chunk, results)
+                if marks and results and results[-1] is not None:
+                    self._marks.update(self._pending_marks.items())
+                    self._pending_marks.clear()
             finally:
                 if self.options.fsync == "always" or (
                     self.options.fsync == "batch" and self._writer.unsynced >= self.options.fsync_batch
                 ):
                     self._sync_locked()
+
+    def _marks_for(self, last_group: bytes) -> bytes:
+        """The marks block the frame of ``last_group`` carries (the pending marks), if it fits."""
+        if not self._pending_marks:
+            return b""
+        marks = encode_marks(self._pending_marks.items())
+        return marks if len(last_group) + len(marks) <= self._max_len else b""
+
+    def note_marks(self, marks: Sequence[Mark]) -> None:
+        """The last ``(publisher GID, seq)`` of samples whose records are appended next (or that
+        made none for this spool): written with the last group of the next append call."""
+        with self._lock:
+            pending = self._pending_marks
+            for gid, seq in marks:
+                known = pending.get(gid)
+                pending[gid] = seq if known is None or seq > known else known
+
+    def marks(self) -> list[Mark]:
+        """The last ``(publisher GID, seq)`` of every publisher whose samples reached the spool
+        (what a previous run left, and what was appended since)."""
+        with self._lock:
+            return self._marks.items()
 
     def _fits(self, size: int) -> bool:
         active = self._writer.segment
@@ -271,7 +370,7 @@ class Spool:
                     return False
                 continue
             if active is not None and active.size + size > self.options.segment_bytes:
-                self._writer.seal()
+                self._seal()
                 continue
             return True
 
@@ -337,7 +436,7 @@ class Spool:
                 except DiskFull:
                     active = self._writer.segment
                     if active is not None and active.count > 0:
-                        self._writer.seal()  # a per-file size limit: a fresh segment may take it
+                        self._seal()  # a per-file size limit: a fresh segment may take it
                         continue
                     try:
                         retry = self._full(deadline, disk=True, count=count)
@@ -353,6 +452,7 @@ class Spool:
         segment = self._writer.segment
         if segment is None:
             segment = self._writer.create(items[0][0])
+            self._ledger.record_segment(segment.first_seq)
             self._segments.append(segment)
             self._bytes += SEGMENT_HEADER_SIZE
         data = b"".join(item[3] for item in items)
@@ -366,15 +466,35 @@ class Spool:
         self._evicting_helps = True
 
     # -- leaving the spool -----------------------------------------------------------------------
+    def _seal(self) -> None:
+        """fsync and close the active segment; the ledger learns the last seq it holds."""
+        segment = self._writer.segment
+        if segment is not None:
+            self._writer.seal()
+            self._ledger.record_extent(segment.first_seq, segment.last_seq, sync=True)
+
+    def _save_marks(self) -> None:
+        """Write every mark known to the snapshot (before a segment and its marks go)."""
+        if not self._marks.changed:
+            return
+        try:
+            write_snapshot(self.directory / SNAPSHOT_NAME, self._marks.items())
+        except OSError as exc:
+            self._warn("marks", "spool %s: cannot write the marks snapshot: %s", self.directory, exc)
+            return
+        self._marks.changed = False
+
     def _remove_first(self) -> None:
         segment = self._segments.pop(0)
         self._recent.forget(segment)
         if segment is self._writer.segment:
-            self._writer.seal()
+            self._seal()
         dropped, orphaned = self._tracker.segment_removed(segment)
         self._c["dropped_oldest"] += dropped
         self._depth -= dropped + orphaned
         self._bytes -= segment.size
+        self._save_marks()
+        self._ledger.record_gone(segment.first_seq)
         segment.path.unlink(missing_ok=True)
         self._space.notify_all()
 
@@ -453,6 +573,16 @@ class Spool:
                 )
                 self._c["corrupt_skipped"] += found.lost
                 self._depth -= found.lost
+                if found.damaged:
+                    self._report.add(
+                        [
+                            Finding(
+                                "corrupt", segment.path.name, d.offset, d.end, lo, hi, hi - lo + 1, d.reason
+                            )
+                            for d, lo, hi in found.damaged
+                        ],
+                        self._clock(),
+                    )
                 if not found.frames:
                     cursor.offset = found.end
                     continue
@@ -524,11 +654,14 @@ class Spool:
         self._ledger.sync()
 
     def flush(self) -> None:
-        """fsync what was appended so far, without blocking appends while the disk works."""
+        """fsync what was appended so far, without blocking appends while the disk works; the
+        ledger then learns how far the active segment is on disk."""
         with self._lock:
             if self._state != "open":
                 return
             pending = self._writer.unsynced
+            active = self._writer.segment
+            covered = active.last_seq if active is not None else -1
             fd = self._writer.dup()
         if fd is not None:
             try:
@@ -544,6 +677,8 @@ class Spool:
             if fd is not None:
                 self._c["fsyncs"] += 1
             if self._state == "open":
+                if active is not None and active is self._writer.segment:
+                    self._ledger.record_extent(active.first_seq, covered)
                 self._ledger.sync()
 
     def _flush_loop(self) -> None:
@@ -567,7 +702,29 @@ class Spool:
                 segments=len(self._segments),
                 next_seq=self._next_seq,
                 blocked_appenders=self._blocked,
+                damage_unacknowledged=len(self._report.unacknowledged()),
             )
+
+    def damage(self) -> tuple[Finding, ...]:
+        """Every damage finding the report keeps (acknowledged ones too)."""
+        with self._lock:
+            return self._report.findings
+
+    def acknowledge_damage(self) -> list[Finding]:
+        """An operator looked at the damage: the findings awaiting it are acknowledged (the spool
+        stops reporting them); returns them."""
+        with self._lock:
+            done = self._report.acknowledge(self._clock())
+        for finding in done:
+            log.warning(
+                "spool %s: damage acknowledged: %s in %s (%s, %d record(s))",
+                self.directory,
+                finding.reason,
+                finding.file,
+                finding.seqs(),
+                finding.records,
+            )
+        return done
 
     def _cursor_ts(self) -> int | None:
         cursor = self._tracker.cursor
@@ -588,3 +745,24 @@ class Spool:
         level = logging.DEBUG if key in self._warned else logging.WARNING
         self._warned.add(key)
         log.log(level, message, *args)
+
+
+def log_finding(directory: Path, finding: Finding) -> None:
+    """One log line per finding: what, file, byte range, seqs, records."""
+    path = directory / finding.file
+    lost = f"{finding.records} record(s) lost ({finding.seqs()})"
+    if finding.reason == "torn_tail":
+        log.warning(
+            "spool: torn tail in %s at offset %d (%s); %d record(s) skipped (a write a crash cut short)",
+            path,
+            finding.offset,
+            finding.detail,
+            finding.records,
+        )
+    elif finding.reason == "segment_missing":
+        log.error("spool: segment %s is missing (%s); %s", path, finding.detail, lost)
+    elif finding.reason == "ledger_missing":
+        log.error("spool: ledger file %s is missing (%s)", path, finding.detail)
+    else:
+        what = "segment cut short" if finding.reason == "truncated" else "corrupt data"
+        log.error("spool: %s in %s at offset %d (%s); %s", what, path, finding.offset, finding.detail, lost)

@@ -89,11 +89,10 @@ class _RateLimitedLog:
 def lightring_schema(settings: FaultDetectionSettings) -> dict[str, Any]:
     """The Avro schema of LightringLeds, from ``msg_paths`` or else the packages fleetlink ships."""
     from fleetlink.schemas.avro_schema import avro_schema
-    from fleetlink.schemas.bundled import bundled_message_paths
     from fleetlink.schemas.errors import SchemaError
     from fleetlink.schemas.typestore import load_typestore
 
-    paths = settings.msg_paths or tuple(bundled_message_paths())
+    paths = settings.msg_paths  # the bundled irobot_create_msgs unless a copy is given
     try:
         ts = load_typestore(settings.distro, paths)
         return avro_schema(ts, LIGHTRING_TYPE, settings.distro)

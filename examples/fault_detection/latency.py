@@ -156,7 +156,6 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
     from confluent_kafka.schema_registry import Schema, SchemaRegistryClient
 
     from fleetlink.examples.fault_detection.app import run
-    from fleetlink.schemas.bundled import bundled_message_paths
     from fleetlink.schemas.codec import get_codec
     from fleetlink.schemas.typestore import load_typestore
 
@@ -172,7 +171,7 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
     new = [NewTopic(n, num_partitions=1, replication_factor=1) for n in [*names.values(), topics.commands]]
     for future in admin.create_topics(new).values():
         future.result(timeout=30)
-    ts = load_typestore(args.distro, [Path(p) for p in args.msg_path] or bundled_message_paths())
+    ts = load_typestore(args.distro, [Path(p) for p in args.msg_path])
     registry = SchemaRegistryClient({"url": args.registry})
     frames = {}
     for sensor, typename in SENSOR_TYPES.items():

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import sys
 from collections.abc import Callable, Sequence
 
 from fleetlink import __version__
+from fleetlink.cli.logs import configure_logging
 from fleetlink.common.errors import FleetlinkError
 
 # Modules that add subcommands, in the order they appear in --help.
@@ -24,9 +24,12 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.cli.ros",
     "fleetlink.cli.schemas",
     "fleetlink.cli.certs",
+    "fleetlink.cli.routers",
     "fleetlink.cli.edge",
+    "fleetlink.cli.spool",
     "fleetlink.cli.uplink",
     "fleetlink.cli.repeater",
+    "fleetlink.cli.probe",
 )
 
 Handler = Callable[[argparse.Namespace], int]
@@ -38,20 +41,23 @@ def build_parser() -> argparse.ArgumentParser:
         description="Connect fleets of ROS 2 robots (rmw_zenoh) to Apache Kafka.",
     )
     parser.add_argument("--version", action="version", version=f"fleetlink {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=0,
+        help="more log output: -v info, -vv debug (services log info by default)",
+    )
+    parser.add_argument(
+        "--log-format",
+        choices=["text", "json"],
+        default="text",
+        help="log lines as text (default) or one JSON object per line (for log collectors)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
-
-
-def configure_logging(verbosity: int) -> None:
-    level = logging.WARNING - 10 * min(verbosity + 1, 2)
-    logging.basicConfig(
-        level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr
-    )
-    if verbosity < 2:
-        logging.getLogger("httpx").setLevel(logging.WARNING)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -61,7 +67,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help()
         return 2
-    configure_logging(args.verbose)
+    configure_logging(args.verbose + getattr(args, "log_verbosity", 0), args.log_format)
     try:
         return handler(args)
     except FleetlinkError as exc:
@@ -69,6 +75,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader went away (`fleetlink ros echo ... | head`)
+        sys.stderr.close()
+        return 141
 
 
 if __name__ == "__main__":

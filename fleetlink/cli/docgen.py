@@ -20,7 +20,7 @@ from typing import Any
 from pydantic import BaseModel, ByteSize, PlainSerializer
 from pydantic_core import PydanticUndefined
 
-from fleetlink.cli.validate import KINDS, model_for
+from fleetlink.cli.configs import KINDS, model_for
 
 
 @cache
@@ -149,8 +149,18 @@ def render() -> str:
         "# Configuration reference",
         "",
         "Generated from the config models by `python -m fleetlink.cli.docgen`; do not edit by hand.",
-        "Every file is checked with `fleetlink validate FILE` (errors name the YAML path).",
-        "Durations are text with a unit (`250ms`, `5s`, `2m`) or seconds; sizes take `KiB`, `MiB`, `GiB`.",
+        "Every file is checked with `fleetlink validate FILE` as start-up would (errors name the YAML",
+        "path): keys and values, then this machine's folders, message packages, mapping types and Zenoh",
+        "config files (`--no-host-checks` skips those). Durations are text with a unit (`250ms`, `5s`,",
+        "`2m`) or seconds; sizes take `KiB`, `MiB`, `GiB`. Relative paths are taken from the working",
+        "folder.",
+        "",
+        "Any value can be changed at start without editing the file: `--set KEY=VALUE` on `validate`",
+        "and `edge|uplink|repeater run`, and one `KEY=VALUE` per line in `$FLEETLINK_SET` (for units",
+        "and containers). KEY is the YAML path as below (`mappings[0].to`; a key holding a dot in",
+        'quotes: `kafka.producer_overrides."batch.size"`), VALUE is YAML:',
+        "`--set zenoh.connect=[tcp/10.0.0.5:7447]`. The file comes first, then `$FLEETLINK_SET`, then",
+        "`--set` in order.",
         "",
     ]
     for kind in KINDS:

@@ -17,7 +17,8 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
-from fleetlink.common.configfile import load_config
+from fleetlink.cli.configs import add_set_argument, load_service
+from fleetlink.cli.logs import SERVICE_VERBOSITY
 from fleetlink.common.extras import MissingExtraError
 from fleetlink.common.zenoh_options import add_zenoh_arguments, options_from_args
 
@@ -35,6 +36,7 @@ def register(sub: Any) -> None:
     edge.set_defaults(handler=lambda _args: _usage(edge))
     run = edge_sub.add_parser("run", help="run the edge agent")
     run.add_argument("-c", "--config", type=Path, required=True, metavar="FILE", help="edge YAML config")
+    add_set_argument(run)
     run.add_argument(
         "--stop-timeout",
         type=float,
@@ -56,7 +58,7 @@ def register(sub: Any) -> None:
         help="how often to write --stats-file (default 1 s)",
     )
     add_zenoh_arguments(run, ros=False)
-    run.set_defaults(handler=run_command)
+    run.set_defaults(handler=run_command, log_verbosity=SERVICE_VERBOSITY)
 
 
 def _usage(parser: argparse.ArgumentParser) -> int:
@@ -93,7 +95,7 @@ def run_command(args: argparse.Namespace) -> int:
     from fleetlink.edge.agent import EdgeAgent
     from fleetlink.edge.config import EdgeConfig
 
-    config = load_config(EdgeConfig, args.config)
+    config = load_service(EdgeConfig, "edge", args)
     # the admin API (HTTP when admin.listen is set, and the Zenoh admin space) with the changes
     # operators made at runtime, saved beside the spool and applied on top of the file
     token = load_token()

@@ -15,6 +15,7 @@ import base64
 import json
 import os
 import sys
+import time
 import uuid
 from collections.abc import Iterable
 from pathlib import Path
@@ -65,7 +66,8 @@ def register(sub: Any) -> None:
         "-f",
         "--follow",
         action="store_true",
-        help="with --from-beginning: keep waiting for new records at the end (the default without it)",
+        help="with --from-beginning: keep waiting for new records at the end (the default without it); "
+        "a topic that does not exist yet is waited for",
     )
     echo.set_defaults(handler=_echo)
 
@@ -194,6 +196,14 @@ def record_json(message: Message, values: ConfluentValues) -> dict[str, Any]:
     return {**out, "schema_id": schema_id, "value": to_json(datum)}
 
 
+def _topic(consumer: Any, name: str) -> Any:
+    """The topic's metadata, or None while it does not exist (or has no partitions yet)."""
+    topic = consumer.list_topics(name, timeout=10).topics.get(name)
+    if topic is None or topic.error is not None or not topic.partitions:
+        return None
+    return topic
+
+
 def _echo(args: argparse.Namespace) -> int:
     from confluent_kafka import OFFSET_BEGINNING, OFFSET_END, Consumer, KafkaError, TopicPartition
 
@@ -218,9 +228,11 @@ def _echo(args: argparse.Namespace) -> int:
     with SchemaRegistry(registry_url) as registry:
         values = ConfluentValues(registry.schema_by_id)
         try:
-            metadata = consumer.list_topics(args.topic, timeout=10)
-            topic = metadata.topics.get(args.topic)
-            if topic is None or topic.error is not None or not topic.partitions:
+            topic = _topic(consumer, args.topic)
+            while topic is None and follow:  # following: a topic made later (a first record) is waited for
+                time.sleep(0.5)  # ok-sleep: polling the broker's metadata for the topic
+                topic = _topic(consumer, args.topic)
+            if topic is None:
                 raise KafkaCliError(f"topic {args.topic!r} does not exist on {bootstrap}")
             start = OFFSET_BEGINNING if args.from_beginning else OFFSET_END
             consumer.assign([TopicPartition(args.topic, p, start) for p in sorted(topic.partitions)])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from fleetlink.cli.configs import load_service
 from fleetlink.cli.service import add_service_command, wait_for_stop
-from fleetlink.common.configfile import load_config
 from fleetlink.common.zenoh_options import options_from_args
 from fleetlink.repeater.config import RepeaterConfig
 
@@ -25,7 +25,7 @@ def register(sub: Any) -> None:
 def _run(args: argparse.Namespace) -> int:
     from fleetlink.repeater.service import Repeater
 
-    config = load_config(RepeaterConfig, args.config)
+    config = load_service(RepeaterConfig, "repeater", args)
     with Repeater(config, config.zenoh.merged_with(options_from_args(args))) as repeater:
         print(
             f"repeater {repeater.id} running for site {repeater.site}, state in {config.repeater.state_dir}",

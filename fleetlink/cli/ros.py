@@ -1,30 +1,36 @@
-"""``fleetlink ros graph``, ``fleetlink sim`` and ``fleetlink replay``.
+"""``fleetlink ros``: see, hear, speak to and simulate robots on the Zenoh network, as ``ros2`` does.
 
-Every command opens its zenoh session from Zenoh's usual options (``-e/-l/-m/--zenoh-config``,
-``--cfg``) plus ``--domain-id``; with no options it behaves like an rmw_zenoh node (peer,
-connecting to a router on ``tcp/127.0.0.1:7447``).
+``graph`` (robots, nodes, topics, QoS, rates), ``echo`` and ``pub`` (``ros2 topic echo/pub``),
+``sim`` (a simulated TurtleBot 4 fleet) and ``replay`` (a bag as a robot). Every command opens
+its zenoh session from Zenoh's usual options (``-e/-l/-m/--zenoh-config``, ``--cfg``) plus
+``--domain-id``; with no options it behaves like an rmw_zenoh node (peer, connecting to a router
+on ``tcp/127.0.0.1:7447``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from fleetlink.cli.ros_call import register_calls
+from fleetlink.cli.ros_common import add_types_arguments
 from fleetlink.common.errors import ConfigError
 from fleetlink.common.zenoh_options import add_zenoh_arguments, options_from_args
 
-DISTROS = ("humble", "jazzy", "kilted")
-MSG_PATH_ENV = "FLEETLINK_MSG_PATH"
-
 
 def register(sub: Any) -> None:
-    ros = sub.add_parser("ros", help="look at the ROS 2 graph on the zenoh network")
+    from fleetlink.cli.ros_sim import replay_command, sim_command
+    from fleetlink.cli.ros_topic import register_echo, register_pub
+
+    ros = sub.add_parser(
+        "ros",
+        help="see, echo, publish, simulate or replay robots on the Zenoh network (like ros2)",
+        description="ROS 2 over Zenoh without ROS 2: the graph, topics, simulated and replayed robots.",
+    )
     ros_sub = ros.add_subparsers(dest="ros_command", metavar="COMMAND")
     ros.set_defaults(handler=lambda _args: _usage(ros))
     graph = ros_sub.add_parser("graph", help="robots, nodes, topics, types, QoS and rates")
@@ -55,7 +61,11 @@ def register(sub: Any) -> None:
     add_zenoh_arguments(graph)
     graph.set_defaults(handler=graph_command)
 
-    sim = sub.add_parser("sim", help="run a simulated TurtleBot 4 fleet (iRobot Create 3 topics)")
+    register_echo(ros_sub)
+    register_pub(ros_sub)
+    register_calls(ros_sub, add_types_arguments)
+
+    sim = ros_sub.add_parser("sim", help="run a simulated TurtleBot 4 fleet (iRobot Create 3 topics)")
     sim.add_argument("--robots", type=int, default=3, metavar="N", help="number of robots (default 3)")
     sim.add_argument("--prefix", default="tb4_", help="robot name prefix (default tb4_: tb4_01, tb4_02 …)")
     sim.add_argument("--rate", type=float, default=10.0, metavar="HZ", help="sensor rate (default 10 Hz)")
@@ -68,11 +78,11 @@ def register(sub: Any) -> None:
         action="store_true",
         help="read commands from stdin: fault R, heal R, add [R], remove R, led R, list, quit",
     )
-    _add_types_arguments(sim)
+    add_types_arguments(sim)
     add_zenoh_arguments(sim)
     sim.set_defaults(handler=sim_command)
 
-    replay = sub.add_parser("replay", help="publish a rosbag2 recording as a robot would")
+    replay = ros_sub.add_parser("replay", help="publish a rosbag2 recording as a robot would")
     replay.add_argument("bag", type=Path, help="rosbag2 directory or file (sqlite3 or MCAP)")
     replay.add_argument("--robot", required=True, help="robot name: topics are published under /NAME")
     replay.add_argument(
@@ -92,7 +102,7 @@ def register(sub: Any) -> None:
         metavar="S",
         help="wait up to S seconds for a subscriber on every topic before starting",
     )
-    _add_types_arguments(replay)
+    add_types_arguments(replay)
     add_zenoh_arguments(replay)
     replay.set_defaults(handler=replay_command)
 
@@ -100,33 +110,6 @@ def register(sub: Any) -> None:
 def _usage(parser: argparse.ArgumentParser) -> int:
     parser.print_help()
     return 2
-
-
-def _add_types_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--distro",
-        choices=DISTROS,
-        default="jazzy",
-        help="ROS 2 distro whose type hashes to publish (default jazzy)",
-    )
-    parser.add_argument(
-        "--msg-path",
-        action="append",
-        type=Path,
-        default=[],
-        metavar="DIR",
-        help=f"package folder with msg/*.msg (repeatable; also ${MSG_PATH_ENV})",
-    )
-
-
-def _msg_paths(args: argparse.Namespace) -> list[Path]:
-    paths = list(args.msg_path)
-    env = os.environ.get(MSG_PATH_ENV, "")
-    paths += [Path(p) for p in env.split(os.pathsep) if p]
-    for path in paths:
-        if not path.is_dir():
-            raise ConfigError(f"--msg-path {path}: not a directory")
-    return paths
 
 
 def _robot_types(specs: list[str]) -> list[Any]:
@@ -185,160 +168,4 @@ def graph_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                         break
         finally:
             sub.undeclare()
-    return 0
-
-
-# --- sim ------------------------------------------------------------------------------------
-
-
-def sim_command(args: argparse.Namespace, out: TextIO = sys.stdout, inp: TextIO = sys.stdin) -> int:
-    from fleetlink.roswire.session import ros_session_config
-    from fleetlink.roswire.sim.fleet import Fleet
-    from fleetlink.roswire.sim.messages import IR_VECTOR
-    from fleetlink.roswire.sim.model import LedState
-    from fleetlink.schemas.typestore import load_typestore
-
-    if args.robots < 0:
-        raise ConfigError("--robots must be >= 0")
-    from fleetlink.schemas.bundled import bundled_message_paths
-
-    # the Create 3 definitions ship with fleetlink; --msg-path adds (or overrides) packages
-    ts = load_typestore(args.distro, [*bundled_message_paths(), *_msg_paths(args)])
-    if IR_VECTOR not in ts.fielddefs:
-        raise ConfigError(
-            "the simulator needs the irobot_create_msgs definitions: pass "
-            f"--msg-path DIR/irobot_create_msgs (or set ${MSG_PATH_ENV})"
-        )
-    lock = threading.Lock()
-
-    def say(text: str) -> None:
-        with lock:
-            print(text, file=out, flush=True)
-
-    def on_led(robot: str, state: LedState) -> None:
-        say(f"{robot} light ring: {state.name}")
-
-    config = ros_session_config(options_from_args(args))
-    with Fleet(
-        config,
-        ts,
-        robots=args.robots,
-        prefix=args.prefix,
-        rate=args.rate,
-        domain_id=args.domain_id,
-        distro=args.distro,
-        on_led=on_led,
-    ) as fleet:
-        for robot in args.fault:
-            fleet.inject_fault(robot)
-        say(
-            f"simulating {', '.join(fleet.names()) or 'no robots'} at {args.rate:g} Hz "
-            f"on domain {args.domain_id}"
-        )
-        if args.stdin:
-            _command_loop(fleet, inp, say, args.duration)
-        elif args.duration:
-            time.sleep(args.duration)
-        else:
-            while True:
-                time.sleep(3600)
-    return 0
-
-
-def _command_loop(fleet: Any, inp: TextIO, say: Any, duration: float | None) -> None:
-    from fleetlink.roswire.errors import RoswireError
-
-    deadline = None if duration is None else time.monotonic() + duration
-    console = _FleetConsole(fleet)
-    for line in inp:
-        words = line.split()
-        if not words:
-            continue
-        if words[0] == "quit":
-            return
-        try:
-            say(console.run(words))
-        except RoswireError as exc:
-            say(f"error: {exc}")
-        if deadline is not None and time.monotonic() >= deadline:
-            return
-    if deadline is not None:  # stdin closed early: keep running for the rest of the duration
-        time.sleep(max(0.0, deadline - time.monotonic()))
-
-
-class _FleetConsole:
-    """The stdin commands of ``fleetlink sim --stdin``; each returns the line to print."""
-
-    usage = "fault R, heal R, add [R], remove R, led R, list, quit"
-
-    def __init__(self, fleet: Any) -> None:
-        self.fleet = fleet
-
-    def run(self, words: list[str]) -> str:
-        action = getattr(self, f"do_{words[0]}", None)
-        needs_name = words[0] in ("fault", "heal", "remove", "led")
-        if action is None or (needs_name and len(words) < 2):
-            return f"unknown command {' '.join(words)!r} ({self.usage})"
-        result: str = action(words[1] if len(words) > 1 else None)
-        return result
-
-    def do_fault(self, name: str) -> str:
-        self.fleet.inject_fault(name)
-        return f"{name} picked up"
-
-    def do_heal(self, name: str) -> str:
-        self.fleet.heal(name)
-        return f"{name} back on the floor"
-
-    def do_add(self, name: str | None) -> str:
-        return f"{self.fleet.add_robot(name)} added"
-
-    def do_remove(self, name: str) -> str:
-        self.fleet.remove_robot(name)
-        return f"{name} removed"
-
-    def do_led(self, name: str) -> str:
-        return f"{name} light ring: {self.fleet.led(name).name}"
-
-    def do_list(self, _name: str | None) -> str:
-        return " ".join(self.fleet.names())
-
-
-# --- replay ---------------------------------------------------------------------------------
-
-
-def replay_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    from fleetlink.roswire.replay import BagReplayer
-    from fleetlink.roswire.session import ros_session_config
-
-    rate = 0.0 if args.fast else args.rate
-    if rate < 0:
-        raise ConfigError("--rate must be >= 0 (0 = as fast as possible)")
-    config = ros_session_config(options_from_args(args))
-    with BagReplayer(
-        args.bag,
-        args.robot,
-        config=config,
-        domain_id=args.domain_id,
-        distro=args.distro,
-        msg_paths=_msg_paths(args),
-        rate=rate,
-        loop=args.loop,
-        topics=args.topic,
-    ) as replayer:
-        topics = ", ".join(p.topic for p in replayer.publishers.values())
-        print(f"replaying {args.bag} as /{args.robot}: {topics}", file=out, flush=True)
-        if args.wait_subscribers > 0 and not replayer.wait_for_subscribers(args.wait_subscribers):
-            print("not every topic has a subscriber; replaying anyway", file=out, flush=True)
-        try:
-            stats = replayer.run()
-        except KeyboardInterrupt:
-            replayer.request_stop()
-            stats = replayer.stats
-    print(
-        f"published {stats.total} messages on {len(stats.published)} topics in {stats.elapsed_s:.2f} s"
-        f" ({stats.loops} pass{'es' if stats.loops != 1 else ''})",
-        file=out,
-        flush=True,
-    )
     return 0

@@ -11,6 +11,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fleetlink.cli.configs import add_set_argument
+from fleetlink.cli.logs import SERVICE_VERBOSITY
 from fleetlink.common.zenoh_options import add_zenoh_arguments
 
 log = logging.getLogger(__name__)
@@ -31,8 +33,9 @@ def add_service_command(
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     run = actions.add_parser("run", help=f"run the {name} until SIGINT/SIGTERM")
     run.add_argument("-c", "--config", type=Path, required=True, metavar="FILE", help=f"{name} YAML config")
+    add_set_argument(run)
     add_zenoh_arguments(run, ros=False)
-    run.set_defaults(handler=handler)
+    run.set_defaults(handler=handler, log_verbosity=SERVICE_VERBOSITY)
     if more is not None:
         more(actions)
     return run

@@ -7,8 +7,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from fleetlink.cli.configs import add_set_argument, load_service
 from fleetlink.cli.service import add_service_command, wait_for_stop
-from fleetlink.common.configfile import load_config
 from fleetlink.common.errors import ConfigError
 from fleetlink.common.extras import MissingExtraError
 from fleetlink.common.zenoh_options import options_from_args
@@ -39,13 +39,14 @@ def _release_robot_action(actions: Any) -> None:
     release.add_argument(
         "-c", "--config", type=Path, required=True, metavar="FILE", help="uplink YAML config"
     )
+    add_set_argument(release)
     release.set_defaults(handler=_release_robot)
 
 
 def _release_robot(args: argparse.Namespace) -> int:
     from fleetlink.uplink.release import release_robot
 
-    config = load_config(UplinkConfig, args.config)
+    config = load_service(UplinkConfig, "uplink", args, host_checks=False)  # only Kafka is needed
     release_robot(config, args.robot)
     print(f"released {args.robot}: any site may register it now", flush=True)
     return 0
@@ -54,7 +55,7 @@ def _release_robot(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from fleetlink.uplink.service import Uplink, UplinkExtension
 
-    config = load_config(UplinkConfig, args.config)
+    config = load_service(UplinkConfig, "uplink", args)
     extensions: Sequence[Callable[[Uplink], UplinkExtension]] = ()
     if config.console is not None:
         try:

@@ -2,14 +2,16 @@
 
 Every fleetlink process has one config model, and every model of every section derives from
 ``Section``: unknown keys are refused, durations are text (``fleetlink.common.durations``) and
-names have one type each (``fleetlink.common.names``). ``load_config`` reads the file,
-validates it and, on failure, raises a ``ConfigError`` listing every problem as
+names have one type each (``fleetlink.common.names``). ``load_config`` reads the file, applies
+``--set`` overrides (:mod:`.overrides`), validates it and, on failure, raises a ``ConfigError``
+listing every problem as
 ``path.to[0].field (line N): message``. No socket is opened.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -17,6 +19,22 @@ import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from fleetlink.common.errors import ConfigError
+from fleetlink.common.overrides import Override, apply_overrides
+from fleetlink.common.yaml_paths import PathPart, format_path
+
+__all__ = [
+    "PathPart",
+    "Places",
+    "Problem",
+    "Section",
+    "format_path",
+    "load_config",
+    "problems_error",
+    "read_config",
+    "read_yaml",
+    "validate_data",
+    "validation_problems",
+]
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -27,20 +45,6 @@ class Section(BaseModel):
     ``model_config`` adds to this one."""
 
     model_config = ConfigDict(extra="forbid")
-
-
-PathPart = str | int
-
-
-def format_path(parts: Sequence[PathPart]) -> str:
-    """``("mappings", 0, "to")`` -> ``mappings[0].to``."""
-    text = ""
-    for part in parts:
-        if isinstance(part, int):
-            text += f"[{part}]"
-        else:
-            text += f".{part}" if text else str(part)
-    return text or "<root>"
 
 
 def _line_index(node: yaml.Node, prefix: tuple[PathPart, ...], out: dict[tuple[PathPart, ...], int]) -> None:
@@ -55,29 +59,49 @@ def _line_index(node: yaml.Node, prefix: tuple[PathPart, ...], out: dict[tuple[P
             _line_index(item, (*prefix, i), out)
 
 
-def _nearest_line(lines: Mapping[tuple[PathPart, ...], int], loc: tuple[PathPart, ...]) -> int | None:
-    for end in range(len(loc), 0, -1):
-        line = lines.get(loc[:end])
-        if line is not None:
-            return line
-    return None
+@dataclass(frozen=True)
+class Places:
+    """Where the values of a config came from: lines of its file, and the overrides applied."""
+
+    lines: Mapping[tuple[PathPart, ...], int] = field(default_factory=dict)
+    overridden: Mapping[tuple[PathPart, ...], str] = field(default_factory=dict)
+    """YAML path -> the override that set it (``--set``, ``$FLEETLINK_SET``)."""
+
+    def describe(self, loc: tuple[PathPart, ...]) -> str:
+        """`` (line 12)``, `` (set by --set)`` or nothing."""
+        for end in range(len(loc), 0, -1):
+            source = self.overridden.get(loc[:end])
+            if source is not None:
+                return f" (set by {source})"
+        for end in range(len(loc), 0, -1):
+            line = self.lines.get(loc[:end])
+            if line is not None:
+                return f" (line {line})"
+        return ""
 
 
-def validation_messages(
-    exc: ValidationError, lines: Mapping[tuple[PathPart, ...], int] | None = None
-) -> list[str]:
-    """One line per error: YAML path, line number when known, and pydantic's message."""
-    messages = []
+Problem = tuple[tuple[PathPart, ...], str]
+"""A YAML path and what is wrong there."""
+
+
+def problems_error(source: str, problems: Sequence[Problem], places: Places | None = None) -> ConfigError:
+    """One ``ConfigError`` listing every problem as ``path (line N): message``."""
+    places = places or Places()
+    listing = "\n  ".join(f"{format_path(loc)}{places.describe(loc)}: {msg}" for loc, msg in problems)
+    return ConfigError(f"{source}: {len(problems)} problem(s) in the config:\n  {listing}")
+
+
+def validation_problems(exc: ValidationError) -> list[Problem]:
+    """One problem per pydantic error, at its YAML path."""
+    problems: list[Problem] = []
     for err in exc.errors(include_url=False):
-        loc = tuple(p for p in err["loc"] if isinstance(p, str | int))
         # pydantic puts the tag of a discriminated union / function validator in loc; drop non-keys
-        line = _nearest_line(lines or {}, loc)
-        where = format_path(loc) + (f" (line {line})" if line else "")
+        loc = tuple(p for p in err["loc"] if isinstance(p, str | int))
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown key (not allowed here; check the spelling)"
-        messages.append(f"{where}: {msg}")
-    return messages
+        problems.append((loc, msg))
+    return problems
 
 
 def read_yaml(path: Path) -> tuple[Any, dict[tuple[PathPart, ...], int]]:
@@ -99,20 +123,25 @@ def read_yaml(path: Path) -> tuple[Any, dict[tuple[PathPart, ...], int]]:
     return data, lines
 
 
-def validate_data(
-    model: type[ModelT], data: Any, *, source: str, lines: Mapping[tuple[PathPart, ...], int] | None = None
-) -> ModelT:
+def validate_data(model: type[ModelT], data: Any, *, source: str, places: Places | None = None) -> ModelT:
     if data is None:
         data = {}
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = validation_messages(exc, lines)
-        listing = "\n  ".join(problems)
-        raise ConfigError(f"{source}: {len(problems)} problem(s) in the config:\n  {listing}") from None
+        raise problems_error(source, validation_problems(exc), places) from None
 
 
-def load_config(model: type[ModelT], path: Path) -> ModelT:
-    """Read and validate ``path`` as ``model``; raises ``ConfigError`` naming each bad YAML path."""
+def read_config(path: Path, overrides: Sequence[Override] = ()) -> tuple[Any, Places]:
+    """The file's data with the overrides applied, and where each value came from."""
     data, lines = read_yaml(path)
-    return validate_data(model, data, source=str(path), lines=lines)
+    if overrides:
+        data = apply_overrides(data, overrides)
+    return data, Places(lines, {o.path: o.source for o in overrides})
+
+
+def load_config(model: type[ModelT], path: Path, overrides: Sequence[Override] = ()) -> ModelT:
+    """Read ``path``, apply ``overrides`` and validate it as ``model``; raises ``ConfigError``
+    naming each bad YAML path."""
+    data, places = read_config(path, overrides)
+    return validate_data(model, data, source=str(path), places=places)

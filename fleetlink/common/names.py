@@ -19,6 +19,8 @@ from pydantic import AfterValidator, WithJsonSchema
 ROS_SEGMENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 """One segment of a ROS name (a topic, namespace or node name)."""
 _ROS_MSG_TYPE = re.compile(r"[A-Za-z][A-Za-z0-9_]*/msg/[A-Za-z][A-Za-z0-9_]*")
+_ROS_SRV_TYPE = re.compile(r"[A-Za-z][A-Za-z0-9_]*/srv/[A-Za-z][A-Za-z0-9_]*")
+_ROS_ACTION_TYPE = re.compile(r"[A-Za-z][A-Za-z0-9_]*/action/[A-Za-z][A-Za-z0-9_]*")
 _NAMESPACE_GLOB = re.compile(r"/?[A-Za-z0-9_/*?\[\]!-]+")
 
 
@@ -47,6 +49,20 @@ def ros_type_problem(name: str) -> str | None:
     """What is wrong with a ROS message type (``package/msg/Type``), or ``None``."""
     if _ROS_MSG_TYPE.fullmatch(name) is None:
         return "must look like 'package/msg/Type'"
+    return None
+
+
+def ros_service_type_problem(name: str) -> str | None:
+    """What is wrong with a ROS service type (``package/srv/Type``), or ``None``."""
+    if _ROS_SRV_TYPE.fullmatch(name) is None:
+        return "must look like 'package/srv/Type'"
+    return None
+
+
+def ros_action_type_problem(name: str) -> str | None:
+    """What is wrong with a ROS action type (``package/action/Type``), or ``None``."""
+    if _ROS_ACTION_TYPE.fullmatch(name) is None:
+        return "must look like 'package/action/Type'"
     return None
 
 
@@ -178,6 +194,20 @@ RosType = Annotated[
     _schema(f"^{_ROS_MSG_TYPE.pattern}$"),
 ]
 """A ROS message type, ``package/msg/Type``."""
+
+RosServiceType = Annotated[
+    str,
+    AfterValidator(_rule(ros_service_type_problem, lambda value, why: f"ROS type {value!r} {why}")),
+    _schema(f"^{_ROS_SRV_TYPE.pattern}$"),
+]
+"""A ROS service type, ``package/srv/Type``."""
+
+RosActionType = Annotated[
+    str,
+    AfterValidator(_rule(ros_action_type_problem, lambda value, why: f"ROS type {value!r} {why}")),
+    _schema(f"^{_ROS_ACTION_TYPE.pattern}$"),
+]
+"""A ROS action type, ``package/action/Type``."""
 RosTopic = Annotated[
     str,
     AfterValidator(

@@ -54,6 +54,7 @@ __all__ = [
     "AclBlock",
     "RouterConfigError",
     "cloud_site_acl",
+    "concrete_json5",
     "edge_raw_acl",
     "placeholders",
     "render_router_config",
@@ -360,13 +361,7 @@ def render_router_json5(
     values: Mapping[str, Value] | None = None,
 ) -> zenoh.Config:
     """Render a template text into a ``zenoh.Config`` (no file access; see the module docstring)."""
-    merged: dict[str, Value] = {"LISTEN": list(listen), "CONNECT": list(connect)}
-    if site is not None:
-        _check_site(site, source=source)
-        merged["SITE"] = site
-    if cert_dir is not None:
-        merged["CERT_DIR"] = str(cert_dir)
-    merged.update(values or {})
+    merged = _values(source, site=site, listen=listen, connect=connect, cert_dir=cert_dir, values=values)
     rendered = render_text(text, merged, source=source)
     try:
         conf = zenoh.Config.from_json5(rendered)
@@ -398,6 +393,78 @@ def render_router_json5(
     if block.rules or block.subjects or block.policies:
         _append_acl(conf, block, source=source)
     return conf
+
+
+def _values(
+    source: str,
+    *,
+    site: str | None,
+    listen: Sequence[str],
+    connect: Sequence[str],
+    cert_dir: str | Path | None,
+    values: Mapping[str, Value] | None,
+) -> dict[str, Value]:
+    merged: dict[str, Value] = {"LISTEN": list(listen), "CONNECT": list(connect)}
+    if site is not None:
+        _check_site(site, source=source)
+        merged["SITE"] = site
+    if cert_dir is not None:
+        merged["CERT_DIR"] = str(cert_dir)
+    merged.update(values or {})
+    return merged
+
+
+def concrete_json5(
+    text: str,
+    *,
+    source: str = "<text>",
+    header: str = "",
+    site: str | None = None,
+    listen: Sequence[str] = (),
+    connect: Sequence[str] = (),
+    cert_dir: str | Path | None = None,
+    sites: Sequence[str] = (),
+    raw_to_cloud: Sequence[str] = (),
+    raw_from: Mapping[str, Sequence[str]] | None = None,
+) -> str:
+    """The text of a concrete config file that stock ``zenohd`` (or any Zenoh) reads.
+
+    Without generated ACL parts it is the template with its placeholders filled in, comments
+    kept; with them (``sites``, ``raw_to_cloud``, ``raw_from``) it is JSON holding the settings
+    that differ from Zenoh's defaults. ``header`` (``//`` comment lines) goes on top.
+    """
+    conf = render_router_json5(
+        text,
+        source=source,
+        site=site,
+        listen=listen,
+        connect=connect,
+        cert_dir=cert_dir,
+        sites=sites,
+        raw_to_cloud=raw_to_cloud,
+        raw_from=raw_from,
+    )
+    if sites or raw_to_cloud or raw_from:
+        body = (
+            json.dumps(_non_default(json.loads(str(conf)), json.loads(str(zenoh.Config()))), indent=2) + "\n"
+        )
+    else:
+        merged = _values(source, site=site, listen=listen, connect=connect, cert_dir=cert_dir, values=None)
+        body = render_text(text, merged, source=source)
+    return header + body
+
+
+def _non_default(value: Any, default: Any) -> Any:
+    """The parts of a config (as JSON data) that differ from Zenoh's default config."""
+    if not isinstance(value, dict) or not isinstance(default, dict):
+        return value
+    out = {}
+    for key, item in value.items():
+        if key not in default:
+            out[key] = item
+        elif item != default[key]:
+            out[key] = _non_default(item, default[key])
+    return out
 
 
 def render_router_config(

@@ -19,6 +19,7 @@ import zenoh
 
 from fleetlink.common.configfile import Section
 from fleetlink.common.errors import ConfigError
+from fleetlink.common.zenoh_configs import placeholders
 
 Mode = Literal["peer", "client", "router"]
 
@@ -36,12 +37,7 @@ class ZenohOptions:
     def to_config(self) -> zenoh.Config:
         """Build the session config: the JSON5 file first, then explicit options on top."""
         if self.config_file is not None:
-            if not self.config_file.is_file():
-                raise ConfigError(f"zenoh config file not found: {self.config_file}")
-            try:
-                conf = zenoh.Config.from_file(str(self.config_file))
-            except zenoh.ZError as exc:
-                raise ConfigError(f"{self.config_file}: invalid zenoh config: {exc}") from None
+            conf = load_zenoh_file(self.config_file)
         else:
             conf = zenoh.Config()
             conf.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
@@ -76,6 +72,37 @@ class ZenohOptions:
             multicast_scouting=self.multicast_scouting,
             extra=dict(self.extra),
         )
+
+
+def zenoh_file_problem(path: Path) -> str | None:
+    """Why Zenoh would refuse the config file at ``path``, or None: missing, a template with
+    ``${...}`` placeholders left in it, or rejected by Zenoh's own parser."""
+    try:
+        load_zenoh_file(path)
+    except ConfigError as exc:
+        return str(exc)
+    return None
+
+
+def load_zenoh_file(path: Path) -> zenoh.Config:
+    """A Zenoh config file parsed by Zenoh; a template that was not rendered is refused by name."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"zenoh config file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"zenoh config file {path}: cannot read it: {exc}") from None
+    names = placeholders(text)
+    if names:
+        listed = ", ".join(f"${{{n}}}" for n in sorted(names))
+        raise ConfigError(
+            f"zenoh config file {path} is a template: {listed} have no value; write a concrete "
+            f"config with `fleetlink zenoh render {path} ... -o FILE` and use that"
+        )
+    try:
+        return zenoh.Config.from_file(str(path))
+    except zenoh.ZError as exc:
+        raise ConfigError(f"zenoh config file {path}: Zenoh refuses it: {exc}") from None
 
 
 def add_zenoh_arguments(parser: argparse.ArgumentParser, *, ros: bool = True) -> None:

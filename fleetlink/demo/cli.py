@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 from typing import Any
 
@@ -69,8 +68,6 @@ def _run(args: argparse.Namespace) -> int:
     if bool(args.bootstrap) != bool(args.registry):
         print("fleetlink demo: give both --bootstrap and --registry, or neither")
         return 2
-    if args.verbose == 0:
-        logging.getLogger().setLevel(logging.WARNING)  # the demo tells its own story
     demo = Demo(
         DemoOptions(
             workdir=args.workdir,
@@ -86,5 +83,4 @@ def _run(args: argparse.Namespace) -> int:
     )
     with interrupted_on_sigint(demo):
         summary = demo.run()
-    print(f"summary written to {args.workdir / 'summary.json'}")
     return 0 if summary["loop_closed"] else 1

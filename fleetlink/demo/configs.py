@@ -26,6 +26,10 @@ class DemoPlaces:
     site_router: str
     workdir: Path
     msg_paths: tuple[Path, ...]
+    edge_admin: str = "127.0.0.1:8480"
+    """The edge's admin API: its site console (/console/), /metrics and /health."""
+    uplink_metrics: str = "127.0.0.1:9464"
+    fleet_console: str = "127.0.0.1:8490"
 
     @property
     def keys(self) -> Path:
@@ -67,6 +71,7 @@ def edge_config(p: DemoPlaces) -> dict[str, Any]:
         "registration": {"grace_period": "3s"},
         "spool": {"dir": str(p.workdir / "spool"), "max_bytes": "256MiB", "policy": "block"},
         "wan": {"linger": "20ms", "ack_timeout": "10s"},
+        "admin": {"listen": p.edge_admin},
     }
 
 
@@ -85,6 +90,8 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
                 "repeat": {"period": "1s", "lease": "15s"},
             },
         ],
+        "metrics": {"listen": p.uplink_metrics},
+        "console": {"listen": p.fleet_console},
     }
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import secrets
 import shutil
 import sys
 import threading
@@ -36,7 +37,7 @@ from fleetlink.demo.configs import (
 )
 from fleetlink.demo.story import Story, led_colour
 from fleetlink.demo.watch import LogFollower, TopicWatcher, app_has_committed
-from fleetlink.localstack.process import ServerProcess, log_tail
+from fleetlink.localstack.process import ServerProcess, free_port, log_tail, port_in_use
 from fleetlink.localstack.registry import registry_url_lines
 from fleetlink.localstack.stack import LocalStack
 from fleetlink.localstack.zenoh_router import ZenohRouter
@@ -70,11 +71,17 @@ class Demo:
         self._exit = contextlib.ExitStack()
         self._since_ms = time.time_ns() // 1_000_000 - 1_000
         self._app_group = f"fleetlink-demo-{uuid.uuid4().hex[:8]}"
+        self._closing = threading.Event()
+        self.token = secrets.token_urlsafe(12)
+        """The access token of the consoles and admin APIs of this run."""
 
     # -- telling ---------------------------------------------------------------------------
 
-    def say(self, text: str) -> None:
+    def say(self, text: str, *, closing: bool = False) -> None:
+        """Tell one line; once the demo is stopping, only its closing lines (output stays in order)."""
         with self._lock:
+            if self._closing.is_set() and not closing:
+                return
             print(f"{self.story.at(time.monotonic())} {text}", file=self.o.out, flush=True)
 
     def stop(self) -> None:
@@ -89,12 +96,16 @@ class Demo:
             self._start_watchers(places)
             self._start_app(places)
             summary = self._scenario(places)
-            (self.o.workdir / "summary.json").write_text(json.dumps(summary, indent=2))
+            path = self.o.workdir / "summary.json"
+            path.write_text(json.dumps(summary, indent=2))
+            self.say(f"summary written to {path}")
             if self.o.keep_running and not self._stop.is_set():
                 self.say("the loop is closed; still running — Ctrl-C stops everything")
                 self._wait(self.o.duration_s)
-            self.say("stopping everything the demo started ...")
-        self.say("stopped")
+            with self._lock:
+                self._closing.set()  # from here on only the closing lines are told
+            self.say("stopping everything the demo started ...", closing=True)
+        self.say("stopped", closing=True)
         return summary
 
     def _start_infrastructure(self) -> DemoPlaces:
@@ -120,10 +131,17 @@ class Demo:
         cloud = self._exit.enter_context(ZenohRouter())
         site = self._exit.enter_context(ZenohRouter(connect=(cloud.endpoint,)))
         self.say(f"Zenoh routers: cloud {cloud.endpoint}, site warehouse-a {site.endpoint} (linked)")
-        from fleetlink.schemas.bundled import bundled_message_paths
-
+        # the Create 3 definitions ship with fleetlink: no message paths needed
         return DemoPlaces(
-            bootstrap, registry, cloud.endpoint, site.endpoint, work, tuple(bundled_message_paths())
+            bootstrap,
+            registry,
+            cloud.endpoint,
+            site.endpoint,
+            work,
+            (),
+            edge_admin=_listen(8480),
+            uplink_metrics=_listen(9464),
+            fleet_console=_listen(8490),
         )
 
     def _process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
@@ -137,6 +155,7 @@ class Demo:
             log_path=log,
             pid_path=self.o.workdir / f"{name}.pid",
             ready=ready,
+            env={"FLEETLINK_ADMIN_TOKEN": self.token},
         )
         took = proc.start(timeout=self.o.step_timeout_s)
         self._exit.callback(proc.stop)
@@ -167,6 +186,14 @@ class Demo:
             "repeater",
             ["repeater", "run", "-c", str(files["repeater"])],
             lambda: "running for site" in _read(logs / "repeater.log"),
+        )
+        self.say(
+            f"web console: http://{places.fleet_console}/console/ (the fleet), "
+            f"http://{places.edge_admin}/console/ (site warehouse-a); sign in with token {self.token}"
+        )
+        self.say(
+            f"metrics: http://{places.uplink_metrics}/metrics (uplink), "
+            f"http://{places.edge_admin}/metrics (edge); health: /health on both"
         )
 
     def _start_watchers(self, places: DemoPlaces) -> None:
@@ -216,7 +243,7 @@ class Demo:
     def _tell_rates(self) -> None:
         last: dict[str, int] = {}
         every = 10.0
-        while not self._stop.wait(every):
+        while not self._closing.wait(every) and not self._stop.is_set():
             counts = dict(self._flow.counts)
             rates = {t: (counts.get(t, 0) - last.get(t, 0)) / every for t in SENSOR_TOPICS}
             last = counts
@@ -374,6 +401,11 @@ class Demo:
 
     def _wait(self, seconds: float | None) -> None:
         self._stop.wait(seconds)
+
+
+def _listen(preferred: int) -> str:
+    """127.0.0.1 and the port people expect (the docs' 8480, 8490, 9464), or a free one."""
+    return f"127.0.0.1:{free_port() if port_in_use(preferred) else preferred}"
 
 
 def _read(path: Path) -> str:

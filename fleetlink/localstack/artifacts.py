@@ -1,12 +1,23 @@
-"""Fetch the Kafka broker jars and the Apicurio Registry distribution from Maven Central, once."""
+"""Fetch the Kafka broker jars and the Apicurio Registry distribution from Maven Central, once.
+
+The first run shows what it downloads (files and megabytes, every few seconds). A lock file in
+the cache folder lets one process fetch at a time: a second one waits, then finds the jars there.
+"""
 
 from __future__ import annotations
 
+import collections
+import contextlib
+import fcntl
+import functools
 import logging
 import os
+import re
 import shutil
 import subprocess
 import tarfile
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,15 +73,90 @@ def _mvn() -> str:
     return mvn
 
 
+_DOWNLOADED = re.compile(r"^\[INFO\] Downloaded from \S+: \S+ \((?P<size>[\d.,]+) (?P<unit>[kMG]?B)")
+_UNITS = {"B": 1, "kB": 1_000, "MB": 1_000_000, "GB": 1_000_000_000}
+
+
+def downloaded_bytes(line: str) -> int | None:
+    """The size of a file Maven reports it downloaded (``Downloaded from central: URL (1.2 MB at …)``)."""
+    match = _DOWNLOADED.match(line.strip())
+    if match is None:
+        return None
+    return int(float(match.group("size").replace(",", "")) * _UNITS[match.group("unit")])
+
+
+class Progress:
+    """Files and bytes fetched so far, told at most every ``every_s`` seconds (clock injected)."""
+
+    def __init__(
+        self, what: str, out: Callable[[str], None], clock: Callable[[], float], every_s: float = 2.0
+    ):
+        self.what = what
+        self.out = out
+        self.clock = clock
+        self.every_s = every_s
+        self.files = 0
+        self.bytes = 0
+        self._told_at = clock()
+
+    def line(self, text: str) -> None:
+        size = downloaded_bytes(text)
+        if size is None:
+            return
+        self.files += 1
+        self.bytes += size
+        if self.clock() - self._told_at >= self.every_s:
+            self.tell()
+
+    def tell(self) -> None:
+        self._told_at = self.clock()
+        self.out(f"  {self.what}: {self.files} files, {self.bytes / 1e6:.1f} MB so far")
+
+    def done(self) -> None:
+        if self.files:
+            self.out(f"  {self.what}: {self.files} files, {self.bytes / 1e6:.1f} MB downloaded")
+        else:
+            self.out(f"  {self.what}: nothing to download (Maven's local repository had it)")
+
+
 def _run_mvn(args: list[str], cwd: Path, what: str) -> None:
     log.info("fetching %s from Maven Central (first run only)", what)
-    print(
-        f"fleetlink stack: fetching {what} from Maven Central (first run only; cached in {cwd})", flush=True
-    )
-    proc = subprocess.run([_mvn(), "-B", "-q", *args], cwd=cwd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        tail = "\n".join((proc.stdout + proc.stderr).splitlines()[-20:])
-        raise StackError(f"could not fetch {what} with Maven (exit {proc.returncode}):\n{tail}")
+    say = functools.partial(print, flush=True)
+    say(f"fleetlink stack: fetching {what} from Maven Central (first run only; cached in {cwd})")
+    progress = Progress(what, say, time.monotonic)
+    tail: collections.deque[str] = collections.deque(maxlen=20)
+    with subprocess.Popen(
+        [_mvn(), "-B", *args],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    ) as proc:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            tail.append(line.rstrip())
+            progress.line(line)
+        code = proc.wait()
+    if code != 0:
+        raise StackError(f"could not fetch {what} with Maven (exit {code}):\n" + "\n".join(tail))
+    progress.done()
+
+
+@contextlib.contextmanager
+def cache_lock(root: Path) -> Iterator[None]:
+    """One fetch at a time per cache folder, across processes (``flock`` on ``<root>/.fetch.lock``):
+    two first runs at once would otherwise download into, and rename, the same folders."""
+    root.mkdir(parents=True, exist_ok=True)
+    with (root / ".fetch.lock").open("a") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print(f"fleetlink stack: waiting for another process fetching into {root} ...", flush=True)
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def fetch_kafka(root: Path) -> Path:
@@ -78,19 +164,22 @@ def fetch_kafka(root: Path) -> Path:
     done = lib / ".complete"
     if done.exists():
         return lib
-    work = lib.parent
-    work.mkdir(parents=True, exist_ok=True)
-    (work / "pom.xml").write_text(_KAFKA_POM.format(kafka=KAFKA_VERSION, log4j=LOG4J_VERSION))
-    tmp = work / "lib.partial"
-    shutil.rmtree(tmp, ignore_errors=True)
-    _run_mvn(
-        ["dependency:copy-dependencies", f"-DoutputDirectory={tmp}", "-DincludeScope=runtime"],
-        work,
-        f"Apache Kafka {KAFKA_VERSION} broker jars",
-    )
-    shutil.rmtree(lib, ignore_errors=True)
-    tmp.rename(lib)
-    done.touch()
+    with cache_lock(root):
+        if done.exists():  # fetched by another process while this one waited
+            return lib
+        work = lib.parent
+        work.mkdir(parents=True, exist_ok=True)
+        (work / "pom.xml").write_text(_KAFKA_POM.format(kafka=KAFKA_VERSION, log4j=LOG4J_VERSION))
+        tmp = work / "lib.partial"
+        shutil.rmtree(tmp, ignore_errors=True)
+        _run_mvn(
+            ["dependency:copy-dependencies", f"-DoutputDirectory={tmp}", "-DincludeScope=runtime"],
+            work,
+            f"Apache Kafka {KAFKA_VERSION} broker jars",
+        )
+        shutil.rmtree(lib, ignore_errors=True)
+        tmp.rename(lib)
+        done.touch()
     return lib
 
 
@@ -100,7 +189,16 @@ def fetch_apicurio(root: Path, version: str = APICURIO_VERSION) -> Path:
     done = home / ".complete"
     if done.exists():
         return _apicurio_jar(home)
-    home.mkdir(parents=True, exist_ok=True)
+    with cache_lock(root):
+        if not done.exists():  # else fetched by another process while this one waited
+            _fetch_apicurio(home, version)
+            done.touch()
+    return _apicurio_jar(home)
+
+
+def _fetch_apicurio(home: Path, version: str) -> None:
+    shutil.rmtree(home, ignore_errors=True)  # what an interrupted fetch left
+    home.mkdir(parents=True)
     artifact = f"io.apicurio:apicurio-registry-app:{version}:tar.gz:all"
     _run_mvn(
         ["dependency:copy", f"-Dartifact={artifact}", f"-DoutputDirectory={home}"],
@@ -113,8 +211,6 @@ def fetch_apicurio(root: Path, version: str = APICURIO_VERSION) -> Path:
     with tarfile.open(archives[0]) as tar:
         tar.extractall(home / "dist", filter="data")
     archives[0].unlink()
-    done.touch()
-    return _apicurio_jar(home)
 
 
 def _apicurio_jar(home: Path) -> Path:

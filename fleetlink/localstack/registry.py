@@ -1,4 +1,9 @@
-"""Apicurio Registry 3 (in-memory storage) with its Confluent-compatible API, on loopback."""
+"""Apicurio Registry 3 with its Confluent-compatible API, on loopback.
+
+Its schemas are kept in an H2 database file in the data folder, next to Kafka's: a stack
+restarted on the same folder (``fleetlink stack up --dir``) finds the schema ids its records
+refer to.
+"""
 
 from __future__ import annotations
 
@@ -46,6 +51,8 @@ class SchemaRegistry:
                 f"-Dquarkus.management.port={settings.management_port or free_port()}",
                 "-Dapicurio.storage.kind=sql",
                 "-Dapicurio.storage.sql.kind=h2",
+                # schemas in a file beside Kafka's data: ids outlive a restart, as the records do
+                f"-Dapicurio.datasource.url=jdbc:h2:file:{(data / 'registry-db').absolute()}",
                 "-Dquarkus.log.level=WARN",
                 '-Dquarkus.log.category."io.quarkus".level=INFO',
                 "-Dquarkus.http.limits.max-body-size=16M",

@@ -238,8 +238,18 @@ def _read_group(
     return pos + length, seq
 
 
-def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
-    """Parse and check a batch; raises ``WireError`` naming what is wrong and where."""
+@dataclass(frozen=True, slots=True)
+class BatchBody:
+    """A batch decompressed, its header and schemas read: ``head`` without records, the body,
+    and where its groups start (what the uplink's native path parses on its own)."""
+
+    head: Batch
+    body: bytes
+    groups_at: int
+
+
+def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> BatchBody:
+    """Check the framing, decompress, read site, edge, stream, first seq and schemas."""
     view = memoryview(data)
     if len(view) < _HEAD.size:
         raise WireError(f"a batch has at least {_HEAD.size} bytes, got {len(view)}", offset=0)
@@ -257,6 +267,25 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
     (first_seq,) = r.unpack(U64, "first_seq")
     schemas, elided = _read_schemas(r)
+    head = Batch(
+        site=site,
+        edge_id=edge_id,
+        stream=stream,
+        first_seq=first_seq,
+        records=(),
+        schemas=schemas,
+        elided=elided,
+    )
+    return BatchBody(head, body, r.pos)
+
+
+def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
+    """Parse and check a batch; raises ``WireError`` naming what is wrong and where."""
+    parsed = decode_batch_head(data, max_bytes=max_bytes)
+    head, body = parsed.head, parsed.body
+    site, edge_id, stream, first_seq = head.site, head.edge_id, head.stream, head.first_seq
+    schemas, elided = head.schemas, head.elided
+    r = Reader(body, parsed.groups_at)
     (n_groups,) = r.unpack(U32, "group count")
     if n_groups == 0:
         raise WireError("a batch needs at least one record", offset=r.pos - 4)

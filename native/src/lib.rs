@@ -1,8 +1,10 @@
-//! `fleetlink._native`: the parts of the edge's data path that run per sample, in Rust.
+//! `fleetlink._native`: the per-sample and per-record work of the edge and the uplink, in Rust.
 
 pub mod attachment;
 pub mod cdr_avro;
 pub mod dataplane;
+pub mod producer;
+pub mod rdkafka;
 pub mod seq;
 
 use pyo3::exceptions::PyValueError;
@@ -33,6 +35,8 @@ impl AvroProgram {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<AvroProgram>()?;
     m.add_class::<dataplane::DataPlane>()?;
+    m.add_class::<producer::ScannedBatch>()?;
+    m.add_class::<producer::NativeProducer>()?;
     m.add("MISMATCH", dataplane::MISMATCH)?;
     Ok(())
 }

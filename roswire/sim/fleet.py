@@ -1,8 +1,10 @@
 """Run simulated TurtleBot 4 robots on zenoh, each as its own rmw_zenoh process would.
 
 Each robot gets its own session and a node ``/<name>/create3`` publishing ``ir_intensity``,
-``hazard_detection``, ``kidnap_status``, ``odom``, ``imu`` and ``battery_state`` and subscribing
-to ``cmd_lightring``. Robots can be added, removed, picked up (fault) and healed while running.
+``hazard_detection``, ``kidnap_status``, ``odom``, ``imu`` and ``battery_state``, subscribing
+to ``cmd_lightring`` and serving the services and actions of :mod:`roswire.sim.services`
+(``e_stop``, ``take_picture``, ``dock`` …). Robots can be added, removed, picked up (fault)
+and healed while running.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from fleetlink.roswire.sim.messages import (
     lightring_colours,
 )
 from fleetlink.roswire.sim.model import LedState, RobotModel
+from fleetlink.roswire.sim.services import DEFAULT_TIMING, EventListener, RobotServices, Timing
 from fleetlink.roswire.subscriber import RosSample
 from fleetlink.schemas.typestore import Distro
 
@@ -64,6 +67,7 @@ class SimRobot:
     lock: threading.Lock = field(default_factory=threading.Lock)
     ticks: int = 0
     stopped: bool = False
+    services: RobotServices | None = None
 
 
 class Fleet:
@@ -79,6 +83,8 @@ class Fleet:
         distro: Distro = "jazzy",
         seed: int = 0,
         on_led: LedListener | None = None,
+        on_event: EventListener | None = None,
+        timing: Timing = DEFAULT_TIMING,
     ) -> None:
         if rate <= 0:
             raise RoswireError(f"sim rate must be > 0 Hz, got {rate}")
@@ -91,6 +97,8 @@ class Fleet:
         self.distro: Distro = distro
         self.seed = seed
         self.on_led = on_led
+        self.on_event = on_event
+        self.timing = timing
         self.published: Counter[str] = Counter()
         self.publish_errors = 0
         self._robots: dict[str, SimRobot] = {}
@@ -177,6 +185,15 @@ class Fleet:
         robot.node.create_subscriber(
             "cmd_lightring", LIGHTRING, lambda s: self._on_lightring(robot, s), decode=True
         )
+        robot.services = RobotServices(
+            robot.name,
+            robot.node,
+            robot.model,
+            robot.lock,
+            self.typestore,
+            timing=self.timing,
+            on_event=self.on_event,
+        ).start()
 
     def remove_robot(self, name: str) -> None:
         with self._lock:
@@ -215,6 +232,9 @@ class Fleet:
 
     def model(self, name: str) -> RobotModel:
         return self._get(name).model
+
+    def services(self, name: str) -> RobotServices | None:
+        return self._get(name).services
 
     # --- running ----------------------------------------------------------------------------
 

@@ -94,6 +94,12 @@ class RobotModel:
     start: float
     seed: int = 0
     picked_up: bool = False
+    docked: bool = False
+    e_stop: bool = False
+    motors_enabled: bool = True
+    drive_left: float = 0.0
+    """Metres a DriveDistance goal still has to go (straight ahead, instead of the circle)."""
+    pictures: int = 0
     led: LedState = SYSTEM_LEDS
     x: float = 0.0
     y: float = 0.0
@@ -113,6 +119,21 @@ class RobotModel:
         """The robot is put back on the floor."""
         self.picked_up = False
 
+    def dock(self) -> None:
+        """The robot is on its dock (at the origin), standing still, back on the floor."""
+        self.docked, self.picked_up, self.drive_left = True, False, 0.0
+        self.x = self.y = 0.0
+
+    def undock(self) -> None:
+        self.docked = False
+
+    def reset_pose(self, x: float, y: float, yaw: float) -> None:
+        self.x, self.y, self.yaw = x, y, yaw
+
+    @property
+    def can_drive(self) -> bool:
+        return not (self.picked_up or self.docked or self.e_stop or not self.motors_enabled)
+
     def set_lightring(self, colours: tuple[RGB, ...], override_system: bool, now: float) -> LedState:
         """Apply a ``cmd_lightring`` command: overriding colours show, otherwise the system's."""
         self.led = (
@@ -124,7 +145,13 @@ class RobotModel:
         dt = 0.0 if self._last is None else max(0.0, now - self._last)
         self._last = now
         rng = self._rng
-        v, w = (0.0, 0.0) if self.picked_up else (LINEAR_SPEED, ANGULAR_SPEED)
+        if not self.can_drive:
+            v, w = 0.0, 0.0
+        elif self.drive_left > 0:
+            v, w = LINEAR_SPEED, 0.0
+            self.drive_left = max(0.0, self.drive_left - v * dt)
+        else:
+            v, w = LINEAR_SPEED, ANGULAR_SPEED
         self.yaw = (self.yaw + w * dt + math.pi) % (2 * math.pi) - math.pi
         self.x += v * math.cos(self.yaw) * dt
         self.y += v * math.sin(self.yaw) * dt

@@ -1,12 +1,12 @@
-"""A memory soak: robots at a steady rate into an edge whose spool is full and whose WAN is cut.
+"""A fleet of robots into an edge whose WAN is cut: memory over time, and every message accounted.
 
-``run_soak`` starts, as real processes, an edge agent (small spool, the given full policy) and a
-fleet of robots (``bench.fleet_publisher``: each robot its own Zenoh session, real Imu
-messages) through a site router whose WAN link is cut from the start; it samples the edge's
-resident memory once the spool is full, then stops the robots and accounts for every message:
-published = lost in transit (sequence gaps) + dropped at the intake + held in the spool +
-evicted (``drop_oldest``) + refused (``block``, ``drop_newest``). Used by
-tests/fault/test_memory_soak.py (short) and bench/bench_soak.py (long).
+``run_fleet`` starts, as real processes, an edge agent and a fleet of robots
+(``bench.fleet_publisher``: each robot its own Zenoh session, real recorded messages) through a
+site router whose WAN link is cut from the start; it samples the edge's resident memory after a
+warm-up, then stops the robots and accounts for every message: published = lost in transit
+(sequence gaps) + dropped at the intake + held in the spool + evicted (``drop_oldest``) + refused
+(``block``, ``drop_newest``). ``run_soak`` is the memory soak (a small, full spool); used by
+tests/fault/test_memory_soak.py, tests/fault/test_receive_under_load.py and bench/bench_soak.py.
 """
 
 from __future__ import annotations
@@ -22,12 +22,11 @@ from typing import Any
 
 import yaml
 
+from bench.fleet_publisher import TOPICS
 from fleetlink.localstack.relay import TcpRelay
 from fleetlink.localstack.zenoh_router import ZenohRouter
 from tests.fault.e2e_processes import Process
 from tests.paths import ROOT
-
-IMU = "sensor_msgs/msg/Imu"
 
 
 @dataclass
@@ -89,9 +88,29 @@ def run_soak(
     seconds: float = 20.0,
     warmup_s: float = 6.0,
 ) -> Soak:
-    """Robots publish ``robots * hz`` messages/s for ``seconds``; memory is sampled after
-    ``warmup_s`` (the spool fills in the first two or three)."""
-    result = Soak(policy)
+    """Robots publish ``robots * hz`` Imu messages/s for ``seconds`` into a 4 MiB spool with full
+    policy ``policy``; memory is sampled after ``warmup_s`` (the spool fills in two or three)."""
+    spool = {"segment_bytes": "1MiB", "max_bytes": "4MiB", "policy": policy, "block_timeout": "500ms"}
+    return run_fleet(
+        tmp, policy, robots=robots, topics=1, hz=hz, seconds=seconds, warmup_s=warmup_s, spool=spool
+    )
+
+
+def run_fleet(
+    tmp: Path,
+    name: str,
+    *,
+    robots: int,
+    topics: int,
+    hz: float,
+    seconds: float,
+    warmup_s: float,
+    spool: dict[str, Any],
+    block: bool = False,
+) -> Soak:
+    """``robots`` robots publish ``topics`` topics each at ``hz`` for ``seconds`` (``block``:
+    reliable, blocking publishers) into an edge with the ``spool`` settings, the WAN cut."""
+    result = Soak(name)
     with ExitStack() as stack:
         cloud = stack.enter_context(ZenohRouter())
         wan = stack.enter_context(TcpRelay(cloud.port))
@@ -105,16 +124,18 @@ def run_soak(
             "robot_types": {
                 "bench": {
                     "match": "/r*",
-                    "mappings": [{"name": "imu", "from": "/{robot}/imu", "to": "soak.imu", "type": IMU}],
+                    "mappings": [
+                        {
+                            "name": topic,
+                            "from": f"/{{robot}}/{topic}",
+                            "to": f"soak.{topic}",
+                            "type": typename,
+                        }
+                        for topic, typename, _bag_topic, _bag in TOPICS[:topics]
+                    ],
                 }
             },
-            "spool": {
-                "dir": str(tmp / "spool"),
-                "segment_bytes": "1MiB",
-                "max_bytes": "4MiB",
-                "policy": policy,
-                "block_timeout": "500ms",
-            },
+            "spool": {"dir": str(tmp / "spool"), **spool},
             "wan": {"ack_timeout": "2s"},
         }
         edge_yaml = tmp / "edge.yaml"
@@ -134,22 +155,10 @@ def run_soak(
             tmp / "edge.log",
         ).start()
         stack.callback(edge.terminate, 10)
+        argv = [sys.executable, "-m", "bench.fleet_publisher", "--connect", site.endpoint]
+        argv += ["--robots", str(robots), "--topics", str(topics), "--hz", str(hz), "--seconds", str(seconds)]
         pub = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "bench.fleet_publisher",
-                "--connect",
-                site.endpoint,
-                "--robots",
-                str(robots),
-                "--topics",
-                "1",
-                "--hz",
-                str(hz),
-                "--seconds",
-                str(seconds),
-            ],
+            [*argv, *(["--block"] if block else [])],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
@@ -168,7 +177,9 @@ def run_soak(
             return data
 
         deadline = time.monotonic() + 60
-        while len(stats().get("subscriptions", {})) < robots or len(stats().get("robots", {})) < robots:
+        while (
+            len(stats().get("subscriptions", {})) < robots * topics or len(stats().get("robots", {})) < robots
+        ):
             if time.monotonic() > deadline or edge.proc is None or edge.proc.poll() is not None:
                 raise AssertionError(f"the edge did not take the {robots} robots:\n{edge.tail()}")
             time.sleep(0.2)

@@ -3,7 +3,7 @@
 Row 8  edge crash:     kill -9 a process appending and acking; reopen intact, resume from the
                        first unacked record, nothing that was taken is lost.
 Row 10 torn tail:      truncate / corrupt segments while stopped: detected, counted, skipped,
-                       logged with file and offset.
+                       logged with file, offset and seqs.
 Row 11 disk full:      a file-size limit (RLIMIT_FSIZE) in the child: writes never half land,
                        the policy applies, the ledger is never half-written, acked data intact.
 Row 12 at capacity:    small max_bytes, nothing acked (WAN down): block / drop_oldest /
@@ -109,6 +109,7 @@ def child_main(spec: dict[str, Any]) -> None:
         _child_crash(spool, spec["run"])
     elif mode == "fill":
         _child_fill(spool, spec["count"], spec["batch"])
+        spool.flush()  # on disk, and the ledger knows how far
     elif mode == "disk_full":
         _child_disk_full(spool)
     _say(stats=asdict(spool.stats()))
@@ -270,8 +271,11 @@ def test_row10_torn_tail_and_flipped_bit_are_counted_skipped_and_named(
     assert stats["corrupt_skipped"] == len(flipped) + len(torn)  # every record of both groups, exactly
     size = end - offset
     assert f"corrupt data in {first} at offset {offset} ({size} bytes: checksum mismatch)" in caplog.text
-    assert f"torn tail in {last} at offset {tail_offset}" in caplog.text
-    assert len(caplog.records) == 2  # one line per damaged range
+    assert f"seqs {flipped[0]}..{flipped[-1]}" in caplog.text
+    # the ledger knew the last group was on disk: not a write cut short, a segment cut short
+    assert f"segment cut short in {last} at offset {tail_offset}" in caplog.text
+    assert f"seqs {torn[0]}..{torn[-1]}" in caplog.text
+    assert len([r for r in caplog.records if " at offset " in r.getMessage()]) == 2  # a line per range
     assert segments_are_clean(tmp_path)  # the torn tail was cut away, the rest was acked away
 
 

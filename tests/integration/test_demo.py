@@ -7,12 +7,16 @@ The same loop, judged the same way, with either fault-detection app: the Quix St
 from __future__ import annotations
 
 import io
+import re
+import threading
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
+import httpx
 import pytest
 
 from fleetlink.demo.runner import Demo, DemoOptions
+from tests.helpers import wait_until
 
 
 @pytest.mark.parametrize("app", ["python", "java"])
@@ -37,7 +41,15 @@ def test_demo_closes_the_loop(
             app=app,
         )
     )
-    summary = demo.run()
+    result: dict[str, Any] = {}
+    runner = threading.Thread(target=lambda: result.update(summary=demo.run()))
+    runner.start()
+    try:
+        wait_until(lambda: "metrics: " in out.getvalue(), timeout=120, message="the demo's URLs told")
+        _consoles_and_metrics_answer(out.getvalue(), demo.token)
+    finally:
+        runner.join(300)
+    summary = result["summary"]
     told = out.getvalue()
 
     faulted = summary["faulted_robot"]
@@ -53,7 +65,11 @@ def test_demo_closes_the_loop(
     assert 0 < summary["fault_to_red_led_s"] < 30
     assert 0 < summary["heal_to_green_led_s"] < 30
     assert (tmp_path / "demo" / "summary.json").exists()
-    assert "stopped" in told.splitlines()[-1]
+    lines = told.splitlines()
+    assert lines[-2].endswith("stopping everything the demo started ...")
+    assert lines[-1].endswith("] stopped")  # nothing told after it, nothing between
+    assert "summary written to" in lines[-3]
+
     # both registry URLs are told, each with what it is for
     native = schema_registry_url.replace("/apis/ccompat/v7", "/apis/registry/v3")
     assert f"registry {schema_registry_url}   Confluent-compatible API" in told
@@ -62,3 +78,21 @@ def test_demo_closes_the_loop(
         assert "fault-detection app: Kafka Streams (Java)" in told
         assert f"fault detection: {faulted} is now failed" in told
         assert f"fault detection: {faulted} is now running" in told
+
+
+def _consoles_and_metrics_answer(told: str, token: str) -> None:
+    consoles = re.search(r"web console: (http://\S+/console/) \(the fleet\), (http://\S+/console/)", told)
+    assert consoles is not None, told
+    assert f"sign in with token {token}" in told
+    for console in consoles.groups():
+        assert httpx.get(console + "login", timeout=10).status_code == 200
+        bearer = {"Authorization": f"Bearer {token}"}
+        page = httpx.get(console, headers=bearer, timeout=10, follow_redirects=True)
+        assert page.status_code == 200, console
+        assert httpx.get(console + "api/sites", timeout=10).status_code == 401  # the token is needed
+    metrics = re.findall(r"(http://\S+/metrics) \(", told)
+    assert len(metrics) == 2, told
+    for url in metrics:
+        scrape = httpx.get(url, timeout=10)
+        assert scrape.status_code == 200
+        assert "fleetlink_" in scrape.text

@@ -1,4 +1,4 @@
-"""``fleetlink sim``, ``fleetlink ros graph`` and ``fleetlink replay`` run as real processes."""
+"""``fleetlink ros sim``, ``graph``, ``echo``, ``pub`` and ``replay`` run as real processes."""
 
 from __future__ import annotations
 
@@ -38,6 +38,7 @@ def domain() -> int:
 def sim(zenoh_router: str, domain: int) -> Iterator[subprocess.Popen[str]]:
     proc = subprocess.Popen(
         fleetlink(
+            "ros",
             "sim",
             "--robots",
             "2",
@@ -105,7 +106,8 @@ def test_ros_graph_json_reports_simulated_fleet_with_rates(
     topics = {t["name"]: t for t in report["topics"]}
     imu = topics["/tb4_01/imu"]
     assert imu["types"] == ["sensor_msgs/msg/Imu"]
-    assert imu["publishers"][0]["qos"] == "2::,5:,:,:,,"
+    assert imu["publishers"][0]["qos"] == "best_effort, volatile, keep_last 5"
+    assert imu["publishers"][0]["qos_wire"] == "2::,5:,:,:,,"
     assert imu["publishers"][0]["type_hash"] == (
         "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
     )
@@ -147,6 +149,7 @@ def test_replay_command_publishes_a_bag_topic(zenoh_router: str, domain: int) ->
         )
         result = subprocess.run(
             fleetlink(
+                "ros",
                 "replay",
                 str(BAGS / "robot_localization_husky"),
                 "--robot",
@@ -175,7 +178,7 @@ def test_replay_command_publishes_a_bag_topic(zenoh_router: str, domain: int) ->
 
 def test_replay_command_reports_a_missing_bag(tmp_path: Path) -> None:
     result = subprocess.run(
-        fleetlink("replay", str(tmp_path / "nope"), "--robot", "r", "--fast", "-e", "tcp/127.0.0.1:1"),
+        fleetlink("ros", "replay", str(tmp_path / "nope"), "--robot", "r", "--fast", "-e", "tcp/127.0.0.1:1"),
         capture_output=True,
         text=True,
         timeout=60,
@@ -188,6 +191,7 @@ def test_replay_command_reports_a_missing_bag(tmp_path: Path) -> None:
 def test_sim_stdin_commands(zenoh_router: str, domain: int) -> None:
     result = subprocess.run(
         fleetlink(
+            "ros",
             "sim",
             "--robots",
             "1",
@@ -222,7 +226,16 @@ def test_sim_with_a_bad_msg_path_names_it() -> None:
     env = {k: v for k, v in os.environ.items() if k != "FLEETLINK_MSG_PATH"}
     result = subprocess.run(
         fleetlink(
-            "sim", "--robots", "1", "--msg-path", "/nonexistent/pkg", "-m", "client", "-e", "tcp/127.0.0.1:1"
+            "ros",
+            "sim",
+            "--robots",
+            "1",
+            "--msg-path",
+            "/nonexistent/pkg",
+            "-m",
+            "client",
+            "-e",
+            "tcp/127.0.0.1:1",
         ),
         capture_output=True,
         text=True,
@@ -232,3 +245,61 @@ def test_sim_with_a_bad_msg_path_names_it() -> None:
     )
     assert result.returncode == 1
     assert "--msg-path /nonexistent/pkg: not a directory" in result.stderr
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(fleetlink(*args), capture_output=True, text=True, timeout=60, check=False)
+
+
+def _banner(sim: subprocess.Popen[str]) -> None:
+    assert sim.stdout is not None
+    line = sim.stdout.readline()
+    assert line.startswith("simulating"), line
+
+
+def test_graph_text_is_quiet_and_readable(zenoh_router: str, domain: int, sim: subprocess.Popen[str]) -> None:
+    _banner(sim)
+    result = subprocess.run(
+        fleetlink("ros", "graph", "--duration", "2", "-e", zenoh_router, "--domain-id", str(domain)),
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ""  # no log lines before (or after) the report without -v
+    assert result.stdout.startswith(f"domain {domain}\n")
+    imu = next(line for line in result.stdout.splitlines() if "/tb4_01/imu " in line)
+    assert imu.endswith("[best_effort, volatile, keep_last 5]")
+
+
+def test_echo_takes_type_and_qos_from_the_publisher(
+    zenoh_router: str, domain: int, sim: subprocess.Popen[str]
+) -> None:
+    _banner(sim)
+    at = ["-e", zenoh_router, "--domain-id", str(domain)]
+    result = run_cli("ros", "echo", "/tb4_02/ir_intensity", "--once", "--timeout", "20", "--json", *at)
+    assert result.returncode == 0, result.stderr
+    (line,) = result.stdout.splitlines()
+    message = json.loads(line)
+    assert message["header"]["frame_id"] == "base_link"
+    assert len(message["readings"]) == 7
+
+
+def test_echo_gives_up_after_its_timeout(zenoh_router: str, domain: int) -> None:
+    at = ["-e", zenoh_router, "--domain-id", str(domain)]
+    result = run_cli("ros", "echo", "/nobody/here", "--once", "--timeout", "1", *at)
+    assert result.returncode == 1
+    assert "no publisher of /nobody/here within 1 s" in result.stderr
+
+
+def test_pub_reaches_the_robot(zenoh_router: str, domain: int, sim: subprocess.Popen[str]) -> None:
+    _banner(sim)
+    red = "{override_system: true, leds: [" + ", ".join(["{red: 255}"] * 6) + "]}"
+    at = ["-e", zenoh_router, "--domain-id", str(domain)]
+    lightring = ["/tb4_01/cmd_lightring", "irobot_create_msgs/msg/LightringLeds"]
+    result = run_cli("ros", "pub", *lightring, red, "--once", "--timeout", "20", *at)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("publishing #1 on /tb4_01/cmd_lightring: ")
+    assert sim.stdout is not None
+    assert sim.stdout.readline().strip() == "tb4_01 light ring: red"

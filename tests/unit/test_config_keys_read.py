@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from pydantic import BaseModel
 
+from fleetlink.cli.configs import KINDS, model_for
 from fleetlink.cli.docgen import render
-from fleetlink.cli.validate import KINDS, model_for
 from tests.paths import DOCS, ROOT
 
 pytestmark = pytest.mark.unit

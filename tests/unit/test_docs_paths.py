@@ -3,7 +3,8 @@
 
 A name counts as a file path when it has a '/' and ends in a source or config file extension;
 paths on a target machine (``/var/lib/...``, ``~/...``) and templates (``<site>``, ``*``) do not.
-It may be written from the repository's top or from the document's own folder.
+It may be written from the repository's top or from the document's own folder, or be a file the
+document itself writes (a code block marked ``file=PATH``).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from tests.paths import DOCS, ROOT
 pytestmark = pytest.mark.unit
 
 _BACKTICKED = re.compile(r"`([^`\s]+)`")
+_WRITTEN = re.compile(r"^```\S*\s+file=(\S+)", re.MULTILINE)
 _FILE = re.compile(r"[\w.-]+(/[\w.-]+)+\.(py|md|ya?ml|json5?|toml|sh|html|css|js|msg|srv|avsc|txt|cfg|ini)")
 
 
@@ -32,11 +34,17 @@ def file_paths(text: str) -> list[tuple[int, str]]:
     return found
 
 
+def written(text: str) -> set[str]:
+    """The files a document writes itself: its code blocks marked ``file=PATH``."""
+    return set(_WRITTEN.findall(text))
+
+
 def missing(doc: Path) -> list[str]:
+    text = doc.read_text()
     return [
         f"{doc.relative_to(ROOT)}:{line}: {path}"
-        for line, path in file_paths(doc.read_text())
-        if not (ROOT / path).exists() and not (doc.parent / path).exists()
+        for line, path in file_paths(text)
+        if not (ROOT / path).exists() and not (doc.parent / path).exists() and path not in written(text)
     ]
 
 
@@ -64,3 +72,9 @@ def test_what_counts_as_a_file_path() -> None:
     ]
     problems = [p for line, p in file_paths(text) if not (ROOT / p).exists()]
     assert problems == ["edge/gone.py"]
+
+
+def test_a_file_the_document_writes_counts_as_there() -> None:
+    text = "Save `var/x/made.yaml`:\n\n```yaml file=var/x/made.yaml\na: 1\n```\n"
+    assert written(text) == {"var/x/made.yaml"}
+    assert file_paths(text) == [(1, "var/x/made.yaml")]

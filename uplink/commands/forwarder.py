@@ -25,6 +25,7 @@ import zenoh
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.uplink.commands.plan import Forward
 from fleetlink.uplink.commands.signing import CommandSigner
+from fleetlink.wire.calls import CallEnvelope, encode_call
 from fleetlink.wire.commands import SETTLED, CommandReply, decode_reply, encode_envelope
 from fleetlink.wire.errors import EnvelopeError
 from fleetlink.wire.keys import command_key
@@ -119,6 +120,32 @@ class Forwarder:
             delay = min(delay * 2, MAX_BACKOFF_S)
         result.detail = "uplink stopping"
         return result
+
+    def send_call(self, key_expr: str, site: str, env: CallEnvelope) -> tuple[bool, str]:
+        """Send a call envelope to ``site`` until its repeater settles it or its deadline passes:
+        (settled, why not)."""
+        payload = encode_call(env)
+        delay, detail = FIRST_BACKOFF_S, ""
+        while not self._stop.is_set():
+            remaining = env.deadline_ms / 1000 - self._clock()
+            if remaining <= 0:
+                return False, f"no site acknowledged before the deadline ({detail or 'no reply'})"
+            timeout = min(self._timeout, max(remaining, 0.05))
+            replies, problem = self._query(key_expr, payload, zenoh.QueryTarget.BEST_MATCHING, timeout, site)
+            if any(r.result in SETTLED for r in replies):
+                return True, ""
+            detail = problem or "; ".join(f"{r.result}: {r.detail}" for r in replies) or "no reply"
+            self._limiter.log(
+                logging.WARNING,
+                f"call:{site}",
+                "call %s for %s not acknowledged yet (%s); retrying",
+                env.call_id,
+                key_expr,
+                detail,
+            )
+            self._stop.wait(delay)
+            delay = min(delay * 2, MAX_BACKOFF_S)
+        return False, "uplink stopping"
 
     def _query(
         self, key: str, payload: bytes, target: zenoh.QueryTarget, timeout: float, site: str | None

@@ -32,6 +32,10 @@ from confluent_kafka import Consumer, KafkaException, Message, TopicPartition
 
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.schemas.registry import SchemaRegistry
+from fleetlink.uplink.calls.convert import CallTypes
+from fleetlink.uplink.calls.mapping import ActionMapping, ServiceMapping
+from fleetlink.uplink.calls.outcomes import OUTCOME_KEY, OutcomeIntake, OutcomeWriter
+from fleetlink.uplink.calls.route import CallRoute, Role
 from fleetlink.uplink.commands.decode import CommandDecoder, DecodedValue
 from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.errors import RegistryUnreachableError, RoutingError, UndecodableValueError
@@ -45,7 +49,10 @@ from fleetlink.uplink.commands.status_writer import STATUS_KEY, StatusIntake, St
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.dead_letter import dead_letter
 from fleetlink.uplink.producer import KafkaSink
+from fleetlink.wire.calls import Outcome
 from fleetlink.wire.commands import StatusEvent
+
+CallRole = tuple[Role, ServiceMapping | ActionMapping]
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +89,10 @@ class CommandRouter:
         max_in_flight: int = 256,
         directory: RobotDirectory | None = None,
         signer: CommandSigner | None = None,
+        call_types: CallTypes | None = None,
     ) -> None:
+        """``call_types`` (the ROS types of ``services`` and ``actions``) is needed when the config
+        has service or action mappings (docs/services.md): they share this router's consumer."""
         self.config = config
         self.group_id = group_id or f"{config.kafka.client_id}.commands"
         self._session = session
@@ -93,7 +103,9 @@ class CommandRouter:
         self._lock = threading.Lock()
         self._mappings: dict[str, list[CommandMapping]] = {}
         self._subscribed: tuple[str, ...] = ()
+        self._calls: dict[str, list[CallRole]] = {}
         self.set_mappings(config.commands)
+        self.set_call_mappings(config.services, config.actions)
         self.stats = RouterStats()
         self._own_directory = directory is None
         self.directory = directory if directory is not None else RobotDirectory()
@@ -111,6 +123,23 @@ class CommandRouter:
         self.assigned = threading.Event()
         """Set once the consumer group gave this router its first partitions."""
         self._limiter = LogLimiter(log)
+        self.outcomes: OutcomeWriter | None = None
+        self.outcome_intake: OutcomeIntake | None = None
+        self.calls: CallRoute | None = None
+        if config.services or config.actions:
+            if call_types is None:
+                raise ValueError("service and action mappings need the ROS types (call_types)")
+            self.outcomes = OutcomeWriter(sink, registry, call_types, config.services, config.actions)
+            self.outcome_intake = OutcomeIntake(self.outcomes, owner_of=self.directory.owner)
+            self.calls = CallRoute(
+                call_types,
+                self.forwarder,
+                self.outcomes,
+                site_of=self.directory.site_of,
+                clock=clock,
+                stopping=self._stop.is_set,
+            )
+        self._outcome_queryable: Any = None
         self._reader: RegistrationsReader | None = None
         self._queryable: Any = None
         self._pool: ThreadPoolExecutor | None = None
@@ -123,6 +152,10 @@ class CommandRouter:
         cfg = self.config
         self._stop.clear()
         self._queryable = self._session.declare_queryable(STATUS_KEY, self.intake.on_query)
+        if self.outcome_intake is not None:
+            self._outcome_queryable = self._session.declare_queryable(
+                OUTCOME_KEY, self.outcome_intake.on_query
+            )
         if self._own_directory:
             self._reader = RegistrationsReader(
                 cfg.kafka, cfg.topics.registrations, self.decoder, self.directory
@@ -152,6 +185,9 @@ class CommandRouter:
         if self._queryable is not None:
             self._queryable.undeclare()
             self._queryable = None
+        if self._outcome_queryable is not None:
+            self._outcome_queryable.undeclare()
+            self._outcome_queryable = None
 
     def __enter__(self) -> CommandRouter:
         return self.start()
@@ -169,6 +205,18 @@ class CommandRouter:
         with self._lock:
             self._mappings = by_topic
 
+    def set_call_mappings(self, services: Sequence[ServiceMapping], actions: Sequence[ActionMapping]) -> None:
+        """Replace the topics the service and action mappings read (requests, goals, cancels)."""
+        by_topic: dict[str, list[CallRole]] = {}
+        for service in services:
+            by_topic.setdefault(service.from_, []).append(("service", service))
+        for action in actions:
+            by_topic.setdefault(action.from_, []).append(("goal", action))
+            if action.cancel_from is not None:
+                by_topic.setdefault(action.cancel_from, []).append(("cancel", action))
+        with self._lock:
+            self._calls = by_topic
+
     def in_flight(self) -> int:
         return self._tracker.in_flight()
 
@@ -185,7 +233,7 @@ class CommandRouter:
         last_commit = 0.0
         while not self._stop.is_set():
             with self._lock:
-                topics = tuple(sorted(self._mappings))
+                topics = tuple(sorted(set(self._mappings) | set(self._calls)))
             if topics != self._subscribed:
                 self._subscribe(consumer, topics)
             if not topics or self._tracker.in_flight() >= self._max_in_flight:
@@ -246,29 +294,74 @@ class CommandRouter:
         )
         with self._lock:
             mappings = list(self._mappings.get(topic, ()))
+            calls = list(self._calls.get(topic, ()))
         self.stats.add(records=1)
         self._tracker.begin((topic, partition), offset)
         pool = self._pool
         if pool is not None:
-            pool.submit(self._process, record, mappings)
+            pool.submit(self._process, record, mappings, calls)
 
     # -- one record (worker thread) -------------------------------------------------------
 
-    def _process(self, record: CommandRecord, mappings: list[CommandMapping]) -> None:
+    def _process(
+        self, record: CommandRecord, mappings: list[CommandMapping], calls: list[CallRole] | None = None
+    ) -> None:
         try:
-            if self._handle(record, mappings):
+            if self._handle(record, mappings, calls or []):
                 self._tracker.done((record.topic, record.partition), record.offset)
         except Exception:  # a bug must not leave the offset silently committed: log, keep it pending
             log.exception("command %s: unexpected failure; the record stays uncommitted", record.source)
 
-    def _handle(self, record: CommandRecord, mappings: list[CommandMapping]) -> bool:
+    def _handle(self, record: CommandRecord, mappings: list[CommandMapping], calls: list[CallRole]) -> bool:
         """True when the record is settled (its offset may be committed)."""
         decoded = self._decode(record, mappings)
         if decoded is None:
             return not self._stop.is_set()
         if isinstance(decoded, str):
             return self._dead_letter(record, "command-decode", decoded)
-        return all(self._route(record, mapping, decoded) for mapping in mappings)
+        settled = all(self._route(record, mapping, decoded) for mapping in mappings)
+        for role, call in calls:
+            settled = self._route_call(record, role, call, decoded) and settled
+        return settled
+
+    def _route_call(
+        self,
+        record: CommandRecord,
+        role: Role,
+        mapping: ServiceMapping | ActionMapping,
+        decoded: DecodedValue,
+    ) -> bool:
+        route = self.calls
+        if route is None:
+            return True
+        try:
+            forward = route.plan(role, record, mapping, decoded)
+        except UndecodableValueError as exc:
+            return self._dead_letter(record, "call-decode", f"mapping {mapping.name}: {exc.reason}")
+        except RoutingError as exc:
+            return self._dead_letter(record, "call-route", f"mapping {mapping.name}: {exc}")
+        self.stats.add(forwards=1)
+        settled, outcome = route.send(forward)
+        if outcome is None:
+            if settled:
+                self.stats.add(settled=1)
+            return settled
+        return self._outcomes([outcome])
+
+    def _outcomes(self, outcomes: list[Outcome]) -> bool:
+        writer = self.outcomes
+        delay = 0.2
+        while writer is not None:
+            problem = writer.write_and_wait(outcomes)
+            if problem is None:
+                return True
+            self._limiter.log(
+                logging.WARNING, "outcome", "writing call outcomes failed: %s; retrying", problem
+            )
+            if self._stop.wait(delay):
+                return False
+            delay = min(delay * 2, 5.0)
+        return True
 
     def _decode(self, record: CommandRecord, mappings: list[CommandMapping]) -> DecodedValue | str | None:
         """The decoded value, the reason it is undecodable, or None (gave up: expired or stopping)."""

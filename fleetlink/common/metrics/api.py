@@ -27,6 +27,7 @@ class Metrics(Protocol):
     def on_dropped(self, mapping: str, stage: str | None, reason: str, n: int = 1) -> None: ...
     def on_dead_letter(self, mapping: str, stage: str | None = None, n: int = 1) -> None: ...
     def on_gap(self, topic: str, n: int = 1) -> None: ...
+    def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None: ...
 
     # the intake (edge)
     def on_intake_dropped(self, n: int = 1) -> None: ...
@@ -48,6 +49,7 @@ class Metrics(Protocol):
         depth: int,
         in_flight: int,
         oldest_age_s: float,
+        damage_unacknowledged: int = 0,
     ) -> None: ...
     def set_wan(self, *, in_flight: int, link_up: bool) -> None: ...
     def set_robots(self, n: int) -> None: ...
@@ -112,6 +114,9 @@ class FamilyMetrics:
     def on_gap(self, topic: str, n: int = 1) -> None:
         self._count("fleetlink_sequence_gaps", topic, n=n)
 
+    def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None:
+        self._count("fleetlink_lost_before_spool", robot, topic, n=n)
+
     # the intake ---------------------------------------------------------------------------
     def on_intake_dropped(self, n: int = 1) -> None:
         self._count("fleetlink_intake_dropped_samples", n=n)
@@ -163,6 +168,7 @@ class FamilyMetrics:
         depth: int,
         in_flight: int,
         oldest_age_s: float,
+        damage_unacknowledged: int = 0,
     ) -> None:
         labels = (stream,)
         self._set(family("fleetlink_spool_bytes"), labels, nbytes)
@@ -170,6 +176,7 @@ class FamilyMetrics:
         self._set(family("fleetlink_spool_depth_records"), labels, depth)
         self._set(family("fleetlink_spool_in_flight_records"), labels, in_flight)
         self._set(family("fleetlink_spool_oldest_age_seconds"), labels, oldest_age_s)
+        self._set(family("fleetlink_spool_damage_unacknowledged"), labels, damage_unacknowledged)
 
     def set_wan(self, *, in_flight: int, link_up: bool) -> None:
         self._set(family("fleetlink_wan_in_flight_batches"), (), in_flight)

@@ -88,6 +88,12 @@ _EDGE: tuple[Family, ...] = (
         "Samples one stage dropped (reason: dropped, late, error)",
     ),
     _c("fleetlink_sequence_gaps", ("topic",), "ROS messages missing from a publisher's sequence numbers"),
+    _c(
+        "fleetlink_lost_before_spool",
+        ("robot", "topic"),
+        "ROS messages a publisher sent that never reached the spool: the edge was stopped or crashed "
+        "(counted from each publisher's first message after a restart)",
+    ),
     # -- the intake (edge): between receiving a sample and spooling its records --------------
     _c(
         "fleetlink_intake_dropped_samples", (), "Samples the full intake could not take (counted, never held)"
@@ -106,7 +112,12 @@ _EDGE: tuple[Family, ...] = (
     _c(
         "fleetlink_spool_dropped_records",
         ("stream", "reason"),
-        "Records a buffer lost (reason: dropped_oldest, dropped_newest, corrupt, block_timeout)",
+        "Records a buffer lost (reason: dropped_oldest, dropped_newest, corrupt, missing, block_timeout)",
+    ),
+    _g(
+        "fleetlink_spool_damage_unacknowledged",
+        ("stream",),
+        "Damage findings in a spool awaiting an operator's acknowledgement",
     ),
     _g("fleetlink_spool_bytes", ("stream",), "Bytes held by a buffer (unacknowledged records)"),
     _g("fleetlink_spool_capacity_bytes", ("stream",), "The buffer's size limit in bytes"),

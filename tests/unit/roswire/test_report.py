@@ -82,14 +82,16 @@ def test_report_json_and_text(world: tuple[Graph, RobotRegistry]) -> None:
     assert report["robots"] == [{"name": "tb4_01", "type": "turtlebot4", "entities": 2, "explicit": False}]
     (imu,) = report["topics"]
     assert imu["rate_hz"] == 10.0
-    assert imu["publishers"][0]["qos"] == "2::,5:,:,:,,"
+    assert imu["publishers"][0]["qos"] == "best_effort, volatile, keep_last 5"
+    assert imu["publishers"][0]["qos_wire"] == "2::,5:,:,:,,"
     assert imu["publishers"][0]["node"] == "/tb4_01/create3"
     assert len(imu["publishers"][0]["gid"]) == 32
     assert report["services"][0]["servers"][0]["type"] == "example_interfaces/srv/AddTwoInts"
     text = render_text(report)
     assert "tb4_01           type=turtlebot4 entities=2" in text
     assert "10.0 Hz" in text
-    assert "qos=2::,5:,:,:,," in text
+    assert "[best_effort, volatile, keep_last 5]" in text
+    assert "2::,5" not in text  # the wire encoding stays in the JSON
     assert "servers=1 clients=0" in text
     assert "malformed liveliness tokens ignored: 2" in text
 

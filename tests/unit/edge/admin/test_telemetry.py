@@ -101,6 +101,29 @@ def test_spool_problem_says_how_full_and_how_old() -> None:
     assert health.extra["spool_fill"] == {"durable": 0.9}
 
 
+def test_unacknowledged_spool_damage_degrades_and_says_what() -> None:
+    damaged = BufferState(stats=stats(damage_unacknowledged=2), capacity_bytes=1000)
+    finding = {"reason": "segment_missing", "file": "00000000000000001150.seg", "records": 1149}
+    other = {"reason": "corrupt", "file": "00000000000000003000.seg", "records": 1}
+    health = assess(
+        EdgeSnapshot(buffers=(damaged,), spool_damage={"durable": [finding, other]}),
+        {},
+        now_ms=NOW_MS,
+        robots=0,
+    )
+    assert health.state == "degraded"
+    ((component, subject, reason, detail),) = [
+        (p.component, p.subject, p.reason, p.detail) for p in health.problems
+    ]
+    assert (component, subject, reason) == ("spool", "durable", "spool_damage")
+    assert detail.startswith(
+        "2 damage finding(s) (1150 record(s) lost); first: segment_missing in 00000000000000001150.seg"
+    )
+    assert "POST /spool/damage/acknowledge" in detail
+    acknowledged = BufferState(stats=stats(), capacity_bytes=1000)
+    assert assess(EdgeSnapshot(buffers=(acknowledged,)), {}, now_ms=NOW_MS, robots=0).state == "ok"
+
+
 def test_threshold_is_a_rule() -> None:
     snapshot = EdgeSnapshot(buffers=(buffer(nbytes=500),))
     assert (
@@ -131,7 +154,7 @@ def test_telemetry_reports_increments_and_gauges() -> None:
         mappings={"ir": counts},
         buffers=(
             BufferState(
-                stats(nbytes=300, depth=3, appended=12, dropped_oldest=2),
+                stats(nbytes=300, depth=3, appended=12, dropped_oldest=2, lost_missing=0),
                 capacity_bytes=1000,
                 appended_bytes=1200,
             ),
@@ -149,6 +172,7 @@ def test_telemetry_reports_increments_and_gauges() -> None:
         },
         wan_link_up=True,
         sequence_gaps={"/tb4_01/ir": 2},
+        lost_before_spool={"tb4_01": {"/tb4_01/ir": 7}},
     )
     health = telemetry.observe(snap, robots=2)
     assert health.state == "degraded"  # one dead letter just now
@@ -181,6 +205,8 @@ def test_telemetry_reports_increments_and_gauges() -> None:
         ("fleetlink_wan_link_up", ()): 1,
         ("fleetlink_robots_registered", ()): 2,
         ("fleetlink_sequence_gaps", ("/tb4_01/ir",)): 2,
+        ("fleetlink_lost_before_spool", ("tb4_01", "/tb4_01/ir")): 7,
+        ("fleetlink_spool_damage_unacknowledged", ("durable",)): 0,
         ("fleetlink_intake_queued_samples", ()): 0.0,
         ("fleetlink_intake_lag_seconds", ()): 0.0,
         ("fleetlink_memory_resident_bytes", ()): 0.0,

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Iterable, Sequence
 from functools import cache
 
 import pytest
@@ -11,7 +12,7 @@ from fleetlink.edge.errors import SpoolFullError
 from fleetlink.edge.mapping import MappingSpec, MappingTable
 from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
-from fleetlink.edge.runtime.processor import Emit, Item, Processor, Rejected
+from fleetlink.edge.runtime.processor import Emit, Item, Processor, Rejected, Taken
 from fleetlink.edge.runtime.records import RecordMaker
 from fleetlink.edge.runtime.types import TypeStoreCodecs
 from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, SpoolBatch, SpoolStats
@@ -19,7 +20,8 @@ from fleetlink.roswire import cdr
 from fleetlink.roswire.errors import PayloadError
 from fleetlink.roswire.subscriber import RosSample
 from fleetlink.schemas.typestore import load_typestore
-from fleetlink.wire import Record, decode_payload
+from fleetlink.wire import Record, decode_payload, encode_payload
+from fleetlink.wire.groups import encode_group
 from tests.helpers import wait_until
 
 STRING = "std_msgs/msg/String"
@@ -181,3 +183,89 @@ def test_drop_newest_results_are_counted() -> None:
         assert batch is not None
         intake.offer(string_sample("/r1/chat", "z", 3))
         wait_until(lambda: processor.stats.spool_dropped == 1, 5)
+
+
+class CallLog(MemoryBuffer):
+    """A buffer that notes the order of marks and appends."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream=stream, first_seq=1)
+        self.calls: list[object] = []
+
+    def note_marks(self, marks: Sequence[tuple[bytes, int]]) -> None:
+        self.calls.append(("marks", sorted(marks)))
+
+    def append_group(self, group: bytes) -> int:
+        self.calls.append("group")
+        return super().append_group(group)
+
+    def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
+        self.calls.append("records")
+        return super().append_many(payloads)
+
+
+class OneTake:
+    """A sample source that brings one ``Taken`` (the data plane's shape), then nothing."""
+
+    def __init__(self, taken: Taken) -> None:
+        self.pending: list[Taken] = [taken]
+
+    def take(self, max_samples: int, timeout_s: float) -> Taken:
+        if self.pending:
+            return self.pending.pop()
+        time.sleep(min(timeout_s, 0.01))
+        return Taken()
+
+    def wake(self) -> None:
+        return None
+
+    def sync(self, table_version: int) -> None:
+        return None
+
+    def install(self, maker: RecordMaker, keys: Iterable[str]) -> None:
+        return None
+
+
+def native_group(text: bytes) -> bytes:
+    return encode_group(
+        [encode_payload(Record(kafka_topic="fleet.imu", key=b"r1", value=text, raw_value=True))]
+    )
+
+
+G1, G2 = b"\x01" * 16, b"\x02" * 16
+
+
+@pytest.mark.parametrize("general", [True, False])
+def test_marks_go_to_the_spool_just_before_its_last_append_of_the_chunk(general: bool) -> None:
+    sample = string_sample("/r1/chat", "a", 9)._replace(gid=G2)  # the general path
+    taken = Taken(
+        groups={
+            "at_least_once": [native_group(b"x"), native_group(b"y")],
+            "best_effort": [native_group(b"z")],
+        },
+        samples=[sample] if general else [],
+        count=4 if general else 3,
+        marks=[(G1, 41)],
+    )
+    durable, memory = CallLog("durable"), CallLog("memory")
+    processor = Processor(
+        Intake(), maker(), {"at_least_once": durable, "best_effort": memory}, source=OneTake(taken)
+    )
+    with processor:
+        wait_until(lambda: processor.stats.appended == (4 if general else 3), 5)
+    if general:
+        assert durable.calls == ["group", "group", ("marks", [(G1, 41), (G2, 9)]), "records"]
+    else:
+        assert durable.calls == ["group", ("marks", [(G1, 41)]), "group"]
+    assert memory.calls == ["group"]  # best-effort records are not what the marks describe
+
+
+def test_marks_of_a_chunk_with_nothing_durable_wait_for_the_next_append() -> None:
+    taken = Taken(groups={"best_effort": [native_group(b"z")]}, count=1, marks=[(G1, 5)])
+    durable, memory = CallLog("durable"), CallLog("memory")
+    processor = Processor(
+        Intake(), maker(), {"at_least_once": durable, "best_effort": memory}, source=OneTake(taken)
+    )
+    with processor:
+        wait_until(lambda: processor.stats.appended == 1, 5)
+    assert durable.calls == [("marks", [(G1, 5)])]

@@ -93,3 +93,16 @@ def test_block_refuses_a_whole_group_and_drop_newest_counts_its_records(tmp_path
         assert info.value.taken == 0  # the refused group is refused whole
         assert spool.stats().block_timeouts == 1
         assert spool.stats().appended == taken
+
+
+def test_groups_larger_than_a_segment_frame_are_split_to_fit(tmp_path: Path) -> None:
+    options = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_bytes=1 << 20)  # (the WAN's limit)
+    payloads = [bytes([n % 251]) * 300 for n in range(100)]  # 30 KB: far beyond one 8 KiB segment
+    with Spool(tmp_path, options) as spool:
+        assert spool.append_group(encode_group(payloads)) == 100
+        assert spool.append_many(payloads) == list(range(101, 201))
+        seen: list[bytes] = []
+        while (batch := spool.read_unacked(1000, 1 << 20)) is not None:
+            seen.extend(r.payload for r in batch.records)
+            spool.ack(batch.first_seq)
+    assert seen == payloads + payloads

@@ -93,6 +93,8 @@ class SpoolModel(RuleBasedStateMachine):
         stats = self.spool.stats()
         assert stats.depth >= len(self.unacked)
         assert stats.corrupt_skipped == 0
+        assert stats.lost_missing == 0  # crashes and clean stops are not damage
+        assert stats.damage_unacknowledged == 0
         assert stats.next_seq > self.last_seq
 
     def drain(self) -> set[int]:

@@ -38,7 +38,9 @@ def reopen_and_read(directory: Path) -> tuple[list[int], Spool]:
     return seqs, spool
 
 
-def test_torn_tail_is_truncated_counted_and_logged(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def test_a_cut_last_record_is_truncated_counted_exactly_and_logged(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     (segment,) = fill(tmp_path, 20)
     size = segment.stat().st_size
     with segment.open("r+b") as handle:
@@ -47,11 +49,34 @@ def test_torn_tail_is_truncated_counted_and_logged(tmp_path: Path, caplog: pytes
     seqs, spool = reopen_and_read(tmp_path)
     assert seqs == list(range(1, 20))
     offset = SEGMENT_HEADER_SIZE + 19 * FRAME
-    assert f"torn tail in {segment} at offset {offset}" in caplog.text
+    assert f"segment cut short in {segment} at offset {offset}" in caplog.text
+    assert "1 record(s) lost (seqs 20..20)" in caplog.text  # the ledger knew seq 20 was in it
     assert spool.stats().corrupt_skipped == 1
+    assert spool.stats().damage_unacknowledged == 1
     assert spool.append(RECORD) is not None
     spool.close()
     assert segment.exists() is False or segment.stat().st_size == offset  # truncated, then acked away
+
+
+def test_a_torn_write_beyond_the_last_known_record_is_a_crash_trace(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    (segment,) = fill(tmp_path, 20)
+    size = segment.stat().st_size
+    whole = segment.read_bytes()[-FRAME:]
+    torn = bytearray(whole[:60])
+    torn[8:16] = (21).to_bytes(8, "little")  # the header of seq 21, whose write was cut short
+    with segment.open("ab") as handle:
+        handle.write(bytes(torn))
+    caplog.set_level(logging.WARNING)
+    seqs, spool = reopen_and_read(tmp_path)
+    assert seqs == list(range(1, 21))
+    assert f"torn tail in {segment} at offset {size}" in caplog.text
+    assert "a write a crash cut short" in caplog.text
+    stats = spool.stats()
+    assert stats.corrupt_skipped == 1
+    assert stats.damage_unacknowledged == 0  # never taken: nothing for an operator to look at
+    spool.close()
 
 
 def test_flipped_bit_in_the_middle_loses_one_record_counted(
@@ -66,7 +91,7 @@ def test_flipped_bit_in_the_middle_loses_one_record_counted(
     seqs, spool = reopen_and_read(tmp_path)
     assert seqs == [s for s in range(1, 31) if s != 11]
     assert f"corrupt data in {segment} at offset {offset} ({FRAME} bytes: checksum mismatch)" in caplog.text
-    assert "1 record(s) skipped" in caplog.text
+    assert "1 record(s) lost (seqs 11..11)" in caplog.text
     assert spool.stats().corrupt_skipped == 1
     spool.close()
 
@@ -154,10 +179,27 @@ def test_torn_ledger_entry_is_ignored(tmp_path: Path, caplog: pytest.LogCaptureF
     assert len(ledger.read_bytes()) % ENTRY_SIZE == 0  # rewritten whole
 
 
-def test_lost_ledger_means_resend_not_loss(tmp_path: Path) -> None:
+def test_a_lost_ledger_file_is_restored_from_its_copy(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     fill(tmp_path, 50, ack_first=20)
     (tmp_path / "ledger").unlink()
+    caplog.set_level(logging.ERROR)
+    seqs, spool = reopen_and_read(tmp_path)
+    assert seqs == list(range(21, 51))  # the copy knew the ack mark: nothing is sent twice
+    assert f"ledger file {tmp_path / 'ledger'} is missing" in caplog.text
+    assert spool.stats().damage_unacknowledged == 1
+    assert spool.append(RECORD) == 51
+    spool.close()
+    assert (tmp_path / "ledger").stat().st_size > 0  # written again
+
+
+def test_both_ledger_files_lost_means_resend_not_loss(tmp_path: Path) -> None:
+    fill(tmp_path, 50, ack_first=20)
+    (tmp_path / "ledger").unlink()
+    (tmp_path / "ledger.copy").unlink()
     seqs, spool = reopen_and_read(tmp_path)
     assert seqs == list(range(1, 51))  # acked records are sent again: duplicates, never a loss
+    assert [f.reason for f in spool.damage()] == ["ledger_missing"]
     assert spool.append(RECORD) == 51
     spool.close()

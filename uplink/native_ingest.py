@@ -1,0 +1,248 @@
+"""The uplink's per-record path in native code: a batch into Kafka with its decisions per tail.
+
+A batch's records share a handful of *tails* (topic, key, headers: one per robot and mapping).
+``ScannedBatch.scan`` parses the record groups once and reports them; everything the uplink
+decides — the sender's identity, the topic policy, the schema ids — is decided per tail here,
+in Python, on a view of the batch with one record per tail (``view``); then ``NativeProducer``
+hands every record of an approved tail to librdkafka (the same library confluent-kafka loaded,
+with the same settings: idempotent, ``acks=all``) without the GIL and counts its delivery
+reports. Records of other tails (diverted by the policy, a schema the registry refused or could
+not give, raw dead letters of an internal topic) and records whose delivery failed go through
+the Python path (``ingest.BatchJob``), which makes the same records, dead letters and retries it
+always did. One ack answers the whole batch once every part is settled.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from fleetlink._native import NativeProducer, ScannedBatch
+from fleetlink.schemas.single_object import confluent_frame
+from fleetlink.uplink.ingest import BatchJob, IngestStats, Sink, count_outcome
+from fleetlink.uplink.policy import Decision
+from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
+from fleetlink.wire import Ack, Batch, Record, RecordFailure, WireError, decode_payload
+
+log = logging.getLogger(__name__)
+
+Failures = list[tuple[int, int, str, str]]
+"""``(record index, librdkafka error code, name, message)`` of records whose delivery failed."""
+
+
+def librdkafka_path() -> str | None:
+    """Where the librdkafka confluent-kafka loaded lives (``None`` when it is not found)."""
+    import confluent_kafka  # noqa: F401 - loads librdkafka into the process
+
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return None
+    for line in maps.splitlines():
+        path = line.split()[-1] if line.split() else ""
+        if "librdkafka" in Path(path).name:
+            return path
+    return None
+
+
+class NativeIngest:
+    """One native producer and the thread that hands each finished batch to its callback."""
+
+    def __init__(self, producer_config: Mapping[str, Any]) -> None:
+        path = librdkafka_path()
+        if path is None:
+            raise RuntimeError("librdkafka is not loaded in this process")
+        settings = [(key, _text(value)) for key, value in producer_config.items() if not callable(value)]
+        self.producer = NativeProducer(path, settings)
+        self._jobs: dict[int, Callable[[Failures], None]] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="uplink-native-done", daemon=True)
+        self._thread.start()
+
+    def produce(
+        self,
+        scanned: ScannedBatch,
+        tails: list[int],
+        heads: dict[tuple[int, bytes], bytes],
+        on_done: Callable[[Failures], None],
+    ) -> list[int]:
+        """Produce the records of ``tails``; ``on_done(failures)`` once they are delivered (at
+        once when there is none). Returns the indices of the records left to the caller."""
+        with self._lock:  # the batch id is registered before its first report can arrive
+            batch_id, produced, others = self.producer.produce(scanned, tails, heads)
+            if produced:
+                self._jobs[batch_id] = on_done
+        if not produced:
+            on_done([])
+        return others
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            for batch_id, failures in self.producer.wait_done(0.5):
+                with self._lock:
+                    callback = self._jobs.pop(batch_id, None)
+                if callback is not None:
+                    try:
+                        callback(failures)
+                    except Exception as exc:  # noqa: BLE001 - one batch's bookkeeping must not stop the others
+                        log.error("native ingest: finishing batch %d failed: %r", batch_id, exc)
+
+    def stop(self, flush_timeout: float = 10.0) -> int:
+        """Deliver what is in flight (bounded), then close; returns records not delivered."""
+        left = self.producer.flush(flush_timeout)
+        self.producer.close()
+        self._stop.set()
+        self._thread.join(5)
+        return left
+
+
+def _text(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def view(head: Batch, scanned: ScannedBatch) -> Batch:
+    """The batch as the admission checks read it: one record per tail (its topic, key, headers)."""
+    records = tuple(
+        Record(topic, key, b"", tuple(headers), seq=head.first_seq)
+        for topic, key, headers, _count, _raw, _fps in scanned.tails()
+    )
+    return dataclasses.replace(head, records=records)
+
+
+@dataclasses.dataclass
+class _Parts:
+    waiting: int
+    retry: list[RecordFailure] = dataclasses.field(default_factory=list)
+    dead: list[RecordFailure] = dataclasses.field(default_factory=list)
+
+
+class NativeJob:
+    """One batch: approved tails natively, the rest (and delivery failures) by ``BatchJob``."""
+
+    def __init__(
+        self,
+        head: Batch,
+        scanned: ScannedBatch,
+        *,
+        native: NativeIngest,
+        sink: Sink,
+        schema_ids: SchemaIds,
+        routes: Mapping[str, Decision],
+        job: Callable[..., BatchJob],
+        on_done: Callable[[Ack], None],
+        stats: IngestStats,
+        on_delivery: Callable[[str, bool, float], None] | None = None,
+    ) -> None:
+        self._head = head
+        self._scanned = scanned
+        self._native = native
+        self._sink = sink
+        self._ids = schema_ids
+        self._routes = routes
+        self._job = job
+        """Makes the ``BatchJob`` of a part: ``job(batch, on_done=...)``."""
+        self._on_done = on_done
+        self._stats = stats
+        self._on_delivery = on_delivery
+        self._parts = _Parts(waiting=2)  # the native part and the Python part
+        self._lock = threading.Lock()
+        self._tails = scanned.tails()
+        self._produced_tails: list[int] = []
+        self._produced_at = 0.0
+
+    def run(self) -> None:
+        with self._stats.lock:
+            self._stats.batches += 1
+            self._stats.records += len(self._scanned)
+        tails: list[int] = []
+        heads: dict[tuple[int, bytes], bytes] = {}
+        for index, (topic, _key, _headers, _count, _raw, fps) in enumerate(self._tails):
+            if topic in self._routes:
+                continue  # diverted or refused by the policy: the Python path knows how
+            try:
+                for fp in fps:
+                    schema_id = self._ids.id_for(self._head.site, topic, fp, self._head.schemas)
+                    heads[index, fp] = confluent_frame(schema_id, b"")
+            except (SchemaUnavailableError, SchemaRefusedError, WireError):
+                continue  # the Python path retries or dead-letters these records, record by record
+            tails.append(index)
+        self._produced_tails = tails
+        self._produced_at = time.monotonic()
+        others = self._native.produce(self._scanned, tails, heads, self._native_done)
+        self._python_part(others, self._part_done)
+
+    def _python_part(self, indices: list[int], on_done: Callable[[Ack], None]) -> None:
+        if not indices:
+            on_done(self._ack((), "ok", ""))
+            return
+        records = []
+        for index in indices:
+            seq, payload = self._scanned.record(index)
+            records.append(decode_payload(payload, seq))
+        part = dataclasses.replace(self._head, records=tuple(records), first_seq=records[0].seq)
+        self._job(part, on_done=on_done).run()
+
+    def _native_done(self, failures: Failures) -> None:
+        if self._on_delivery is not None:
+            self._report_deliveries(failures)
+        if not failures:
+            self._part_done(self._ack((), "ok", ""))
+            return
+        log.info(
+            "native ingest: %d record(s) of batch %s/%s %d.. not delivered (%s): sent again the Python way",
+            len(failures),
+            self._head.edge_id,
+            self._head.stream,
+            self._head.first_seq,
+            failures[0][2],
+        )
+        self._python_part(sorted(index for index, *_ in failures), self._part_done)
+
+    def _report_deliveries(self, failures: Failures) -> None:
+        """One delivery report per record produced natively (only when metrics are exported)."""
+        on_delivery = self._on_delivery
+        if on_delivery is None:
+            return
+        latency = time.monotonic() - self._produced_at
+        failed = {index for index, *_ in failures}
+        produced = set(self._produced_tails)
+        for index, tail in enumerate(self._scanned.tail_ids()):
+            if tail in produced:
+                on_delivery(self._tails[tail][0], index not in failed, latency)
+
+    def _part_done(self, ack: Ack) -> None:
+        with self._lock:
+            parts = self._parts
+            for failure in ack.failures:
+                (parts.dead if failure.dead_lettered else parts.retry).append(failure)
+            if ack.status == "error" and all(f.dead_lettered for f in ack.failures):
+                parts.retry.append(RecordFailure(self._head.first_seq, ack.detail or "not produced", False))
+            parts.waiting -= 1
+            finished = parts.waiting == 0
+        if finished:
+            status = "error" if parts.retry else "ok"
+            detail = parts.retry[0].reason if parts.retry else ""
+            count_outcome(self._stats, status)
+            self._on_done(
+                self._ack(tuple(sorted(parts.dead + parts.retry, key=lambda f: f.seq)), status, detail)
+            )
+
+    def _ack(self, failures: tuple[RecordFailure, ...], status: str, detail: str) -> Ack:
+        seqs = self._scanned.seqs()
+        return Ack(
+            edge_id=self._head.edge_id,
+            stream=self._head.stream,
+            first_seq=self._head.first_seq,
+            last_seq=seqs[-1] if seqs else self._head.first_seq,
+            status="error" if status == "error" else "ok",
+            failures=failures,
+            detail=detail[:1000],
+        )
