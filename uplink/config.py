@@ -36,6 +36,8 @@ class TopicsSection(Section):
     command_status: KafkaTopic = "fleetlink.commands.status"
     refused: KafkaTopic = "fleetlink.refused"
     """The cloud-side dead-letter topic: records the uplink refused (site, topic and reason in headers)."""
+    audit: KafkaTopic = "fleetlink.audit"
+    """Who changed what and sent which command from the fleet console (JSON, keyed by user)."""
 
 
 class IngestSection(Section):

@@ -24,10 +24,18 @@ _READS = ("robots", "topics", "mappings", "robot_types", "health")
 
 
 class LocalSite:
-    def __init__(self, service: AdminService, *, edge_id: str, status: Callable[[], dict[str, Any]]) -> None:
+    def __init__(
+        self,
+        service: AdminService,
+        *,
+        edge_id: str,
+        status: Callable[[], dict[str, Any]],
+        latest: Callable[[str], Envelope] | None = None,
+    ) -> None:
         self.service = service
         self.edge_id = edge_id
         self._status = status
+        self._latest = latest
         self.session: zenoh.Session | None = None
         """The edge's Zenoh session, once started: the uplinks' delivery figures for this site."""
         self.timeout_s = 1.0
@@ -58,6 +66,11 @@ class LocalSite:
             return failure(404, f"no admin resource at {key!r}", site=site)
         status, part = execute(self.service, found[0], body)
         return from_parts(status, part, site=site, edge_id=self.edge_id)
+
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        if site != self.site:
+            return failure(404, f"this edge serves site {self.site!r}, not {site!r}", site=site)
+        return None if self._latest is None else self._latest(robot)
 
     def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
         if self.session is None:

@@ -20,7 +20,7 @@ from typing import Any
 import zenoh
 from pydantic import SecretStr
 
-from fleetlink.common.names import key_path_problem, site_problem
+from fleetlink.common.names import key_chunk_problem, key_path_problem, site_problem
 from fleetlink.console.envelope import Envelope, failure, parse
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
@@ -52,6 +52,11 @@ def delivery_answers(session: zenoh.Session, site: str | None, timeout_s: float)
         if isinstance(data, dict) and (site is None or data.get("site") == site):
             out.append(data)
     return out
+
+
+def latest_key(site: str, robot: str) -> str:
+    """Where an edge console answers the latest values of a robot's mapped topics."""
+    return f"fleetlink/{site}/console/latest/{robot}"
 
 
 def _site_of(key: str) -> str | None:
@@ -134,6 +139,15 @@ class ZenohSites:
 
     def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
         return delivery_answers(self.session, site, self.timeout_s)
+
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        if site_problem(site) is not None or key_chunk_problem(robot) is not None:
+            return failure(400, f"not a site and robot: {site!r} {robot!r}", site=site)
+        key = latest_key(site, robot)
+        for reply_key, env in self._replies(self._get(key)):
+            if reply_key == key:
+                return env
+        return failure(504, f"no edge of site {site!r} answered within {self.timeout_s:g} s", site=site)
 
     def commands(self) -> dict[str, Any]:
         if self._commands is None:

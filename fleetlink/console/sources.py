@@ -41,6 +41,11 @@ class Sites(Protocol):
         no way to ask."""
         ...
 
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        """The latest values of the robot's mapped topics (``{"robot", "values": {topic: ...}}``),
+        as the site's edge reads them; ``None`` when this process cannot ask."""
+        ...
+
     def commands(self) -> dict[str, Any]:
         """Command routing status: ``{"available": false, "reason"}`` where there is none."""
         ...

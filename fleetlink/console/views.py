@@ -160,3 +160,39 @@ def site_summary(site: str, health: Envelope) -> dict[str, Any]:
         "problems": len(body.get("problems", ())) if isinstance(body.get("problems"), list) else None,
         "error": None if health.body is not None else (health.error or f"status {health.status}"),
     }
+
+
+def robot_view(
+    site: str, robot: str, parts: Mapping[str, Envelope], latest: Envelope | None
+) -> dict[str, Any]:
+    """A robot's page: its registration (and history), the topics it publishes with the mappings
+    each feeds, and the latest value of each mapped topic (when the edge answered them)."""
+    errors: dict[str, str] = {}
+    robots = _list(_body(parts, "robots", errors))
+    topics = _list(_body(parts, "topics", errors))
+    found = next((r for r in robots if r.get("robot") == robot), None)
+    own = []
+    for topic in topics:
+        name = str(topic.get("topic", ""))
+        feeds = [m for m in topic.get("mappings", ()) if isinstance(m, dict) and m.get("robot") == robot]
+        if feeds or name.startswith(f"/{robot}/"):
+            own.append(
+                {"topic": name, "types": topic.get("types", []), "mappings": feeds, "mapped": bool(feeds)}
+            )
+    values: dict[str, Any] = {}
+    if latest is None:
+        errors["latest"] = "not available on this process"
+    elif latest.ok and isinstance(latest.body, dict):
+        values = latest.body
+    else:
+        errors["latest"] = f"{latest.status}: {latest.error or 'refused'}"
+    return {
+        "site": site,
+        "robot": robot,
+        "registered": found is not None,
+        "registration": found,
+        "history": (found or {}).get("history", []),
+        "topics": sorted(own, key=lambda t: (not t["mapped"], t["topic"])),
+        "latest": values,
+        "errors": errors,
+    }

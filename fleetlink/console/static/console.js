@@ -551,6 +551,291 @@
     };
   }
 
+
+  // -- charts: the last hour, as small SVG line charts ------------------------------------------
+  const COLOURS = ["#1f6feb", "#1a7f37", "#b35900", "#c62828", "#8250df", "#0a7ea4", "#6e7781", "#bf3989"];
+
+  function chart(title, columns, names, id) {
+    const width = 420;
+    const height = 140;
+    const pad = { l: 44, r: 8, t: 8, b: 18 };
+    const t = columns.t || [];
+    const svg = document.createElementNS(SVG, "svg");
+    svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
+    svg.setAttribute("class", "chart");
+    if (id) svg.setAttribute("id", id);
+    const values = names.flatMap((n) => (columns[n] || []).filter((v) => v !== null && v !== undefined));
+    const max = Math.max(1e-9, ...values);
+    const t0 = t.length ? t[0] : 0;
+    const t1 = t.length ? Math.max(t[t.length - 1], t0 + 1) : 1;
+    const x = (v) => pad.l + ((v - t0) / (t1 - t0)) * (width - pad.l - pad.r);
+    const y = (v) => height - pad.b - (v / max) * (height - pad.t - pad.b);
+    const axis = document.createElementNS(SVG, "path");
+    axis.setAttribute("d", `M${pad.l},${pad.t} V${height - pad.b} H${width - pad.r}`);
+    axis.setAttribute("class", "axis");
+    svg.append(axis);
+    const label = (text, lx, ly, anchor) => {
+      const node = document.createElementNS(SVG, "text");
+      node.setAttribute("x", String(lx));
+      node.setAttribute("y", String(ly));
+      node.setAttribute("text-anchor", anchor || "start");
+      node.textContent = text;
+      svg.append(node);
+    };
+    label(fmtRate(max), pad.l - 4, pad.t + 8, "end");
+    label("0", pad.l - 4, height - pad.b, "end");
+    if (t.length) label(`${Math.round((t1 - t0) / 60)} min`, width - pad.r, height - 4, "end");
+    const legend = el("div", { class: "legend" });
+    names.forEach((name, i) => {
+      const data = columns[name] || [];
+      let d = "";
+      let pen = false;
+      data.forEach((v, j) => {
+        if (v === null || v === undefined) { pen = false; return; }
+        d += `${pen ? "L" : "M"}${x(t[j]).toFixed(1)},${y(v).toFixed(1)} `;
+        pen = true;
+      });
+      const path = document.createElementNS(SVG, "path");
+      path.setAttribute("d", d.trim() || `M${pad.l},${height - pad.b}`);
+      path.setAttribute("class", "series");
+      path.setAttribute("stroke", COLOURS[i % COLOURS.length]);
+      path.dataset.series = name;
+      path.dataset.points = String(data.filter((v) => v !== null && v !== undefined).length);
+      svg.append(path);
+      legend.append(el("span", { style: null }, el("strong", { text: "— ", class: `c${i}` }), name));
+      legend.lastChild.firstChild.setAttribute("class", `swatch c${i % COLOURS.length}`);
+    });
+    return el("div", { class: "card" }, el("h3", { text: title }), svg, legend);
+  }
+
+  async function refreshHistory(site) {
+    const box = document.getElementById("history-charts");
+    if (!box) return;
+    const { status, data } = await api("GET", `api/sites/${encodeURIComponent(site)}/history`);
+    if (status !== 200 || !data.available) {
+      replaceChildren(box, el("span", { class: "muted", text: data.reason || data.error || `HTTP ${status}` }));
+      return;
+    }
+    const all = (data.site || {}).all || { t: [] };
+    replaceChildren(box,
+      chart("Records per second", all, ["received", "emitted", "acked"], "chart-rates"),
+      chart("Dropped per second", all, ["filtered", "lost", "dead_lettered"], "chart-drops"),
+      chart("Spool backlog (records)", all, ["backlog"], "chart-backlog"),
+      chart("Oldest record waiting (s)", all, ["oldest_age_s"], "chart-lag"));
+    const mappings = Object.entries(data.mappings || {}).filter(([name]) => matches(name));
+    replaceChildren(document.getElementById("mapping-charts"), mappings.map(([name, cols]) =>
+      chart(name, cols, ["received", "emitted", "filtered", "lost", "dead_lettered"], `chart-mapping-${name}`)));
+  }
+
+  // -- site page: robot types ------------------------------------------------------------------
+  function robotTypes(site, refresh) {
+    const form = document.getElementById("type-form");
+    if (!form) return { render() {} };
+    const enc = encodeURIComponent(site);
+    const result = document.getElementById("type-result");
+    const say = (text, bad) => { result.textContent = text; result.classList.toggle("bad", Boolean(bad)); };
+    const admin = body.dataset.role === "admin" || body.dataset.role === "";
+    const confirm = { name: null, until: 0 };
+    function clear() {
+      for (const box of form.querySelectorAll(".field-error")) { box.textContent = ""; box.hidden = true; }
+    }
+    function show(fields) {
+      for (const [field, messages] of Object.entries(fields || {})) {
+        const box = document.getElementById(`terror-${field}`) || document.getElementById("terror-_form");
+        box.textContent = messages.join(" ");
+        box.hidden = false;
+      }
+    }
+    form.addEventListener("submit", async (event) => {
+      event.preventDefault();
+      clear();
+      const name = form.elements.name.value.trim();
+      if (!name) { show({ name: ["a name is needed"] }); return; }
+      say("saving …");
+      const { data } = await api("PUT", `api/sites/${enc}/robot-types/${encodeURIComponent(name)}`,
+        { match: form.elements.match.value, mappings: form.elements.mappings.value });
+      if (!data.ok) { show(data.fields && Object.keys(data.fields).length ? data.fields : { _form: [data.error] }); say(data.error || "refused", true); return; }
+      say(`robot type ${name} ${data.result.status}`);
+      form.reset();
+      refresh();
+    });
+    for (const input of form.elements) if (!admin) input.disabled = true;
+    if (!admin) say("only an admin changes robot types", false);
+    return {
+      render(types) {
+        const tbody = document.querySelector("#robot-types tbody");
+        const rows = (types || []).map((t) => {
+          const confirming = confirm.name === t.name && Date.now() < confirm.until;
+          return el("tr", { dataset: { type: t.name } },
+            el("td", {}, el("strong", { text: t.name })), el("td", {}, el("code", { text: t.match })),
+            el("td", { text: (t.mappings || []).join(", ") }), el("td", { text: (t.robots || []).join(", ") }),
+            el("td", { text: t.origin }),
+            el("td", { class: "actions" },
+              el("button", { type: "button", class: "edit", text: "Edit", disabled: !admin, onclick: () => {
+                form.elements.name.value = t.name;
+                form.elements.match.value = t.match;
+                form.elements.mappings.value = "";
+                form.scrollIntoView({ behavior: "smooth" });
+              } }),
+              el("button", { type: "button", class: confirming ? "remove danger" : "remove", disabled: !admin,
+                text: confirming ? "Confirm remove" : "Remove", onclick: async () => {
+                  if (confirm.name !== t.name || Date.now() >= confirm.until) {
+                    confirm.name = t.name; confirm.until = Date.now() + 5000; refresh(); return;
+                  }
+                  confirm.name = null;
+                  const { data } = await api("DELETE", `api/sites/${enc}/robot-types/${encodeURIComponent(t.name)}`);
+                  say(data.ok ? `robot type ${t.name} removed` : data.error || "refused", !data.ok);
+                  refresh();
+                } })));
+        });
+        if (!rows.length) rows.push(el("tr", {}, el("td", { colspan: 6, class: "muted", text: "no robot type" })));
+        replaceChildren(tbody, rows);
+      },
+    };
+  }
+
+  // -- robot page ------------------------------------------------------------------------------
+  function robotPage() {
+    const site = body.dataset.site;
+    const robot = body.dataset.robot;
+    const path = `api/sites/${encodeURIComponent(site)}/robots/${encodeURIComponent(robot)}`;
+    const sent = [];
+    const refresh = async () => {
+      const { status, data } = await api("GET", path);
+      if (status !== 200) throw new Error(data.error || `HTTP ${status}`);
+      const reg = data.registration;
+      const state = document.getElementById("robot-state");
+      state.className = `badge ${reg ? reg.state : "unknown"}`;
+      state.textContent = reg ? reg.state : "not registered here";
+      document.getElementById("robot-type").textContent = reg ?
+        `${reg.robot_type} · since ${fmtTime(reg.registered_at)} · ${reg.explicit ? "registered explicitly" : "discovered"}` : "";
+      const latest = data.latest || {};
+      const values = latest.values || {};
+      const box = document.getElementById("latest");
+      box.className = "latest";
+      const cards = Object.entries(values).map(([topic, v]) => el("div", { class: "card", dataset: { topic } },
+        el("h3", {}, el("code", { text: topic }), el("span", { class: "muted small", text: ` ${v.type}` })),
+        v.link ? el("div", {}, el("a", { href: v.link, rel: "noopener noreferrer", target: "_blank", text: v.link })) : null,
+        el("pre", { class: "value", text: v.error || JSON.stringify(v.value, null, 1).slice(0, 4000) }),
+        el("div", { class: "muted small", text: `at ${fmtTime(v.at)}` })));
+      replaceChildren(box, cards.length ? el("div", { class: "cards" }, cards) :
+        el("span", { class: "muted", text: data.errors && data.errors.latest ? data.errors.latest :
+          "no mapped topic of this robot published within the wait" }));
+      replaceChildren(document.querySelector("#robot-topics tbody"), (data.topics || []).map((t) => el("tr", { dataset: { topic: t.topic } },
+        el("td", {}, el("code", { text: t.topic })), el("td", { text: (t.types || []).join(", ") }),
+        el("td", { text: t.mapped ? t.mappings.map((m) => `${m.mapping} → ${m.kafka_topic}`).join(", ") : "not mapped" }))));
+      replaceChildren(document.querySelector("#robot-history tbody"), (data.history || []).map((h) => el("tr", {},
+        el("td", { text: fmtTime(h.at) }), el("td", {}, badge(h.event)), el("td", { text: h.robot_type }),
+        el("td", { text: h.reason }))));
+      const errors = Object.entries(data.errors || {}).filter(([k]) => k !== "latest");
+      const eb = document.getElementById("read-errors");
+      eb.hidden = !errors.length;
+      replaceChildren(eb, errors.map(([k, m]) => el("div", { text: `${k}: ${m}` })));
+      setUpdated(`updated ${new Date().toLocaleTimeString()}`);
+    };
+    const form = document.getElementById("command-form");
+    const result = document.getElementById("command-result");
+    const say = (text, bad) => { result.textContent = text; result.classList.toggle("bad", Boolean(bad)); };
+    (async () => {
+      const { data } = await api("GET", "api/command-mappings");
+      const select = form.elements.mapping;
+      if (!data.available) {
+        for (const input of form.elements) input.disabled = true;
+        say(data.reason || "commands are not available here");
+        return;
+      }
+      replaceChildren(select, (data.mappings || []).map((m) => el("option", { value: m.name, text: `${m.name} (${m.type} → ${m.to})` })));
+      if (!["operator", "admin", ""].includes(body.dataset.role)) {
+        for (const input of form.elements) input.disabled = true;
+        say("only an operator or an admin sends commands");
+      }
+    })();
+    const renderSent = async () => {
+      if (!sent.length) return;
+      const { data } = await api("GET", `api/commands/status?ids=${sent.map((c) => encodeURIComponent(c.command_id)).join(",")}`);
+      const statuses = data.statuses || {};
+      replaceChildren(document.querySelector("#sent-commands tbody"), sent.map((c) => {
+        const seen = statuses[c.command_id] || [];
+        const last = seen.length ? seen[seen.length - 1] : null;
+        return el("tr", { dataset: { command: c.command_id, status: last ? last.status : "sent" } },
+          el("td", {}, el("code", { text: c.command_id })), el("td", { text: c.mapping }),
+          el("td", { text: new Date(c.at).toLocaleTimeString() }),
+          el("td", { class: last ? `status-${last.status}` : "" }, last ? `${last.status}${last.site ? ` at ${last.site}` : ""}${last.detail ? ` (${last.detail})` : ""}` :
+            "in Kafka: waiting for the uplink and the repeater", seen.length > 1 ? el("div", { class: "muted small",
+              text: seen.map((s) => s.status).join(" → ") }) : null));
+      }));
+    };
+    form.addEventListener("submit", async (event) => {
+      event.preventDefault();
+      for (const box of form.querySelectorAll(".field-error")) { box.textContent = ""; box.hidden = true; }
+      say("sending …");
+      const { data } = await api("POST", "api/commands/send", { mapping: form.elements.mapping.value, robot, value: form.elements.value.value });
+      if (!data.ok) {
+        for (const [field, messages] of Object.entries(data.fields || { _form: [data.error] })) {
+          const box = document.getElementById(`cerror-${field}`) || document.getElementById("cerror-_form");
+          box.textContent = messages.join(" ");
+          box.hidden = false;
+        }
+        say(data.error || "refused", true);
+        return;
+      }
+      sent.unshift({ ...data.result, at: Date.now() });
+      say(`command ${data.result.command_id} is in Kafka (${data.result.topic}, offset ${data.result.offset})`);
+      renderSent();
+    });
+    loop(refresh, Math.max(POLL_MS, 3000));
+    loop(renderSent, Math.max(POLL_MS, 1000));
+  }
+
+  // -- dead letters ----------------------------------------------------------------------------
+  function deadLettersPage() {
+    const site = body.dataset.site;
+    const state = document.getElementById("dead-letters-state");
+    const filter = document.getElementById("filter");
+    const detail = document.getElementById("dead-letter-detail");
+    let records = [];
+    const render = () => {
+      view.filter = filter.value;
+      const shown = records.filter((r) => matches(r.reason, r.stage, r.topic, r.key, r.site, r.edge));
+      replaceChildren(document.querySelector("#dead-letters tbody"), shown.map((r) => el("tr", { dataset: { offset: r.offset, partition: r.partition } },
+        el("td", { text: new Date(r.timestamp_ms).toLocaleString("en-GB", { hour12: false }) }),
+        el("td", { text: `${r.site || "?"} / ${r.edge || "?"}` }), el("td", {}, el("code", { text: r.topic || "—" })),
+        el("td", { text: r.stage }), el("td", { class: "reason", text: r.reason }), el("td", {}, el("code", { text: r.key })),
+        el("td", { class: "num", text: fmtInt(r.size) }),
+        el("td", { class: "actions" },
+          el("button", { type: "button", class: "show", text: "Bytes", onclick: () => {
+            detail.hidden = false;
+            replaceChildren(detail, el("h3", { text: `partition ${r.partition}, offset ${r.offset}: ${fmtInt(r.size)} bytes` }),
+              el("div", { class: "hex", id: "dead-letter-hex", text: r.value_hex.replace(/(.{2})/g, "$1 ").trim() + (r.truncated ? " …" : "") }),
+              el("a", { href: `${BASE}api/dead-letters/${r.partition}/${r.offset}/raw`, id: "dead-letter-download", text: "Download the raw bytes" }));
+          } })))));
+      state.textContent = `${shown.length} of ${records.length} dead letter(s) shown`;
+    };
+    filter.addEventListener("input", render);
+    loop(async () => {
+      const { status, data } = await api("GET", `api/dead-letters?limit=200${site ? `&site=${encodeURIComponent(site)}` : ""}`);
+      if (status !== 200) throw new Error(data.error || `HTTP ${status}`);
+      if (!data.available) { state.textContent = data.reason; return; }
+      records = data.records || [];
+      render();
+      setUpdated(`updated ${new Date().toLocaleTimeString()}`);
+    }, Math.max(POLL_MS, 3000));
+  }
+
+  // -- audit -------------------------------------------------------------------------------------
+  function auditPage() {
+    loop(async () => {
+      const { status, data } = await api("GET", "api/audit?limit=200");
+      if (status !== 200) throw new Error(data.error || `HTTP ${status}`);
+      replaceChildren(document.querySelector("#audit tbody"), (data.records || []).map((r) => el("tr", { dataset: { action: r.action } },
+        el("td", { text: fmtTime(r.at) }), el("td", { text: r.user }), el("td", { text: r.role }),
+        el("td", {}, el("code", { text: r.action })), el("td", { text: r.site || "" }), el("td", { text: r.target || "" }),
+        el("td", { class: r.ok ? "" : "bad", text: String(r.status) }),
+        el("td", {}, el("code", { class: "small", text: JSON.stringify(r.detail) })))));
+      setUpdated(`updated ${new Date().toLocaleTimeString()}`);
+    }, Math.max(POLL_MS, 3000));
+  }
+
   // -- site page -------------------------------------------------------------------------------
   function sitePage() {
     const site = body.dataset.site;
@@ -565,10 +850,12 @@
       const shown = renderGraph(data.graph);
       renderRobots(data.robots || [], site);
       renderMappings(data, editor);
+      types.render(data.robot_type_details || []);
       drawEdges(shown);
       setUpdated(`updated ${new Date().toLocaleTimeString()}`);
     };
     editor = mappingEditor(site, () => refresh().catch((err) => setUpdated(String(err), true)));
+    const types = robotTypes(site, () => refresh().catch((err) => setUpdated(String(err), true)));
     const filter = document.getElementById("filter");
     const unmapped = document.getElementById("show-unmapped");
     const rerender = () => {
@@ -584,10 +871,11 @@
     unmapped.addEventListener("change", rerender);
     loop(refresh, POLL_MS);
     loop(refreshCommands, Math.max(POLL_MS, 3000));
+    loop(() => refreshHistory(site), Math.max(POLL_MS * 5, 5000));
     new ResizeObserver(() => { if (last) drawEdges(visibleGraph(last.graph)); }).observe(document.getElementById("graph"));
   }
 
-  const pages = { fleet: fleetPage, site: sitePage };
+  const pages = { fleet: fleetPage, site: sitePage, robot: robotPage, "dead-letters": deadLettersPage, audit: auditPage };
   const start = pages[body.dataset.page];
   if (start) start();
 })();

@@ -358,6 +358,9 @@ class FixedFleet:
         ]
         return [a for a in answers if site in (None, a["site"])]
 
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        return Envelope(status=200, site=site, body={"robot": robot, "values": {}})
+
     def commands(self) -> dict[str, Any]:
         return {"available": True, "records": 3}
 
