@@ -169,3 +169,19 @@ def test_a_command_value_is_completed_with_defaults() -> None:
         fill_datum(RING, {"leds": "red"})
     with pytest.raises(CommandRefusedError, match="colour"):
         fill_datum(RING, {"colour": 1})
+
+
+def test_the_command_line_prints_a_hash_of_the_password_on_stdin(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import io
+
+    from fleetlink.cli import main
+
+    monkeypatch.setattr("sys.stdin", io.StringIO("a-long-password\n"))
+    assert main(["console", "hash-password"]) == 0
+    printed = capsys.readouterr().out.strip()
+    assert verify_password(printed, "a-long-password")
+    monkeypatch.setattr("sys.stdin", io.StringIO("short\n"))
+    assert main(["console", "hash-password"]) == 2
+    assert "at least 8 characters" in capsys.readouterr().err
