@@ -1,8 +1,9 @@
 """Sending a command from the fleet console, on real processes: an uplink with one light-ring
 command mapping and its console, a site with a repeater and a simulated robot. An operator
-sends the command; it goes through the mapping's Kafka topic like an app's, the robot's light
-ring shows it, and the console reports its status from the command status topic. A viewer
-may not send, and a value that does not fit the ROS type is refused with its field named.
+sends the command from the robot's page in Chromium; it goes through the mapping's Kafka topic
+like an app's, the robot's light ring shows it, and the page shows its status from the command
+status topic as it changes. Over the JSON API: a viewer may not send, a value that does not
+fit the ROS type and a robot no site registered are refused.
 """
 
 from __future__ import annotations
@@ -11,12 +12,14 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from playwright.sync_api import Page, expect
 
 from fleetlink.common.console_config import ConsoleSection
 from fleetlink.console.uplink import UplinkConsole, console_extensions
 from fleetlink.console.users import hash_password
 from fleetlink.repeater.service import Repeater
 from fleetlink.uplink.service import Uplink
+from tests.browser.conftest import shoot
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
     fleet,
@@ -27,10 +30,11 @@ from tests.integration.test_commands_harness import (
 
 CHANGE = {"X-Fleetlink-Console": "1"}
 RED_RING = "leds: [" + ", ".join(["{red: 255, green: 0, blue: 0}"] * 6) + "]\noverride_system: true"
+GREEN_RING = RED_RING.replace("red: 255, green: 0", "red: 0, green: 255")
 
 
 def test_an_operator_sends_a_command_and_sees_it_delivered(
-    kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
+    page: Page, kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
     users = tmp_path / "users.yaml"
     users.write_text(
@@ -84,3 +88,20 @@ def test_an_operator_sends_a_command_and_sees_it_delivered(
 
                 wait_until(delivered, 15, interval=0.3, message="the console shows the command delivered")
                 assert bed.site.name in {s["site"] for s in statuses["statuses"][command_id]}
+
+            # the same from the robot's page, as an operator would
+            page.goto(base)
+            page.fill("#user", "lin")
+            page.fill("#token", "operator-pass-1")
+            page.click("form.login button[type=submit]")
+            page.wait_for_url("**/console/**")
+            page.goto(f"{base}sites/{bed.site.name}/robots/tb4_01")
+            expect(page.locator("#c-mapping option")).to_have_count(1)
+            page.fill("#c-value", GREEN_RING)
+            page.click("#send-command")
+            expect(page.locator("#command-result")).to_contain_text("is in Kafka")
+            row = page.locator("#sent-commands tbody tr").first
+            expect(row).to_have_attribute("data-status", "delivered", timeout=15000)
+            expect(row).to_contain_text(f"delivered at {bed.site.name}")
+            assert bed.leds.first("tb4_01", "green") is not None
+            print(f"screenshot: {shoot(page, 'fleet-robot-command-delivered')}")
