@@ -310,3 +310,8 @@ class KafkaCommands:
 
     def statuses(self, command_ids: list[str]) -> dict[str, list[dict[str, Any]]]:
         return self._statuses.of(command_ids)
+
+    def close(self) -> None:
+        """Flush and drop the producer (the console is stopping)."""
+        with self._lock:
+            self._producer.flush(self.timeout_s)

@@ -111,6 +111,7 @@ class UplinkConsole:
         self.audit: Audit = MemoryAudit()
         self._tails: list[KafkaTail] = []
         self._registry: SchemaRegistry | None = None
+        self._commands: KafkaCommands | None = None
 
     def start(self) -> UplinkConsole:
         if self.http is not None:
@@ -163,7 +164,7 @@ class UplinkConsole:
         if config.commands:
             registry = self._registry = SchemaRegistry(config.registry.url)
             registry.start()
-            ops.commands = KafkaCommands(
+            ops.commands = self._commands = KafkaCommands(
                 kafka.producer_config(),
                 [
                     {
@@ -195,6 +196,9 @@ class UplinkConsole:
         self._tails = []
         if isinstance(self.audit, KafkaAudit):
             self.audit.close()
+        if self._commands is not None:
+            self._commands.close()
+            self._commands = None
         if self._registry is not None:
             self._registry.stop()
             self._registry = None
