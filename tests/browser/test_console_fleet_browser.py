@@ -3,8 +3,9 @@ tests/integration/test_console_fleet.py), signed in as named users:
 
 1. the fleet page lists both sites and the delivery of both uplinks;
 2. a site's page shows that site alone, what Kafka acknowledged, and the last hour as charts;
-3. a robot's page shows the latest value of its mapped topic and its registration; the
-   dead-letter browser reads the dead-letter topic;
+3. a robot's page shows the latest value of its mapped topic and its registration history; a
+   sample the edge dead-letters shows in the dead-letter browser with its stage, reason and
+   bytes (hex, download);
 4. a viewer sees their role and no audit link, and the robot-type editor is closed to them.
 
 Screenshots are saved under var/screenshots/ (listed at the end of the run).
@@ -13,13 +14,16 @@ Screenshots are saved under var/screenshots/ (listed at the end of the run).
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
+import zenoh
 from playwright.sync_api import Page, expect
 
+from fleetlink.roswire.names import data_key_expr
 from tests.browser.conftest import shoot
 from tests.browser.test_console_browser import node, rate
-from tests.helpers import wait_until
+from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.test_console_fleet import PASSWORDS, Fleet2, two_sites
 
 
@@ -73,10 +77,31 @@ def test_each_site_alone_robot_page_and_dead_letters(page: Page, fleet2: Fleet2)
     expect(page.locator('#latest [data-topic="/tb4_01/ir_intensity"]')).to_contain_text("readings")
     expect(page.locator('#robot-topics tr[data-topic="/tb4_01/ir_intensity"]')).to_contain_text("fleet.ir")
     expect(page.locator("#command-result")).to_contain_text("not available")  # no command mapping here
+
+    expect(page.locator("#robot-history tbody tr").first).to_contain_text("registered")
     print(f"screenshot: {shoot(page, 'fleet-robot-page')}")
 
+    # a sample without its rmw_zenoh attachment on tb4_01's mapped topic: the edge dead-letters it
     page.goto(f"{base}sites/{site_a}/dead-letters")
     expect(page.locator("#dead-letters-state")).to_contain_text("0 of 0 dead letter(s) shown")
+    garbage = bytes(range(48))
+    with zenoh.open(zenoh_peer_config(fleet2.routers[0])) as vandal:
+        keys: list[str] = []
+        expr = data_key_expr(fleet2.domain, "/tb4_01/ir_intensity")
+        subscriber = vandal.declare_subscriber(expr, lambda sample: keys.append(str(sample.key_expr)))
+        wait_until(lambda: bool(keys), 10, message="the robot's key seen")
+        subscriber.undeclare()
+        vandal.put(keys[0], garbage)
+    row = page.locator("#dead-letters tbody tr").first
+    expect(row).to_contain_text("receive", timeout=20000)
+    expect(row).to_contain_text("attachment")
+    expect(row).to_contain_text(f"{site_a} / edge-1")
+    row.locator("button.show").click()
+    expect(page.locator("#dead-letter-hex")).to_contain_text("00 01 02 03 04 05")
+    with page.expect_download() as download:
+        page.click("#dead-letter-download")
+    assert Path(download.value.path()).read_bytes() == garbage
+    print(f"screenshot: {shoot(page, 'fleet-dead-letters')}")
 
 
 def test_a_viewer_sees_their_role_and_cannot_edit_robot_types(page: Page, fleet2: Fleet2) -> None:

@@ -54,6 +54,9 @@ class Fleet2:
     audit_topic: str
     suffix: str
     bootstrap: str
+    routers: tuple[str, str]
+    """Each site's router (Zenoh endpoint)."""
+    domain: int
 
 
 @contextmanager
@@ -97,8 +100,10 @@ def two_sites(bootstrap: str, registry_url: str, tmp_path: Path) -> Iterator[Fle
         cloud = Cloud(
             cloud_router.endpoint, bootstrap, registry_url, base.topics.registrations, base.topics.dead_letter
         )
+        routers = []
         for i, (site, prefix) in enumerate(zip(sites, ("tb4_", "kb_"), strict=True)):
             router = stack.enter_context(ZenohRouter(connect=(cloud_router.endpoint,)))
+            routers.append(router.endpoint)
             kind = prefix.rstrip("_")
             edge = edge_config(
                 tmp_path / f"spool-{i}",
@@ -133,6 +138,8 @@ def two_sites(bootstrap: str, registry_url: str, tmp_path: Path) -> Iterator[Fle
             audit_topic=f"e2e.audit.{suffix}",
             suffix=suffix,
             bootstrap=bootstrap,
+            routers=(routers[0], routers[1]),
+            domain=domain,
         )
 
 
