@@ -9,7 +9,10 @@ uplinks, edge agents, simulated robots):
   console shows the delivery of both: the Kafka column of site B on uplink 1's console is what
   uplink 2 had Kafka acknowledge, and the fleet-wide figures add up both uplinks;
 - named users with roles: a viewer reads but may not change, an operator adds a mapping, a
-  wrong password is refused, and each change lands in the audit topic with who made it.
+  wrong password is refused, and each change lands in the audit topic with who made it;
+- the robot page, the history, the dead-letter browser and the robot-type editor's checks;
+- with site B's only uplink stopped (a WAN outage for it), its Kafka column shows 0 while its
+  mapping keeps producing into the spool, whose backlog shows.
 """
 
 from __future__ import annotations
@@ -316,3 +319,23 @@ def test_robot_page_history_dead_letters_and_robot_types(fleet2: Fleet2) -> None
         refused = httpx.put(url, json=body, headers=admin, timeout=15)  # no "to", no "type"
         assert refused.status_code == 422, refused.text
         assert refused.json()["fields"]
+
+
+def test_an_outage_shows_nothing_acknowledged_and_the_backlog(fleet2: Fleet2) -> None:
+    """Last in the module: it stops the only uplink serving site B."""
+    site_b = fleet2.sites[1]
+    fleet2.uplinks[1].stop()
+    with as_user(fleet2.consoles[0], "sam") as viewer:
+        seen: list[dict[str, Any]] = []
+
+        def stalled() -> bool:
+            view = viewer.get(f"api/sites/{site_b}").json()
+            seen.append(view)
+            [node] = [n for n in view["graph"]["kafka"] if n["id"] == "k:fleet.ir"]
+            backlog = view["graph"]["backlog"] or {}
+            return node["rate"] == 0 and (backlog.get("records") or 0) > 0 and (node["mapped"] or 0) > 0
+
+        wait_until(
+            stalled, 20, interval=0.5, message="nothing acknowledged, a backlog, the mapping still running"
+        )
+        assert kafka_rate(seen[-1], "fleet.ir") == 0
