@@ -17,6 +17,7 @@ from fleetlink.console.auth import COOKIE, cookie_value
 from fleetlink.console.edge import EdgeConsole
 from fleetlink.console.envelope import Envelope, failure
 from fleetlink.console.sources import Process
+from fleetlink.console.users import User, hash_password
 from fleetlink.edge.admin.backend import EdgeSnapshot, MappingCounts
 from fleetlink.edge.admin.http import create_app
 from tests.unit.edge.admin.world import World, world
@@ -36,7 +37,9 @@ class Clock:
         return self.now
 
 
-def edge_client(w: World, *, token: str | None = TOKEN, clock: Clock | None = None) -> TestClient:
+def edge_client(
+    w: World, *, token: str | None = TOKEN, clock: Clock | None = None, users: dict[str, User] | None = None
+) -> TestClient:
     secret = SecretStr(token) if token else None
     raw = {"subscriptions": {"/tb4_01/ir_intensity": {"received": 0}}}
     console = EdgeConsole(
@@ -46,6 +49,7 @@ def edge_client(w: World, *, token: str | None = TOKEN, clock: Clock | None = No
         snapshot=w.backend.snapshot,
         raw_snapshot=lambda: raw,
         clock=clock or Clock(),
+        users=users,
     )
     app = create_app(w.service, token=secret)
     console.mount(app)
@@ -421,3 +425,38 @@ def test_wrong_tokens_lock_a_client_out(w: World) -> None:
     bearer = client.get("/console/api/sites", headers={"Authorization": "Bearer nope"})
     assert bearer.status_code == 429
     assert int(bearer.headers["retry-after"]) >= 1
+
+
+SAM = User("sam", "viewer", hash_password("viewer-pass-1", salt=b"s" * 16))
+LIN = User("lin", "operator", hash_password("operator-pass-1", salt=b"l" * 16))
+
+
+def test_named_users_sign_in_with_their_role_for_the_session_time(w: World) -> None:
+    clock = Clock()
+    client = edge_client(w, clock=clock, users={"sam": SAM, "lin": LIN})
+    form = {"user": "sam", "token": "viewer-pass-1", "next": "/console/"}
+    assert client.post("/console/login", data=form, follow_redirects=False).status_code == 303
+    assert client.get("/console/api/me").json() == {"user": "sam", "role": "viewer", "process": "edge"}
+    page_change = {"X-Fleetlink-Console": "1"}
+    refused = client.post(f"/console/api/sites/{SITE}/mappings", json=IMU, headers=page_change)
+    assert refused.status_code == 403
+    assert "operator" in refused.json()["error"]
+    clock.now += 8 * 3600 + 1
+    assert client.get("/console/api/me").status_code == 401
+    added = client.post(
+        f"/console/api/sites/{SITE}/mappings", json=IMU, auth=("lin", "operator-pass-1"), headers=page_change
+    )
+    assert added.status_code == 201, added.text
+    audit = client.get("/console/api/audit", headers=BEARER).json()
+    assert [(r["user"], r["action"], r["target"], r["status"]) for r in audit["records"]] == [
+        ("lin", "mapping.add", "imu", 201)
+    ]
+
+
+def test_wrong_passwords_lock_a_client_out(w: World) -> None:
+    client = edge_client(w, users={"lin": LIN})
+    answers = [client.get("/console/api/sites", auth=("lin", f"guess-{i}")).status_code for i in range(20)]
+    assert answers[:5] == [401] * 5
+    assert set(answers[5:]) == {429}
+    form = {"user": "lin", "token": "operator-pass-1", "next": "/console/"}
+    assert client.post("/console/login", data=form, follow_redirects=False).status_code == 429
