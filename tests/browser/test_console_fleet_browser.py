@@ -114,3 +114,23 @@ def test_a_viewer_sees_their_role_and_cannot_edit_robot_types(page: Page, fleet2
     expect(node(page, "r:tb4_01")).to_have_count(0)
     expect(page.locator("#t-name")).to_be_disabled()  # the robot-type editor is an admin's
     expect(page.locator("#save-type")).to_be_disabled()
+
+
+def test_an_admin_edits_robot_types_and_reads_the_audit(page: Page, fleet2: Fleet2) -> None:
+    base = fleet2.consoles[1]
+    page.goto(base)
+    page.fill("#token", fleet2.token)  # no user name: the admin token, the bootstrap admin
+    page.click("form.login button[type=submit]")
+    page.wait_for_url("**/console/**")
+    expect(page.locator("#who")).to_have_text("token · admin")
+    page.goto(f"{base}sites/{fleet2.sites[1]}")
+    page.fill("#t-name", "kb")
+    page.fill("#t-match", "/kb_*")
+    page.fill("#t-mappings", "{not: a list}")
+    page.click("#save-type")
+    expect(page.locator("#terror-mappings")).to_contain_text("a list of mappings is expected")
+    page.click(".audit-link")
+    row = page.locator('#audit tbody tr[data-action="robot_type.put"]').first
+    expect(row).to_contain_text("token")
+    expect(row).to_contain_text("422")
+    print(f"screenshot: {shoot(page, 'fleet-audit')}")

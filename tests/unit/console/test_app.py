@@ -460,3 +460,10 @@ def test_wrong_passwords_lock_a_client_out(w: World) -> None:
     assert set(answers[5:]) == {429}
     form = {"user": "lin", "token": "operator-pass-1", "next": "/console/"}
     assert client.post("/console/login", data=form, follow_redirects=False).status_code == 429
+
+
+def test_an_admin_page_reads_with_the_cookie_alone_but_changes_need_the_header(w: World) -> None:
+    client = edge_client(w)
+    client.post("/console/login", data={"token": TOKEN, "next": "/console/"}, follow_redirects=False)
+    assert client.get("/console/api/audit").status_code == 200  # what the audit page polls
+    assert client.post(f"/console/api/sites/{SITE}/mappings", json=IMU).status_code == 403
