@@ -46,6 +46,7 @@ from fleetlink.edge.runtime.registration import (
     RobotChange,
     event_record,
 )
+from fleetlink.edge.runtime.robot_log import RobotLog
 from fleetlink.edge.runtime.schema_book import SchemaBook
 from fleetlink.edge.runtime.sender import SenderOptions, WanSender
 from fleetlink.edge.runtime.subscriptions import SubscriptionManager
@@ -121,6 +122,8 @@ class EdgeAgent:
         self.record_limit: RecordLimit | None = None
         """The largest Kafka record the uplink produces, as learned from its answers."""
         self.robot_errors = 0
+        self.robot_log = RobotLog()
+        """When each robot registered and how; each robot's last registration changes."""
         self._gc_before = gc.get_threshold()
 
     # -- lifecycle -------------------------------------------------------------------------------
@@ -389,6 +392,7 @@ class EdgeAgent:
                 self.table.add_robot(change.robot, change.robot_type)
             else:
                 self.table.remove_robot(change.robot)
+            self.robot_log.record(change)
         except MappingError as exc:
             self.robot_errors += 1
             log.warning("robot %s: %s", change.robot, exc)
@@ -456,6 +460,8 @@ class EdgeAgent:
             "robots": self.table.robots(),
             "intake": self._source.intake_stats() if self._source is not None else {},
             "robot_errors": self.robot_errors,
+            "robot_details": self.robot_log.details(),
+            "robot_history": self.robot_log.history(),
         }
         if self._processor is not None:
             out.update(self._processor.counters())

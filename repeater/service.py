@@ -37,7 +37,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
 from fleetlink.common.command_keys import load_public_key
 from fleetlink.common.errors import FleetlinkError
-from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
+from fleetlink.common.metrics import Health, NullMetrics, PrometheusMetrics, serve_metrics, split_listen
 from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.zenoh_options import ZenohOptions
 from fleetlink.repeater.call_intake import CallIntake, final_outcome
@@ -55,6 +55,7 @@ from fleetlink.repeater.schedule import Schedule
 from fleetlink.repeater.shared import RepeaterStats, Shared
 from fleetlink.repeater.state import CommandStore
 from fleetlink.repeater.status_link import StatusLink
+from fleetlink.repeater.telemetry import RepeaterTelemetry
 from fleetlink.roswire.discovery import GraphWatcher
 from fleetlink.roswire.node import RosNode
 from fleetlink.roswire.session import open_session, ros_session_config
@@ -109,6 +110,9 @@ class Repeater:
             PrometheusMetrics("repeater") if config.metrics is not None else NullMetrics()
         )
         self._metrics_server: HttpServer | None = None
+        self.telemetry = RepeaterTelemetry(self.metrics)
+        self.link_up: bool | None = None
+        """Whether an uplink answers the status link (``None`` until the first answer or failure)."""
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -159,7 +163,7 @@ class Repeater:
         self._queryable = self._session.declare_queryable(key, intake.on_query)
         if self.config.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(self.config.metrics.listen)
-            self._metrics_server = serve_metrics(host, port, self.metrics)
+            self._metrics_server = serve_metrics(host, port, self.metrics, self.health)
         self._start_calls(typestore)
         log.info("repeater %s serving %s (%d commands resumed)", self.id, key, len(self.schedule.active()))
         return self
@@ -293,6 +297,7 @@ class Repeater:
 
     def _on_link(self, up: bool) -> None:
         shared = self._shared
+        self.link_up = up
         with shared.lock:
             if up:
                 self.schedule.link_up()
@@ -301,6 +306,17 @@ class Repeater:
         shared.poke.set()
 
     # -- views ----------------------------------------------------------------------------
+
+    def health(self) -> Health:
+        """Report the counters to the metrics and answer the repeater's health (``/health``)."""
+        shared = self._shared
+        with shared.lock:
+            return self.telemetry.observe(
+                shared.stats,
+                link_up=self.link_up,
+                active=len(self.schedule.active()),
+                pending=self.pending_statuses(),
+            )
 
     @property
     def metrics_url(self) -> str | None:

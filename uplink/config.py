@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import secrets
+import socket
 from pathlib import Path
 
 from pydantic import Field, field_validator, model_validator
@@ -10,7 +12,7 @@ from fleetlink.common.configfile import Section
 from fleetlink.common.console_config import ConsoleSection
 from fleetlink.common.durations import Seconds
 from fleetlink.common.metrics_config import MetricsSection
-from fleetlink.common.names import KafkaTopic, Site, site_problem
+from fleetlink.common.names import KafkaTopic, KeyChunk, Site, host_id, site_problem
 from fleetlink.common.zenoh_options import ZenohSection
 from fleetlink.schemas.typestore import Distro
 from fleetlink.uplink.calls.mapping import ActionMapping, ServiceMapping, unique_call_names
@@ -34,6 +36,8 @@ class TopicsSection(Section):
     command_status: KafkaTopic = "fleetlink.commands.status"
     refused: KafkaTopic = "fleetlink.refused"
     """The cloud-side dead-letter topic: records the uplink refused (site, topic and reason in headers)."""
+    audit: KafkaTopic = "fleetlink.audit"
+    """Who changed what and sent which command from the fleet console (JSON, keyed by user)."""
 
 
 class IngestSection(Section):
@@ -108,7 +112,15 @@ class UplinkRosSection(Section):
 __all__ = ["MetricsSection", "UplinkConfig"]
 
 
+def default_uplink_id() -> str:
+    """The host name and a few random characters: uplinks may share a host, and a restarted
+    uplink's counters start again under a new name (consoles then measure them afresh)."""
+    return f"{host_id(socket.gethostname(), 'uplink')[:55]}-{secrets.token_hex(3)}"
+
+
 class UplinkConfig(Section):
+    id: KeyChunk = Field(default_factory=default_uplink_id)
+    """Names this uplink in the delivery figures consoles add up (``fleetlink/<site>/delivery/<id>``)."""
     kafka: KafkaSection
     registry: RegistrySection
     zenoh: ZenohSection = ZenohSection()

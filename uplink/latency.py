@@ -67,6 +67,22 @@ class DeliveryLatency:
             "window_s": self.window_s,
         }
 
+    def recent(self, site: str, n: int) -> dict[str, Any]:
+        """``{"batches", "max_ms", "samples_ms"}`` over the window: every batch counted, the newest
+        ``n`` latencies kept (so several uplinks' answers can be merged into one percentile)."""
+        now = self._clock()
+        with self._lock:
+            samples = self._sites.get(site)
+            while samples and now - samples[0][0] > self.window_s:
+                samples.popleft()
+            values = [v for _, v in samples] if samples else []
+        return {
+            "batches": len(values),
+            "max_ms": round(max(values) * 1000, 1) if values else None,
+            "samples_ms": [round(v * 1000, 2) for v in values[-n:]] if n > 0 else [],
+            "window_s": self.window_s,
+        }
+
     def sites(self) -> list[str]:
         with self._lock:
             return sorted(self._sites)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import threading
+from collections import Counter
 from collections.abc import Iterable, Mapping
 from typing import Any, Protocol
 
@@ -56,6 +57,7 @@ class SchemaIds:
         self._texts: dict[tuple[str, bytes], str] = {}
         self._max_texts = max_texts
         self._lock = threading.Lock()
+        self.errors: Counter[str] = Counter()
 
     def learn(self, site: str, schemas: Mapping[bytes, str]) -> list[bytes]:
         """Remember the schema texts a batch from ``site`` carried (by fingerprint); a text not
@@ -84,6 +86,15 @@ class SchemaIds:
         """Those of ``fingerprints`` with no text known here from ``site``, in a stable order."""
         return tuple(sorted(fp for fp in fingerprints if (site, fp) not in self._texts))
 
+    def _failed(self, reason: str) -> None:
+        with self._lock:
+            self.errors[reason] += 1
+
+    def error_totals(self) -> dict[str, int]:
+        """Registry requests that failed, by reason (``unavailable``, ``incompatible``, ``refused``)."""
+        with self._lock:
+            return dict(self.errors)
+
     def id_for(
         self, site: str, topic: str, fingerprint: bytes, schemas: Mapping[bytes, str] | None = None
     ) -> int:
@@ -107,10 +118,13 @@ class SchemaIds:
         except json.JSONDecodeError as exc:
             raise SchemaRefusedError(f"schema for {fingerprint.hex()} is not JSON: {exc}") from None
         except RegistryUnavailableError as exc:
+            self._failed("unavailable")
             raise SchemaUnavailableError(str(exc)) from None
         except IncompatibleSchemaError as exc:
+            self._failed("incompatible")
             raise SchemaRefusedError(str(exc)) from None
         except RegistryError as exc:
+            self._failed("refused")
             raise SchemaRefusedError(str(exc)) from None
         with self._lock:
             self._ids[key] = schema_id

@@ -22,7 +22,13 @@ from typing import Any, Protocol
 import zenoh
 
 from fleetlink._native import ScannedBatch
-from fleetlink.common.metrics import NullMetrics, PrometheusMetrics, serve_metrics, split_listen
+from fleetlink.common.metrics import (
+    CounterDeltas,
+    NullMetrics,
+    PrometheusMetrics,
+    serve_metrics,
+    split_listen,
+)
 from fleetlink.common.metrics.server import HttpServer
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.common.zenoh_options import ZenohOptions
@@ -34,6 +40,8 @@ from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.registrations import RegistrationsReader
 from fleetlink.uplink.commands.router import CommandRouter
 from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.delivery_board import DeliveryBoard, acked_scanned, acked_topics
+from fleetlink.uplink.delivery_status import DeliveryStatus
 from fleetlink.uplink.diversion import Diversion
 from fleetlink.uplink.identity import source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats
@@ -47,7 +55,7 @@ from fleetlink.uplink.refusals import Refusals
 from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.topics import ensure_topics
-from fleetlink.wire import Ack, WireError, decode_batch, decode_batch_head, encode_ack
+from fleetlink.wire import Ack, Batch, WireError, decode_batch, decode_batch_head, encode_ack
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +88,7 @@ class Uplink:
             else NullMetrics()
         )
         self._metrics_server: HttpServer | None = None
+        self._registry_deltas = CounterDeltas()
         self._gc_before: tuple[int, int, int] | None = None
         self._zenoh_options = zenoh_options or config.zenoh.options()
         self.stats = IngestStats()
@@ -99,6 +108,9 @@ class Uplink:
         """Which site holds each robot: read from the registrations topic, claimed at ingest."""
         self.delivery_latency = DeliveryLatency()
         """Per site: from a batch's arrival to Kafka's last delivery report (shown by the console)."""
+        self.delivery = DeliveryBoard()
+        """Per site: batches answered, records Kafka acknowledged per topic, dead letters."""
+        self._delivery_status = DeliveryStatus(config.id, self.delivery, self.delivery_latency)
         self.extension_factories = tuple(extensions)
         """Made and started at the end of ``start`` (the layer above passes the fleet console)."""
         self.extensions: list[UplinkExtension] = []
@@ -141,6 +153,7 @@ class Uplink:
             key = f"fleetlink/{site}/ingest/*"
             self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
             log.info("serving edge batches on %s", key)
+        self._delivery_status.start(self._session)
         if cfg.commands or cfg.services or cfg.actions:
             self._commands = CommandRouter(
                 cfg,
@@ -152,7 +165,7 @@ class Uplink:
             ).start()
         if cfg.metrics is not None and isinstance(self.metrics, PrometheusMetrics):
             host, port = split_listen(cfg.metrics.listen)
-            self._metrics_server = serve_metrics(host, port, self.metrics)
+            self._metrics_server = serve_metrics(host, port, self.metrics, refresh=self._refresh_metrics)
         for make in self.extension_factories:
             extension = make(self)
             extension.start()
@@ -178,6 +191,7 @@ class Uplink:
         for queryable in self._queryables:
             queryable.undeclare()
         self._queryables.clear()
+        self._delivery_status.stop()
         if self._commands is not None:
             self._commands.stop()
             self._commands = None
@@ -213,6 +227,14 @@ class Uplink:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
+
+    def _refresh_metrics(self) -> None:
+        """Before a scrape: the registry's failures and the command lag (pull model)."""
+        if self._ids is not None:
+            for reason, total in self._ids.error_totals().items():
+                self.metrics.on_registry_error(reason, self._registry_deltas.delta(reason, total))
+        router = self._commands
+        self.metrics.set_command_lag(router.lag_s() if router is not None else 0.0)
 
     @property
     def metrics_url(self) -> str | None:
@@ -255,6 +277,29 @@ class Uplink:
         key = str(query.key_expr)
         serial.submit(key, partial(self._ingest, query, payload.to_bytes(), time.monotonic()))
 
+    def _answered(self, batch: Batch, scanned: ScannedBatch | None, ack: Ack, arrived: float) -> None:
+        """Count a batch's answer: metrics, the site's delivery figures, a warning on errors."""
+        dead = {f.seq for f in ack.failures if f.dead_lettered}
+        records = len(scanned) if scanned is not None else len(batch.records)
+        self.metrics.on_ingested(batch.site, ack.status, records, len(dead))
+        if ack.status == "ok":
+            self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
+            acked = acked_scanned(scanned, dead) if scanned is not None else acked_topics(batch.records, dead)
+            self.delivery.on_batch(batch.site, "ok", acked, len(dead))
+        else:
+            self.delivery.on_batch(batch.site, ack.status)
+        if ack.status == "error":
+            self._limiter.log(
+                logging.WARNING,
+                "batch-error",
+                "batch %s/%s %d..%d not fully delivered: %s",
+                ack.edge_id,
+                ack.stream,
+                ack.first_seq,
+                ack.last_seq,
+                ack.detail,
+            )
+
     def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> None:
         """On a worker: decode the batch and produce it; the reply comes with the last delivery report."""
         scanned: ScannedBatch | None = None
@@ -289,6 +334,7 @@ class Uplink:
         if isinstance(verdict, Refused):
             self.refusals.batch(source, key, verdict.reason, verdict.detail)
             self.metrics.on_ingested(site_of(key), "refused", 0)
+            self.delivery.on_batch(site_of(key), "refused")
             self._finish(query, error=f"refused ({verdict.reason}): {verdict.detail}")
             return
         diversion = (
@@ -326,23 +372,7 @@ class Uplink:
             return
 
         def done(ack: Ack) -> None:
-            records = len(scanned) if scanned is not None else len(batch.records)
-            self.metrics.on_ingested(
-                batch.site, ack.status, records, sum(f.dead_lettered for f in ack.failures)
-            )
-            if ack.status == "ok":
-                self.delivery_latency.observe(batch.site, time.monotonic() - arrived)
-            if ack.status == "error":
-                self._limiter.log(
-                    logging.WARNING,
-                    "batch-error",
-                    "batch %s/%s %d..%d not fully delivered: %s",
-                    ack.edge_id,
-                    ack.stream,
-                    ack.first_seq,
-                    ack.last_seq,
-                    ack.detail,
-                )
+            self._answered(batch, scanned, ack, arrived)
             self._finish(query, ack)
 
         metered = not isinstance(self.metrics, NullMetrics)

@@ -31,6 +31,7 @@ def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float =
         NewTopic(topics.command_dead_letter, num_partitions=1, replication_factor=-1),
         NewTopic(topics.command_status, num_partitions=1, replication_factor=-1),
         NewTopic(topics.refused, num_partitions=1, replication_factor=-1),
+        NewTopic(topics.audit, num_partitions=1, replication_factor=-1),
     ]
     try:
         existing = set(admin.list_topics(timeout=timeout_s).topics)

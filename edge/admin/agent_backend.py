@@ -13,12 +13,14 @@ from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
+from fleetlink.common.metrics.buckets import EMPTY, BucketTotals
 from fleetlink.edge.admin.backend import (
     BufferState,
     EdgeSnapshot,
     IntakeState,
     MappingCounts,
     MappingIssue,
+    RobotEvent,
     RobotState,
     RobotStatus,
     WanTotals,
@@ -52,6 +54,17 @@ def _dict(value: Any) -> Mapping[str, Any]:
     return value if isinstance(value, Mapping) else {}
 
 
+def _buckets(value: Any) -> BucketTotals:
+    data = _dict(value)
+    counts = data.get("counts")
+    if not isinstance(counts, list) or len(counts) != len(EMPTY.counts):
+        return EMPTY
+    total = data.get("sum_s")
+    return BucketTotals(
+        tuple(_int(c) for c in counts), float(total) if isinstance(total, int | float) else 0.0
+    )
+
+
 def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnapshot:
     """``EdgeAgent.snapshot()`` (plain data) -> ``EdgeSnapshot``; missing parts stay neutral."""
     stages = _dict(data.get("stages"))
@@ -83,7 +96,9 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
                 buffers.append(BufferState(stats=stats, capacity_bytes=capacity.get(str(stream), 0)))
         sender = _dict(_dict(entry).get("sender"))
         if sender:
-            wan[str(stream)] = WanTotals(**{k: _int(sender.get(k)) for k in _WAN})
+            wan[str(stream)] = WanTotals(
+                **{k: _int(sender.get(k)) for k in _WAN}, ack_latency=_buckets(sender.get("ack_latency"))
+            )
             healthy.append(bool(sender.get("healthy", True)))
     subscriptions = _dict(data.get("subscriptions"))
     gaps = {str(topic): _int(_dict(sub).get("missing")) for topic, sub in subscriptions.items()}
@@ -128,11 +143,23 @@ def robots_from_agent(data: Mapping[str, Any], robots: Mapping[str, str]) -> lis
     """Registered robots; registration times and states from ``robot_details`` when the agent
     reports them (``{robot: {"registered_at_ms", "state", "explicit"}}``)."""
     details = _dict(data.get("robot_details"))
+    histories = _dict(data.get("robot_history"))
     out = []
     for robot, kind in sorted(robots.items()):
         detail = _dict(details.get(robot))
         at_ms = detail.get("registered_at_ms")
         state: RobotState = "lost" if detail.get("state") == "lost" else "registered"
+        events = histories.get(robot)
+        history = tuple(
+            RobotEvent(
+                event=str(e.get("event", "")),
+                robot_type=str(e.get("robot_type", "")),
+                reason=str(e.get("reason", "")),
+                at=_int(e.get("at_ms")) / 1000,
+            )
+            for e in (events if isinstance(events, list) else [])
+            if isinstance(e, Mapping)
+        )
         out.append(
             RobotStatus(
                 robot=robot,
@@ -140,6 +167,7 @@ def robots_from_agent(data: Mapping[str, Any], robots: Mapping[str, str]) -> lis
                 registered_at=at_ms / 1000 if isinstance(at_ms, int | float) else None,
                 state=state,
                 explicit=bool(detail.get("explicit", False)),
+                history=history,
             )
         )
     return out

@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
+from fleetlink.common.metrics.buckets import EMPTY, BucketTotals
 from fleetlink.edge.config import EdgeConfig
 from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
 from fleetlink.edge.spool import SpoolStats
@@ -29,6 +30,19 @@ class RobotStatus:
     """``lost``: its liveliness is gone, it is deregistered when the grace period ends."""
     explicit: bool = False
     """Registered on the registration topic rather than discovered."""
+    history: tuple[RobotEvent, ...] = ()
+    """The robot's last registrations and deregistrations at this edge, oldest first."""
+
+
+@dataclass(frozen=True, slots=True)
+class RobotEvent:
+    """One registration or deregistration of a robot at this edge."""
+
+    event: str
+    robot_type: str
+    reason: str
+    at: float
+    """Wall-clock seconds since the epoch."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,6 +86,8 @@ class WanTotals:
     records_acked: int = 0
     batches_retried: int = 0
     in_flight: int = 0
+    ack_latency: BucketTotals = EMPTY
+    """From sending each acknowledged batch to its ack, counted per bucket."""
 
 
 @dataclass(frozen=True, slots=True)

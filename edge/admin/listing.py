@@ -14,6 +14,7 @@ from fleetlink.edge.admin.views import (
     MappingCountersView,
     MappingView,
     PublisherView,
+    RobotEventView,
     RobotView,
     StageView,
     TopicMatchView,
@@ -100,6 +101,15 @@ def robot_views(robots: Iterable[RobotStatus]) -> list[RobotView]:
                 registered_since=since,
                 state=robot.state,
                 explicit=robot.explicit,
+                history=[
+                    RobotEventView(
+                        event="registered" if e.event == "registered" else "deregistered",
+                        robot_type=e.robot_type,
+                        reason=e.reason,
+                        at=e.at,
+                    )
+                    for e in robot.history
+                ],
             )
         )
     return out

@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 
 from fleetlink.common.metrics import CounterDeltas, Health, Metrics, RecentIncrease
+from fleetlink.common.metrics.buckets import BucketDeltas
 from fleetlink.edge.admin.backend import EdgeSnapshot
 from fleetlink.edge.admin.health import HealthRules, assess
 
@@ -38,6 +39,7 @@ class EdgeTelemetry:
         self._clock = clock
         self._created = clock()
         self._deltas = CounterDeltas()
+        self._latency = BucketDeltas()
         self._recent: dict[str, RecentIncrease] = {}
         self._lock = threading.Lock()
 
@@ -94,6 +96,8 @@ class EdgeTelemetry:
                 d(("records_acked", stream), wan.records_acked),
             )
             m.on_wan_failure("retry", d(("batches_retried", stream), wan.batches_retried))
+            latency = self._latency.delta(stream, wan.ack_latency)
+            m.on_ack_latencies(latency.counts, latency.sum_s)
         for topic, missing in snapshot.sequence_gaps.items():
             m.on_gap(topic, d(("gap", topic), missing))
         for robot, topics in snapshot.lost_before_spool.items():

@@ -68,13 +68,23 @@ class MappingView(_View):
     issues: list[IssueView] = []
 
 
+class RobotEventView(_View):
+    event: Literal["registered", "deregistered"]
+    robot_type: str
+    reason: str = Field(description="discovered, explicit or liveliness_lost")
+    at: float = Field(description="seconds since the epoch")
+
+
 class RobotView(_View):
     robot: str
     robot_type: str
     registered_at: float | None = Field(description="seconds since the epoch; null when not known")
     registered_since: str | None = Field(description="the same as ISO 8601 UTC text")
     state: Literal["registered", "lost"]
-    explicit: bool
+    explicit: bool = Field(description="registered on the register topic rather than discovered")
+    history: list[RobotEventView] = Field(
+        default=[], description="its last registrations and deregistrations at this edge, oldest first"
+    )
 
 
 class PublisherView(_View):

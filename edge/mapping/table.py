@@ -199,13 +199,25 @@ class MappingTable:
             if names.count(name) > 1:
                 raise MappingError(f"robot type {name!r} is declared twice")
         check_unique_names([*mappings, *(m for t in robot_types for m in t.mappings)])
-        site = {m.name: compile_mapping(m) for m in mappings}
+        site = {m.name: self._compiled(m, None, self._site.get(m.name)) for m in mappings}
         templates = {
-            t.name: {m.name: compile_mapping(m, robot_type=t.name) for m in t.mappings} for t in robot_types
+            t.name: {
+                m.name: self._compiled(m, t.name, self._templates.get(t.name, {}).get(m.name))
+                for m in t.mappings
+            }
+            for t in robot_types
         }
         self._types = {t.name: t for t in robot_types}
         self._templates = templates
         self._site = site
+
+    @staticmethod
+    def _compiled(spec: MappingSpec, robot_type: str | None, old: CompiledMapping | None) -> CompiledMapping:
+        """The mapping compiled; an unchanged one keeps its old object, so the runtime keeps its
+        stage objects (and their state and counters) across a reload of the others."""
+        if old is not None and old.robot_type == robot_type and old.spec == spec:
+            return old
+        return compile_mapping(spec, robot_type=robot_type)
 
     def reload(
         self, robot_types: Iterable[RobotTypeSpec], mappings: Iterable[MappingSpec]

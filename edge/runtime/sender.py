@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
+from fleetlink.common.metrics.buckets import BucketCounts
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.edge.config import WanSection
 from fleetlink.edge.errors import SpoolError
@@ -142,6 +143,8 @@ class WanSender:
         self._known: set[bytes] = set()
         """Fingerprints whose schema an uplink acknowledged (left out of later batches)."""
         self._outage_since: float | None = None
+        self.ack_latency = BucketCounts()
+        """From sending each acknowledged batch to its ack (``fleetlink_wan_ack_latency_seconds``)."""
         self._last_error = ""
         self._stopping = threading.Event()
         self._mutex = threading.Lock()
@@ -407,6 +410,7 @@ class WanSender:
         stats = self.stats
         stats.batches_acked += 1
         stats.records_acked += flight.records
+        self.ack_latency.observe(self._clock() - flight.sent_at)
         dead = sum(1 for f in ack.failures if f.dead_lettered)
         if dead:
             stats.records_dead_lettered += dead
@@ -480,4 +484,5 @@ class WanSender:
             "healthy": self._healthy,
             "outage_s": round(self.outage_s, 3),
             "last_error": self._last_error,
+            "ack_latency": self.ack_latency.totals().as_dict(),
         }

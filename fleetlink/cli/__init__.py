@@ -30,6 +30,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fleetlink.cli.uplink",
     "fleetlink.cli.repeater",
     "fleetlink.cli.probe",
+    "fleetlink.cli.console",
 )
 
 Handler = Callable[[argparse.Namespace], int]

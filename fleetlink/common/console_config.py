@@ -23,6 +23,17 @@ class ConsoleSection(Section):
     token_file: Path | None = Field(
         default=None, description="file holding the access token (wins over token_env)"
     )
+    users_file: Path | None = Field(
+        default=None,
+        description="YAML file of named users with roles (viewer, operator, admin) and scrypt password "
+        "hashes (fleetlink console hash-password); $FLEETLINK_CONSOLE_USERS_FILE when not set",
+    )
+    history_step: Seconds = Field(
+        default=10.0,
+        ge=1,
+        le=600,
+        description="how often the console samples each site for its charts (the last hour)",
+    )
     session_ttl: Seconds = Field(
         default=8 * 3600.0,
         gt=0,

@@ -7,7 +7,7 @@ polls JSON; every asset ships in the package (no network at run time).
 
 - pure core: ``forms`` (form <-> request body, errors -> fields), ``rates`` (counter deltas ->
   rates), ``graph`` (robots -> topics -> mappings -> Kafka), ``views`` (a site's page data),
-  ``status`` (an edge's spool/WAN/topic counters), ``latency`` (Kafka delivery latency),
+  ``status`` (an edge's spool/WAN/topic counters), ``delivery`` (every uplink's Kafka figures added up),
   ``envelope`` (the admin space's answers), ``auth`` (token, session cookie);
 - sources: ``local.LocalSite`` (in process), ``remote.ZenohSites`` (over Zenoh);
 - adapters: ``app.create_console_app`` (FastAPI), ``edge.EdgeConsole``, ``uplink.UplinkConsole``.

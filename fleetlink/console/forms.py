@@ -21,7 +21,21 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from fleetlink.console.errors import FormError
 
-FIELDS = ("name", "robot_type", "from", "to", "key", "type", "delivery", "stages")
+FIELDS = (
+    "name",
+    "robot_type",
+    "from",
+    "to",
+    "key",
+    "type",
+    "delivery",
+    "stages",
+    "match",
+    "mappings",
+    "value",
+    "robot",
+    "mapping",
+)
 FORM = "_form"
 _TEXT = ("robot_type", "from", "to", "key", "type", "delivery")
 _HEAD = re.compile(r"[^.\[]+")
@@ -63,13 +77,7 @@ def parse_stages(text: str) -> list[Any]:
     """The stage list from the form's YAML text ([] when blank)."""
     if not text.strip():
         return []
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise FormError({"stages": [f"not valid YAML{where}: {problem}"]}) from None
+    data = _yaml(text, "stages")
     if data is None:
         return []
     if not isinstance(data, list):
@@ -107,3 +115,59 @@ def refusal_fields(
         where = "name" if status == 409 else FORM
         fields[where] = [error or f"refused ({status})"]
     return fields
+
+
+class RobotTypeForm(BaseModel):
+    """The robot-type editor: the namespace glob, and optionally the type's whole mapping list
+    in YAML (as under ``robot_types.<name>.mappings`` in the config file)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    match: str = Field(default="", max_length=500)
+    mappings: str = Field(default="", max_length=200_000)
+
+
+def robot_type_body(form: RobotTypeForm) -> dict[str, Any]:
+    """The admin request body (``FormError`` on ``mappings`` when its YAML is not a list)."""
+    body: dict[str, Any] = {}
+    if form.match.strip():
+        body["match"] = form.match.strip()
+    if form.mappings.strip():
+        mappings = _yaml(form.mappings, "mappings")
+        if not isinstance(mappings, list):
+            raise FormError(
+                {"mappings": ["a list of mappings is expected, e.g. - {name: ir, from: ..., to: ...}"]}
+            )
+        body["mappings"] = mappings
+    return body
+
+
+class CommandForm(BaseModel):
+    """Send one command: the command mapping, the robot (the record's key) and the value in
+    YAML (the fields of the mapping's ROS type; fields left out take their defaults)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    mapping: str = Field(min_length=1, max_length=200)
+    robot: str = Field(min_length=1, max_length=200)
+    value: str = Field(default="", max_length=100_000)
+
+
+def parse_value(text: str) -> dict[str, Any]:
+    """A command's value from YAML (``{}`` when blank); ``FormError`` on ``value`` otherwise."""
+    if not text.strip():
+        return {}
+    data = _yaml(text, "value")
+    if not isinstance(data, dict):
+        raise FormError({"value": ["a mapping of the message's fields is expected, e.g. {data: 1}"]})
+    return data
+
+
+def _yaml(text: str, field: str) -> Any:
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise FormError({field: [f"not valid YAML{where}: {problem}"]}) from None

@@ -10,7 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import zenoh
+
 from fleetlink.console.envelope import Envelope, failure, from_parts
+from fleetlink.console.remote import delivery_answers
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
 from fleetlink.edge.admin.service import AdminService
@@ -21,10 +24,21 @@ _READS = ("robots", "topics", "mappings", "robot_types", "health")
 
 
 class LocalSite:
-    def __init__(self, service: AdminService, *, edge_id: str, status: Callable[[], dict[str, Any]]) -> None:
+    def __init__(
+        self,
+        service: AdminService,
+        *,
+        edge_id: str,
+        status: Callable[[], dict[str, Any]],
+        latest: Callable[[str], Envelope] | None = None,
+    ) -> None:
         self.service = service
         self.edge_id = edge_id
         self._status = status
+        self._latest = latest
+        self.session: zenoh.Session | None = None
+        """The edge's Zenoh session, once started: the uplinks' delivery figures for this site."""
+        self.timeout_s = 1.0
 
     @property
     def process(self) -> Process:
@@ -53,9 +67,15 @@ class LocalSite:
         status, part = execute(self.service, found[0], body)
         return from_parts(status, part, site=site, edge_id=self.edge_id)
 
-    def latency(self, site: str) -> dict[str, Any] | None:
-        del site
-        return None
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        if site != self.site:
+            return failure(404, f"this edge serves site {self.site!r}, not {site!r}", site=site)
+        return None if self._latest is None else self._latest(robot)
+
+    def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        if self.session is None:
+            return None
+        return delivery_answers(self.session, self.site if site is None else site, self.timeout_s)
 
     def commands(self) -> dict[str, Any]:
         return {"available": False, "reason": NOT_HERE}

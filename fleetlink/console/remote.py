@@ -20,11 +20,10 @@ from typing import Any
 import zenoh
 from pydantic import SecretStr
 
-from fleetlink.common.names import key_path_problem, site_problem
+from fleetlink.common.names import key_chunk_problem, key_path_problem, site_problem
 from fleetlink.console.envelope import Envelope, failure, parse
 from fleetlink.console.sources import Process
 from fleetlink.console.views import site_summary
-from fleetlink.uplink.latency import DeliveryLatency
 
 
 def _admin_path_problem(path: str) -> str | None:
@@ -35,6 +34,29 @@ def _admin_path_problem(path: str) -> str | None:
 def status_key(site: str) -> str:
     """Where an edge console answers with its site's counters."""
     return f"fleetlink/{site}/console/status"
+
+
+def delivery_answers(session: zenoh.Session, site: str | None, timeout_s: float) -> list[dict[str, Any]]:
+    """Every uplink's delivery figures for ``site`` (or every site), one answer per uplink and site."""
+    if site is not None and site_problem(site) is not None:
+        return []
+    selector = f"fleetlink/{site or '*'}/delivery/*"
+    out = []
+    for reply in session.get(selector, target=zenoh.QueryTarget.ALL, timeout=timeout_s):
+        if reply.ok is None:
+            continue
+        try:
+            data = json.loads(reply.ok.payload.to_bytes())
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            continue
+        if isinstance(data, dict) and (site is None or data.get("site") == site):
+            out.append(data)
+    return out
+
+
+def latest_key(site: str, robot: str) -> str:
+    """Where an edge console answers the latest values of a robot's mapped topics."""
+    return f"fleetlink/{site}/console/latest/{robot}"
 
 
 def _site_of(key: str) -> str | None:
@@ -49,13 +71,11 @@ class ZenohSites:
         *,
         token: SecretStr | None,
         timeout_s: float = 3.0,
-        latency: DeliveryLatency | None = None,
         commands: Callable[[], dict[str, Any]] | None = None,
     ) -> None:
         self.session = session
         self.timeout_s = timeout_s
         self._attachment = None if token is None else f"Bearer {token.get_secret_value()}".encode()
-        self._latency = latency
         self._commands = commands
 
     @property
@@ -117,8 +137,17 @@ class ZenohSites:
             return replies[0][1]
         return failure(504, f"no edge of site {site!r} answered within {self.timeout_s:g} s", site=site)
 
-    def latency(self, site: str) -> dict[str, Any] | None:
-        return None if self._latency is None else self._latency.summary(site)
+    def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        return delivery_answers(self.session, site, self.timeout_s)
+
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        if site_problem(site) is not None or key_chunk_problem(robot) is not None:
+            return failure(400, f"not a site and robot: {site!r} {robot!r}", site=site)
+        key = latest_key(site, robot)
+        for reply_key, env in self._replies(self._get(key)):
+            if reply_key == key:
+                return env
+        return failure(504, f"no edge of site {site!r} answered within {self.timeout_s:g} s", site=site)
 
     def commands(self) -> dict[str, Any]:
         if self._commands is None:

@@ -35,8 +35,15 @@ class Sites(Protocol):
         ``mappings/<name>``, ``dry-run``), ``op`` as the admin space takes it."""
         ...
 
-    def latency(self, site: str) -> dict[str, Any] | None:
-        """Kafka delivery latency of the site's batches, when this process measures it."""
+    def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        """Every uplink's delivery figures for ``site`` (every site: ``None``), as each uplink
+        answers them on ``fleetlink/<site>/delivery/<uplink>``; ``None`` when this process has
+        no way to ask."""
+        ...
+
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        """The latest values of the robot's mapped topics (``{"robot", "values": {topic: ...}}``),
+        as the site's edge reads them; ``None`` when this process cannot ask."""
         ...
 
     def commands(self) -> dict[str, Any]:

@@ -11,12 +11,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from fleetlink.console.delivery import delivery_view
 from fleetlink.console.envelope import Envelope
 from fleetlink.console.graph import build_graph
 from fleetlink.console.rates import RateBoard
 
 PARTS = ("robots", "topics", "mappings", "robot_types", "health", "status")
-MAPPING_RATES = ("received", "emitted", "dropped", "dead_lettered")
+MAPPING_RATES = ("received", "emitted", "filtered", "dropped", "dead_lettered")
 
 
 def _body(parts: Mapping[str, Envelope], name: str, errors: dict[str, str]) -> Any:
@@ -34,17 +35,34 @@ def _list(value: Any) -> list[dict[str, Any]]:
     return [v for v in value if isinstance(v, dict)] if isinstance(value, list) else []
 
 
+def intended_drops(mapping: Mapping[str, Any]) -> int:
+    """Samples the mapping's stages left out by their rule (a throttle, a filter, a dedupe, a
+    watermark): what the mapping was told to do, not a problem."""
+    stages = mapping.get("stage_counters")
+    if not isinstance(stages, list):
+        return 0
+    return sum(
+        int(s.get("dropped", 0) or 0) + int(s.get("late", 0) or 0) for s in stages if isinstance(s, dict)
+    )
+
+
 def mapping_rates(
     board: RateBoard, site: str, mappings: list[dict[str, Any]], now: float
 ) -> dict[str, dict[str, float | None]]:
+    """Per mapping: received, emitted, ``filtered`` (left out by its stages on purpose),
+    ``dropped`` (lost otherwise: a stage error, another ROS type than declared) and
+    dead-lettered records per second."""
     out = {}
     for mapping in mappings:
         counters = mapping.get("counters") or {}
         name = str(mapping.get("name"))
+        filtered = intended_drops(mapping)
+        lost = counters.get("dropped", 0) + counters.get("type_mismatch", 0)
         values = {
             "received": counters.get("received", 0),
             "emitted": counters.get("emitted", 0),
-            "dropped": counters.get("dropped", 0) + counters.get("type_mismatch", 0),
+            "filtered": filtered,
+            "dropped": max(0, lost - filtered),
             "dead_lettered": counters.get("dead_lettered", 0),
         }
         out[name] = {k: board.rate((site, "mapping", name, k), float(v), now) for k, v in values.items()}
@@ -62,20 +80,47 @@ def topic_rates(board: RateBoard, site: str, status: Any, now: float) -> dict[st
     }
 
 
-def site_view(site: str, parts: Mapping[str, Envelope], board: RateBoard, *, now: float) -> dict[str, Any]:
+def backlog(status: Any) -> dict[str, Any] | None:
+    """What waits in the edge's buffers for Kafka: records, bytes, the oldest record's age."""
+    streams = status.get("streams") if isinstance(status, dict) else None
+    if not isinstance(streams, list):
+        return None
+    found = [s for s in streams if isinstance(s, dict)]
+    return {
+        "records": sum(int(s.get("depth", 0) or 0) for s in found),
+        "bytes": sum(int(s.get("bytes", 0) or 0) for s in found),
+        "oldest_age_s": max((float(s.get("oldest_age_s", 0) or 0) for s in found), default=0.0),
+    }
+
+
+def site_view(
+    site: str,
+    parts: Mapping[str, Envelope],
+    board: RateBoard,
+    *,
+    now: float,
+    delivery: list[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """``delivery``: every uplink's delivery figures for the site (``None``: this process cannot
+    ask them); the Kafka column shows what they acknowledged."""
     errors: dict[str, str] = {}
     robots = _list(_body(parts, "robots", errors))
     topics = _list(_body(parts, "topics", errors))
     mappings = _list(_body(parts, "mappings", errors))
-    robot_types = [str(t["name"]) for t in _list(_body(parts, "robot_types", errors)) if "name" in t]
+    robot_types_body = _list(_body(parts, "robot_types", errors))
+    robot_types = [str(t["name"]) for t in robot_types_body if "name" in t]
     health = _body(parts, "health", errors)
     status = _body(parts, "status", errors)
     rates = mapping_rates(board, site, mappings, now)
     per_topic = topic_rates(board, site, status, now)
+    kafka = delivery_view(board, delivery or [], now=now)
     board.forget_idle(now)
     for mapping in mappings:
         mapping["rates"] = rates.get(str(mapping.get("name")), {})
     edge_ids = sorted({e.edge_id for e in parts.values() if e.edge_id})
+    kafka_rates = None
+    if delivery is not None:
+        kafka_rates = {topic: entry["rate"] for topic, entry in kafka["topics"].items()}
     return {
         "site": site,
         "edge_id": ", ".join(edge_ids),
@@ -85,9 +130,20 @@ def site_view(site: str, parts: Mapping[str, Envelope], board: RateBoard, *, now
         "status": status if isinstance(status, dict) else None,
         "robots": robots,
         "robot_types": robot_types,
+        "robot_type_details": robot_types_body,
         "mappings": mappings,
         "topic_rates": per_topic,
-        "graph": build_graph(robots, topics, mappings, topic_rates=per_topic, mapping_rates=rates),
+        "delivery": kafka if delivery is not None else None,
+        "latency": kafka["latency"],
+        "graph": build_graph(
+            robots,
+            topics,
+            mappings,
+            topic_rates=per_topic,
+            mapping_rates=rates,
+            kafka_rates=kafka_rates,
+            backlog=backlog(status),
+        ),
     }
 
 
@@ -103,4 +159,40 @@ def site_summary(site: str, health: Envelope) -> dict[str, Any]:
         "wan_link_up": body.get("wan_link_up"),
         "problems": len(body.get("problems", ())) if isinstance(body.get("problems"), list) else None,
         "error": None if health.body is not None else (health.error or f"status {health.status}"),
+    }
+
+
+def robot_view(
+    site: str, robot: str, parts: Mapping[str, Envelope], latest: Envelope | None
+) -> dict[str, Any]:
+    """A robot's page: its registration (and history), the topics it publishes with the mappings
+    each feeds, and the latest value of each mapped topic (when the edge answered them)."""
+    errors: dict[str, str] = {}
+    robots = _list(_body(parts, "robots", errors))
+    topics = _list(_body(parts, "topics", errors))
+    found = next((r for r in robots if r.get("robot") == robot), None)
+    own = []
+    for topic in topics:
+        name = str(topic.get("topic", ""))
+        feeds = [m for m in topic.get("mappings", ()) if isinstance(m, dict) and m.get("robot") == robot]
+        if feeds or name.startswith(f"/{robot}/"):
+            own.append(
+                {"topic": name, "types": topic.get("types", []), "mappings": feeds, "mapped": bool(feeds)}
+            )
+    values: dict[str, Any] = {}
+    if latest is None:
+        errors["latest"] = "not available on this process"
+    elif latest.ok and isinstance(latest.body, dict):
+        values = latest.body
+    else:
+        errors["latest"] = f"{latest.status}: {latest.error or 'refused'}"
+    return {
+        "site": site,
+        "robot": robot,
+        "registered": found is not None,
+        "registration": found,
+        "history": (found or {}).get("history", []),
+        "topics": sorted(own, key=lambda t: (not t["mapped"], t["topic"])),
+        "latest": values,
+        "errors": errors,
     }

@@ -54,3 +54,11 @@ def events_key(site: str) -> str:
 def admin_key(site: str) -> str:
     """Everything administrative of a site: ``fleetlink/<site>/admin/**``."""
     return f"{site_prefix(site)}/admin/**"
+
+
+def delivery_key(site: str, uplink_id: str) -> str:
+    """Where an uplink answers what it delivered to Kafka for a site:
+    ``fleetlink/<site>/delivery/<uplink_id>`` (under the site's prefix, so the per-site ACLs let a
+    site read its own figures and no other's; a query on ``fleetlink/<site>/delivery/*`` gets one
+    answer per uplink)."""
+    return f"{site_prefix(site)}/delivery/{check_key_chunk(uplink_id, 'uplink id')}"

@@ -72,7 +72,15 @@ def test_graph_shows_the_robots_and_their_topics_with_live_rates(page: Page, sta
         expect(page.locator(f'#robots tr[data-robot="{robot}"]')).to_contain_text("registered")
     wait_live(page, ["t:/tb4_01/ir_intensity", "t:/tb4_02/ir_intensity", "m:ir", "k:fleet.ir"])
     expect(node(page, "t:/tb4_01/ir_intensity")).to_contain_text("msg/s")
+    expect(node(page, "t:/tb4_01/imu")).to_have_count(0)  # topics no mapping takes: behind a switch
+    page.check("#show-unmapped")
     expect(node(page, "t:/tb4_01/imu")).to_contain_text("not mapped")
+    page.uncheck("#show-unmapped")
+    page.fill("#filter", "tb4_02")  # the filter leaves the other robot and its topics out
+    expect(node(page, "r:tb4_01")).to_have_count(0)
+    expect(node(page, "t:/tb4_02/ir_intensity")).to_be_visible()
+    expect(page.locator('#robots tr[data-robot="tb4_01"]')).to_be_hidden()
+    page.fill("#filter", "")
     expect(page.locator("#graph-lines path.edge.live").first).to_be_attached()
     expect(page.locator("#health-spool")).to_contain_text("durable:")
     expect(page.locator("#health-wan")).to_contain_text("up")

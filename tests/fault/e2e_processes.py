@@ -209,6 +209,15 @@ class Bed:
         stream: dict[str, Any] = self.stats().get("streams", {}).get("durable", {})
         return stream
 
+    def assert_memory_bounded(self) -> None:
+        """The edge's resident memory is under the bound its configuration implies (docs/edge.md):
+        whatever the fault, the backlog waits in the spool, not in the process."""
+        memory = self.stats().get("memory", {})
+        rss, bound = memory.get("rss_bytes", 0), memory.get("bound_bytes", 0)
+        assert rss > 0
+        assert bound > 0
+        assert rss <= bound, f"the edge holds {rss >> 20} MiB, over its bound of {bound >> 20} MiB"
+
     def wait_drained(self, records: int, timeout: float) -> None:
         """Every one of ``records`` samples spooled, and the spool empty (all acknowledged)."""
 

@@ -88,6 +88,7 @@ def test_flapping_wan(kafka_bootstrap: str, schema_registry_url: str, tmp_path: 
             b.relay.set_mode("pass")
             generate(b, gen, 600)
         flapped_s = time.monotonic() - began
+        b.assert_memory_bounded()
         generate(b, gen, 200)
         sent = gen.pause()
         b.wait_drained(sent, 60)
@@ -117,6 +118,7 @@ def test_slow_wan_backlog_grows_in_the_spool_not_in_front_of_zenoh(
         profile = e2e_processes.PROFILE
         expected = 500 if profile.window / 0.4 < 600 else 120
         assert backlog >= expected, f"the backlog should wait in the spool ({backlog} records there)"
+        b.assert_memory_bounded()
         b.relay.set_mode("pass")
         sent = gen.pause()
         b.wait_drained(sent, 60)
@@ -200,6 +202,7 @@ def test_a_stalled_edge_loses_nothing_silently(
             "everything processed or counted",
         )
         accounted = counted()
+        b.assert_memory_bounded()
     result = tally(reader, b, sent, f" with the edge stopped 2 s; {accounted} counted as lost by the edge")
     assert len(result.lost) == accounted, str(result)
     assert (result.unexpected, result.duplicated) == (0, 0), str(result)

@@ -7,6 +7,7 @@ Row 4  WAN cut:         the relay between the site and cloud routers swallows ev
                         (hang-style); the spool grows while the robot keeps publishing and drains
                         after the heal; lost 0, dup within the in-flight window; one warning.
 Row 7  uplink crash:    SIGKILL the uplink mid-stream and start it again; lost 0, dup <= window.
+                        With two uplinks: each batch answered once; kill each in turn: lost 0.
 Row 8  edge crash:      SIGKILL the edge with unacknowledged records in its spool; restart: the
                         spool reopens intact and resumes from the first unacknowledged record.
 Row 2  Kafka crash:     SIGKILL the broker mid-stream, restart it on the same data directory;
@@ -87,6 +88,7 @@ def test_wan_cut_hang_style(
         generate(b, gen, 1200)  # about 5 s of cut in all
         depth = b.durable()["buffer"]["depth"]
         assert depth >= 1500
+        b.assert_memory_bounded()
         b.relay.set_mode("pass")
         generate(b, gen, 200)
         sent = gen.pause()
@@ -126,6 +128,36 @@ def test_uplink_killed_mid_stream(
         sent = gen.pause()
         b.wait_drained(sent, 40)
     within_window(tally(reader, b, sent))
+
+
+def test_two_uplinks_each_killed_in_turn_the_other_takes_over(
+    kafka_bootstrap: str, schema_registry_url: str, reader: TopicReader, tmp_path: Path
+) -> None:
+    """Row 7 with two uplinks on the cloud router: each batch is answered by one of them (no
+    duplicates while both run); SIGKILL one, then the other after the first is back: whichever
+    was answering, the batches move to the one left, lost 0."""
+    with streaming(tmp_path, kafka_bootstrap, schema_registry_url, ack_timeout="3s") as (b, gen):
+        first = b.uplink
+        second = b.start_uplink()
+        assert first is not None
+        generate(b, gen, 600)
+        both = gen.pause()
+        b.wait_drained(both, 30)
+        baseline = tally(reader, b, both, " with two uplinks running")
+        assert (baseline.lost, baseline.duplicated, baseline.unexpected) == ([], 0, 0), str(baseline)
+        gen.start()
+        for victim in (first, second):
+            victim.kill()
+            generate(b, gen, 600)
+            if victim is first:
+                b.start_uplink()
+        generate(b, gen, 400)
+        sent = gen.pause()
+        b.wait_drained(sent, 45)
+    result = tally(reader, b, sent)
+    assert result.lost == [], str(result)
+    assert result.unexpected == 0
+    assert result.duplicated <= 2 * e2e_processes.PROFILE.window, str(result)
 
 
 def test_edge_killed_with_unacknowledged_records(

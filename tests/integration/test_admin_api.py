@@ -78,9 +78,12 @@ def edge_config(spool: Path, router: str, *, site: str, domain: int, **extra: An
 
 
 @contextmanager
-def fleet(router: str, domain: int, robots: int = 2, rate: float = 20.0) -> Iterator[Fleet]:
+def fleet(
+    router: str, domain: int, robots: int = 2, rate: float = 20.0, prefix: str = "tb4_"
+) -> Iterator[Fleet]:
     typestore = load_typestore("jazzy", bundled_message_paths())
-    with Fleet(zenoh_peer_config(router), typestore, robots=robots, rate=rate, domain_id=domain) as sim:
+    config = zenoh_peer_config(router)
+    with Fleet(config, typestore, robots=robots, rate=rate, domain_id=domain, prefix=prefix) as sim:
         yield sim
 
 

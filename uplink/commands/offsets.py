@@ -9,6 +9,8 @@ that has not settled, so after a crash everything not settled comes again (at-le
 from __future__ import annotations
 
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 TopicPartitionKey = tuple[str, int]
@@ -16,31 +18,41 @@ TopicPartitionKey = tuple[str, int]
 
 @dataclass
 class _Partition:
-    pending: set[int] = field(default_factory=set)
+    pending: dict[int, float] = field(default_factory=dict)
+    """Offset -> when it was handed out (the tracker's clock)."""
     highest: int = -1
     committed: int = -1
 
 
 class OffsetTracker:
-    def __init__(self) -> None:
+    def __init__(self, *, clock: Callable[[], float] = time.monotonic) -> None:
         self._parts: dict[TopicPartitionKey, _Partition] = {}
         self._lock = threading.Lock()
+        self._clock = clock
 
     def begin(self, tp: TopicPartitionKey, offset: int) -> None:
+        now = self._clock()
         with self._lock:
             part = self._parts.setdefault(tp, _Partition())
-            part.pending.add(offset)
+            part.pending[offset] = now
             part.highest = max(part.highest, offset)
 
     def done(self, tp: TopicPartitionKey, offset: int) -> None:
         with self._lock:
             part = self._parts.get(tp)
             if part is not None:
-                part.pending.discard(offset)
+                part.pending.pop(offset, None)
 
     def in_flight(self) -> int:
         with self._lock:
             return sum(len(p.pending) for p in self._parts.values())
+
+    def oldest_age_s(self) -> float:
+        """How long the oldest record still in flight has waited (0 when none is): the command lag."""
+        now = self._clock()
+        with self._lock:
+            started = [t for p in self._parts.values() for t in p.pending.values()]
+        return max(0.0, now - min(started)) if started else 0.0
 
     def committable(self) -> dict[TopicPartitionKey, int]:
         """Partition -> next offset to commit, for partitions that advanced since the last commit."""

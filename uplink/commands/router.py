@@ -220,6 +220,10 @@ class CommandRouter:
     def in_flight(self) -> int:
         return self._tracker.in_flight()
 
+    def lag_s(self) -> float:
+        """Age of the oldest command read and not yet settled (``fleetlink_command_lag_seconds``)."""
+        return self._tracker.oldest_age_s()
+
     # -- consumer thread ------------------------------------------------------------------
 
     def _run(self) -> None:

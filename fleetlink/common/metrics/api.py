@@ -38,6 +38,7 @@ class Metrics(Protocol):
     def on_spool_dropped(self, stream: str, reason: str, n: int = 1) -> None: ...
     def on_sent(self, batches: int, records: int, nbytes: int) -> None: ...
     def on_acked(self, batches: int, records: int, latency_s: float | None = None) -> None: ...
+    def on_ack_latencies(self, counts: tuple[int, ...], total_s: float) -> None: ...
     def on_wan_failure(self, reason: str, n: int = 1) -> None: ...
     def set_spool(
         self,
@@ -59,9 +60,13 @@ class Metrics(Protocol):
     def on_delivered(self, topic: str, ok: bool, latency_s: float) -> None: ...
     def on_refused(self, site: str, reason: str, *, batches: int = 0, records: int = 0) -> None: ...
 
+    def on_registry_error(self, reason: str, n: int = 1) -> None: ...
+    def set_command_lag(self, seconds: float) -> None: ...
+
     # repeater
     def on_command(self, command: str, outcome: str, n: int = 1) -> None: ...
     def on_forged_command(self, reason: str) -> None: ...
+    def set_repeater(self, *, link_up: bool, active: int) -> None: ...
 
     # every process
     def set_health(self, state: HealthState) -> None: ...
@@ -78,6 +83,9 @@ class FamilyMetrics:
         raise NotImplementedError
 
     def _observe(self, fam: Family, labels: tuple[str, ...], value: float) -> None:
+        raise NotImplementedError
+
+    def _observe_buckets(self, fam: Family, counts: tuple[int, ...], total: float) -> None:
         raise NotImplementedError
 
     def _count(self, name: str, *labels: str, n: float = 1) -> None:
@@ -141,6 +149,13 @@ class FamilyMetrics:
         if latency_s is not None:
             self._observe(family("fleetlink_wan_ack_latency_seconds"), (), max(0.0, latency_s))
 
+    def on_ack_latencies(self, counts: tuple[int, ...], total_s: float) -> None:
+        """Ack latencies the edge's senders measured and counted per bucket since the last look:
+        ``counts[i]`` in bucket ``i`` of ``LATENCY_BUCKETS`` (the last: above them), summing to
+        ``total_s`` seconds (``fleetlink_wan_ack_latency_seconds``)."""
+        if any(counts):
+            self._observe_buckets(family("fleetlink_wan_ack_latency_seconds"), counts, total_s)
+
     def on_wan_failure(self, reason: str, n: int = 1) -> None:
         self._count("fleetlink_wan_failures", reason, n=n)
 
@@ -189,12 +204,22 @@ class FamilyMetrics:
         if records:
             self._count("fleetlink_ingest_refused_records", site, reason, n=records)
 
+    def on_registry_error(self, reason: str, n: int = 1) -> None:
+        self._count("fleetlink_registry_errors", reason, n=n)
+
+    def set_command_lag(self, seconds: float) -> None:
+        self._set(family("fleetlink_command_lag_seconds"), (), max(0.0, seconds))
+
     # repeater --------------------------------------------------------------------------------
     def on_command(self, command: str, outcome: str, n: int = 1) -> None:
         self._count("fleetlink_commands", command, outcome, n=n)
 
     def on_forged_command(self, reason: str) -> None:
         self._count("fleetlink_commands_forged", reason)
+
+    def set_repeater(self, *, link_up: bool, active: int) -> None:
+        self._set(family("fleetlink_repeater_link_up"), (), 1.0 if link_up else 0.0)
+        self._set(family("fleetlink_repeater_active_commands"), (), active)
 
     # every process ---------------------------------------------------------------------------
     def set_health(self, state: HealthState) -> None:
@@ -213,4 +238,7 @@ class NullMetrics(FamilyMetrics):
         return None
 
     def _observe(self, fam: Family, labels: tuple[str, ...], value: float) -> None:  # noqa: ARG002
+        return None
+
+    def _observe_buckets(self, fam: Family, counts: tuple[int, ...], total: float) -> None:  # noqa: ARG002
         return None

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from typing import Literal
 
 Kind = Literal["counter", "gauge", "histogram"]
+Component = Literal["edge", "uplink", "repeater", "any"]
+COMPONENTS: tuple[str, ...] = ("edge", "uplink", "repeater")
 
 LATENCY_BUCKETS: tuple[float, ...] = (
     0.001,
@@ -38,6 +40,8 @@ class Family:
     kind: Kind
     labels: tuple[str, ...]
     help: str
+    component: Component = "any"
+    """The process that exports it (``any``: every process); a process exports its own alone."""
 
     @property
     def exposed(self) -> str:
@@ -57,7 +61,11 @@ def _h(name: str, text: str) -> Family:
     return Family(name, "histogram", (), text)
 
 
-FAMILIES: tuple[Family, ...] = (
+def _of(component: Component, *families: Family) -> tuple[Family, ...]:
+    return tuple(Family(f.name, f.kind, f.labels, f.help, component) for f in families)
+
+
+_EDGE: tuple[Family, ...] = (
     # -- mappings (edge) ---------------------------------------------------------------------
     _c("fleetlink_mapping_received", ("mapping",), "ROS samples a mapping received"),
     _c(
@@ -135,7 +143,8 @@ FAMILIES: tuple[Family, ...] = (
         ("reason",),
         "Admin requests refused (reason: wrong_token, locked_out, read_only)",
     ),
-    # -- uplink ----------------------------------------------------------------------------------
+)
+_UPLINK: tuple[Family, ...] = (
     _c(
         "fleetlink_ingest_batches",
         ("site", "status"),
@@ -155,7 +164,18 @@ FAMILIES: tuple[Family, ...] = (
     ),
     _c("fleetlink_kafka_delivered", ("topic", "result"), "Kafka delivery reports (result: ok, error)"),
     _h("fleetlink_kafka_delivery_latency_seconds", "From produce() to Kafka's delivery report"),
-    # -- repeater --------------------------------------------------------------------------------
+    _c(
+        "fleetlink_registry_errors",
+        ("reason",),
+        "Schema registry requests that failed (reason: unavailable, incompatible, refused)",
+    ),
+    _g(
+        "fleetlink_command_lag_seconds",
+        (),
+        "Age of the oldest command read from Kafka and not yet settled by a repeater",
+    ),
+)
+_REPEATER: tuple[Family, ...] = (
     _c(
         "fleetlink_commands",
         ("command", "outcome"),
@@ -167,12 +187,27 @@ FAMILIES: tuple[Family, ...] = (
         "Command envelopes refused unread: not signed by a trusted key for this site (reason: "
         "unsigned, unknown_key, bad_signature, other_site)",
     ),
-    # -- every process ---------------------------------------------------------------------------
+    _g("fleetlink_repeater_link_up", (), "1 while the uplink answers the repeater's status link, else 0"),
+    _g("fleetlink_repeater_active_commands", (), "Commands the repeater repeats now (their lease holds)"),
+)
+_ANY: tuple[Family, ...] = (
     _g("fleetlink_health", ("state",), "1 for the process's current health state (ok, degraded, failed)"),
     _g("fleetlink_build_info", ("component", "version"), "Always 1; labels name the process and version"),
 )
 
+FAMILIES: tuple[Family, ...] = (
+    *_of("edge", *_EDGE),
+    *_of("uplink", *_UPLINK),
+    *_of("repeater", *_REPEATER),
+    *_ANY,
+)
+
 BY_NAME: dict[str, Family] = {f.name: f for f in FAMILIES}
+
+
+def families_of(component: str) -> tuple[Family, ...]:
+    """The families ``component`` exports: its own and those of every process."""
+    return tuple(f for f in FAMILIES if f.component in (component, "any"))
 
 
 def family(name: str) -> Family:

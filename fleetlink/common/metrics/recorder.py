@@ -20,6 +20,7 @@ class MetricsRecorder(FamilyMetrics):
         self._lock = threading.Lock()
         self._values: dict[tuple[str, tuple[str, ...]], float] = defaultdict(float)
         self._observed: dict[str, list[float]] = defaultdict(list)
+        self._buckets: dict[str, list[int]] = {}
 
     def _inc(self, fam: Family, labels: tuple[str, ...], n: float) -> None:
         _check(fam, labels)
@@ -35,6 +36,18 @@ class MetricsRecorder(FamilyMetrics):
         _check(fam, labels)
         with self._lock:
             self._observed[fam.name].append(value)
+
+    def _observe_buckets(self, fam: Family, counts: tuple[int, ...], total: float) -> None:
+        with self._lock:
+            held = self._buckets.setdefault(fam.name, [0] * len(counts))
+            for i, n in enumerate(counts):
+                held[i] += n
+            self._values[(fam.name + "_sum", ())] += total
+
+    def bucket_counts(self, name: str) -> list[int]:
+        """Observations added per bucket (``on_ack_latencies``), non-cumulative."""
+        with self._lock:
+            return list(self._buckets.get(family(name).name, ()))
 
     def value(self, name: str, **labels: str) -> float:
         """A counter's total or a gauge's value (0 when never reported)."""

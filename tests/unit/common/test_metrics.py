@@ -60,6 +60,10 @@ def drive(m: Metrics) -> None:
     m.on_delivered("fleet.ir", True, 0.003)
     m.on_delivered("fleet.ir", False, 0.2)
     m.on_command("lightring", "published")
+    m.on_ack_latencies((0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1), 70.004)
+    m.on_registry_error("unavailable", 2)
+    m.set_command_lag(4.5)
+    m.set_repeater(link_up=False, active=3)
     m.set_health("degraded")
 
 
@@ -97,16 +101,53 @@ EXPECTED = [
     ("fleetlink_commands_total", {"command": "lightring", "outcome": "published"}, 1),
     ("fleetlink_health", {"state": "degraded"}, 1),
     ("fleetlink_health", {"state": "ok"}, 0),
-    ("fleetlink_wan_ack_latency_seconds_count", {}, 1),
+    ("fleetlink_wan_ack_latency_seconds_count", {}, 4),
     ("fleetlink_kafka_delivery_latency_seconds_count", {}, 2),
+    ("fleetlink_registry_errors_total", {"reason": "unavailable"}, 2),
+    ("fleetlink_command_lag_seconds", {}, 4.5),
+    ("fleetlink_repeater_link_up", {}, 0),
+    ("fleetlink_repeater_active_commands", {}, 3),
 ]
+
+
+def component_of(name: str) -> str:
+    """The process that exports ``name`` (a sample name: ``_total``, ``_count`` ...)."""
+    base = re.sub(r"_(total|count|sum|bucket)$", "", name)
+    owner = family(base).component
+    return "edge" if owner == "any" else owner
 
 
 @pytest.mark.parametrize(("name", "labels", "value"), EXPECTED)
 def test_prometheus_exposes_each_call(name: str, labels: dict[str, str], value: float) -> None:
-    metrics = PrometheusMetrics("edge")
+    metrics = PrometheusMetrics(component_of(name))
     drive(metrics)
     assert samples(metrics)[(name, tuple(sorted(labels.items())))] == value
+
+
+@pytest.mark.parametrize("component", ["edge", "uplink", "repeater"])
+def test_each_process_exports_its_own_families_only(component: str) -> None:
+    metrics = PrometheusMetrics(component)
+    drive(metrics)  # every method, those of the other processes included: they are dropped
+    exported = {re.sub(r"_(total|count|sum|bucket|created)$", "", name) for name, _ in samples(metrics)}
+    own = {f.name for f in FAMILIES if f.component in (component, "any")}
+    assert exported <= own
+    assert "fleetlink_build_info" in exported
+    others = {f.name for f in FAMILIES if f.component not in (component, "any")}
+    assert not exported & others
+    if component != "edge":
+        assert "fleetlink_wan_link_up" not in exported  # an alert on it fires for edges alone
+
+
+def test_ack_latencies_counted_elsewhere_fill_the_histogram() -> None:
+    metrics = PrometheusMetrics("edge")
+    metrics.on_ack_latencies((0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1), 70.004)
+    found = samples(metrics)
+    assert found[("fleetlink_wan_ack_latency_seconds_count", ())] == 3
+    assert found[("fleetlink_wan_ack_latency_seconds_sum", ())] == pytest.approx(70.004)
+    assert found[("fleetlink_wan_ack_latency_seconds_bucket", (("le", "0.001"),))] == 0
+    assert found[("fleetlink_wan_ack_latency_seconds_bucket", (("le", "0.0025"),))] == 2
+    assert found[("fleetlink_wan_ack_latency_seconds_bucket", (("le", "60.0"),))] == 2
+    assert found[("fleetlink_wan_ack_latency_seconds_bucket", (("le", "+Inf"),))] == 3
 
 
 @pytest.mark.parametrize(("name", "labels", "value"), [e for e in EXPECTED if not e[0].endswith("_count")])
@@ -120,6 +161,7 @@ def test_recorder_observations_and_totals() -> None:
     rec = MetricsRecorder()
     drive(rec)
     assert rec.observations("fleetlink_wan_ack_latency_seconds") == [0.04]
+    assert rec.bucket_counts("fleetlink_wan_ack_latency_seconds")[1] == 2
     assert rec.observations("fleetlink_kafka_delivery_latency_seconds") == [0.003, 0.2]
     assert rec.total("fleetlink_mapping_dead_lettered", mapping="ir") == 2
     assert rec.total("fleetlink_kafka_delivered") == 2

@@ -17,6 +17,7 @@ from fleetlink.console.auth import COOKIE, cookie_value
 from fleetlink.console.edge import EdgeConsole
 from fleetlink.console.envelope import Envelope, failure
 from fleetlink.console.sources import Process
+from fleetlink.console.users import User, hash_password
 from fleetlink.edge.admin.backend import EdgeSnapshot, MappingCounts
 from fleetlink.edge.admin.http import create_app
 from tests.unit.edge.admin.world import World, world
@@ -36,7 +37,9 @@ class Clock:
         return self.now
 
 
-def edge_client(w: World, *, token: str | None = TOKEN, clock: Clock | None = None) -> TestClient:
+def edge_client(
+    w: World, *, token: str | None = TOKEN, clock: Clock | None = None, users: dict[str, User] | None = None
+) -> TestClient:
     secret = SecretStr(token) if token else None
     raw = {"subscriptions": {"/tb4_01/ir_intensity": {"received": 0}}}
     console = EdgeConsole(
@@ -46,6 +49,7 @@ def edge_client(w: World, *, token: str | None = TOKEN, clock: Clock | None = No
         snapshot=w.backend.snapshot,
         raw_snapshot=lambda: raw,
         clock=clock or Clock(),
+        users=users,
     )
     app = create_app(w.service, token=secret)
     console.mount(app)
@@ -201,6 +205,7 @@ def test_the_site_view_with_rates_between_polls(w: World) -> None:
     assert view["mappings"][1]["rates"] == {
         "received": 20.0,
         "emitted": 4.0,
+        "filtered": 0.0,
         "dropped": 16.0,
         "dead_lettered": 0.0,
     }
@@ -341,8 +346,24 @@ class FixedFleet:
         self.asked.append((site, path, op, body))
         return failure(504, f"no edge of site {site!r} answered within 3 s", site=site)
 
-    def latency(self, site: str) -> dict[str, Any] | None:
-        return {"batches": 1, "p50_ms": 5.0, "p95_ms": 5.0, "max_ms": 5.0, "window_s": 60.0}
+    def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        """Two uplinks, each having delivered some of site a's batches."""
+        answers = [
+            {
+                "uplink": uplink,
+                "site": "a",
+                "batches": {"ok": n},
+                "records": 10 * n,
+                "dead_lettered": 0,
+                "topics": {"fleet.ir": 10 * n},
+                "latency": {"batches": n, "max_ms": 9.0, "samples_ms": [5.0] * n, "window_s": 60.0},
+            }
+            for uplink, n in (("up-1", 3), ("up-2", 2))
+        ]
+        return [a for a in answers if site in (None, a["site"])]
+
+    def latest(self, site: str, robot: str) -> Envelope | None:
+        return Envelope(status=200, site=site, body={"robot": robot, "values": {}})
 
     def commands(self) -> dict[str, Any]:
         return {"available": True, "records": 3}
@@ -357,6 +378,14 @@ def test_the_fleet_pages() -> None:
     assert client.get("/api/sites", headers=BEARER).json()["sites"][1]["error"] == "timeout"
     view = client.get("/api/sites/a", headers=BEARER).json()
     assert (view["process"], view["latency"]["p50_ms"], view["health"]) == ("uplink", 5.0, {"state": "ok"})
+    assert view["latency"]["batches"] == 5  # every uplink's batches, not one uplink's
+    assert (view["delivery"]["batches"], view["delivery"]["uplink_count"]) == ({"ok": 5}, 2)
+    fleetwide = client.get("/api/delivery", headers=BEARER).json()
+    assert (fleetwide["available"], fleetwide["records"], fleetwide["topics"]["fleet.ir"]["acked"]) == (
+        True,
+        50,
+        50,
+    )
     assert client.get("/api/commands", headers=BEARER).json() == {
         "process": "uplink",
         "available": True,
@@ -396,3 +425,45 @@ def test_wrong_tokens_lock_a_client_out(w: World) -> None:
     bearer = client.get("/console/api/sites", headers={"Authorization": "Bearer nope"})
     assert bearer.status_code == 429
     assert int(bearer.headers["retry-after"]) >= 1
+
+
+SAM = User("sam", "viewer", hash_password("viewer-pass-1", salt=b"s" * 16))
+LIN = User("lin", "operator", hash_password("operator-pass-1", salt=b"l" * 16))
+
+
+def test_named_users_sign_in_with_their_role_for_the_session_time(w: World) -> None:
+    clock = Clock()
+    client = edge_client(w, clock=clock, users={"sam": SAM, "lin": LIN})
+    form = {"user": "sam", "token": "viewer-pass-1", "next": "/console/"}
+    assert client.post("/console/login", data=form, follow_redirects=False).status_code == 303
+    assert client.get("/console/api/me").json() == {"user": "sam", "role": "viewer", "process": "edge"}
+    page_change = {"X-Fleetlink-Console": "1"}
+    refused = client.post(f"/console/api/sites/{SITE}/mappings", json=IMU, headers=page_change)
+    assert refused.status_code == 403
+    assert "operator" in refused.json()["error"]
+    clock.now += 8 * 3600 + 1
+    assert client.get("/console/api/me").status_code == 401
+    added = client.post(
+        f"/console/api/sites/{SITE}/mappings", json=IMU, auth=("lin", "operator-pass-1"), headers=page_change
+    )
+    assert added.status_code == 201, added.text
+    audit = client.get("/console/api/audit", headers=BEARER).json()
+    assert [(r["user"], r["action"], r["target"], r["status"]) for r in audit["records"]] == [
+        ("lin", "mapping.add", "imu", 201)
+    ]
+
+
+def test_wrong_passwords_lock_a_client_out(w: World) -> None:
+    client = edge_client(w, users={"lin": LIN})
+    answers = [client.get("/console/api/sites", auth=("lin", f"guess-{i}")).status_code for i in range(20)]
+    assert answers[:5] == [401] * 5
+    assert set(answers[5:]) == {429}
+    form = {"user": "lin", "token": "operator-pass-1", "next": "/console/"}
+    assert client.post("/console/login", data=form, follow_redirects=False).status_code == 429
+
+
+def test_an_admin_page_reads_with_the_cookie_alone_but_changes_need_the_header(w: World) -> None:
+    client = edge_client(w)
+    client.post("/console/login", data={"token": TOKEN, "next": "/console/"}, follow_redirects=False)
+    assert client.get("/console/api/audit").status_code == 200  # what the audit page polls
+    assert client.post(f"/console/api/sites/{SITE}/mappings", json=IMU).status_code == 403

@@ -109,7 +109,8 @@ def test_the_form_refuses_unknown_inputs() -> None:
         ("stages.0.hz", "stages"),
         ("<root>", "_form"),
         ("", "_form"),
-        ("mappings[3].to", "_form"),
+        ("mappings[3].to", "mappings"),
+        ("stagez[3].to", "_form"),
         ("fromage", "_form"),
     ],
 )

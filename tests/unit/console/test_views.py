@@ -55,6 +55,7 @@ def test_rates_come_from_counter_changes_between_polls() -> None:
     assert first["mappings"][0]["rates"] == {
         "received": None,
         "emitted": None,
+        "filtered": None,
         "dropped": None,
         "dead_lettered": None,
     }
@@ -63,14 +64,15 @@ def test_rates_come_from_counter_changes_between_polls() -> None:
     assert second["mappings"][0]["rates"] == {
         "received": 10.0,
         "emitted": 2.0,
+        "filtered": 0.0,
         "dropped": 7.5,
         "dead_lettered": 0.0,
     }  # dropped counts type mismatches too
     assert second["topic_rates"] == {"/tb4_01/ir": 11.0}
     assert second["graph"]["topics"][0]["rate"] == 11.0
     assert second["graph"]["kafka"] == [
-        {"id": "k:fleet.ir", "label": "fleet.ir", "rate": 2.0, "approx": False}
-    ]
+        {"id": "k:fleet.ir", "label": "fleet.ir", "rate": None, "mapped": 2.0, "approx": False}
+    ]  # no uplink figures given: what Kafka acknowledged is not known
     assert (second["site"], second["edge_id"], second["at"], second["errors"]) == ("s", "edge-1", 102.0, {})
     assert second["robot_types"] == ["tb4"]
     assert second["health"] == {"state": "ok", "robots": 1}
@@ -119,3 +121,33 @@ def test_site_summaries() -> None:
         "missing or wrong admin token",
         None,
     )
+
+
+def test_intended_drops_are_told_apart_from_losses() -> None:
+    board = RateBoard()
+    for now, (received, dropped, throttled, errors) in ((100.0, (0, 0, 0, 0)), (102.0, (40, 36, 30, 2))):
+        body = mapping(received, received - dropped, dropped, mismatch=0)
+        body["stage_counters"] = [{"name": "throttle", "dropped": throttled, "late": 0, "errors": errors}]
+        answers = parts(0, 0, 0, 0) | {"mappings": ok([body])}
+        view = site_view("s", answers, board, now=now)
+    rates = view["mappings"][0]["rates"]
+    assert (rates["filtered"], rates["dropped"]) == (15.0, 3.0)  # the throttle's, then the rest
+
+
+def test_the_kafka_column_shows_what_every_uplink_acknowledged() -> None:
+    board = RateBoard()
+
+    def answer(uplink: str, acked: int) -> dict[str, object]:
+        return {
+            "uplink": uplink,
+            "site": "s",
+            "batches": {"ok": 1},
+            "records": acked,
+            "topics": {"fleet.ir": acked},
+        }
+
+    site_view("s", parts(0, 0, 0, 0), board, now=100.0, delivery=[answer("u1", 0), answer("u2", 0)])
+    view = site_view("s", parts(20, 4, 15, 22), board, now=102.0, delivery=[answer("u1", 6), answer("u2", 2)])
+    assert [(n["rate"], n["mapped"]) for n in view["graph"]["kafka"]] == [(4.0, 2.0)]
+    outage = site_view("s", parts(40, 8, 30, 44), board, now=104.0, delivery=[])
+    assert [(n["rate"], n["mapped"]) for n in outage["graph"]["kafka"]] == [(0.0, 2.0)]

@@ -290,6 +290,7 @@ def test_robots(w: World) -> None:
             "registered_since": None,
             "state": "registered",
             "explicit": False,
+            "history": [],
         }
     ]
 

@@ -216,6 +216,26 @@ def test_reload_keeps_robots_whose_type_survives() -> None:
     assert [b.name for b in t.match("/tb4_01/imu")] == ["imu", "all_sensors"]  # unchanged
 
 
+def test_reload_keeps_the_stage_objects_of_unchanged_mappings() -> None:
+    """Adding one mapping must not rebuild the others' stages (their state and counters)."""
+    throttle = ({"type": "throttle", "hz": 2},)
+    ir = MappingSpec(name="ir", source="/{robot}/ir_intensity", topic="fleet.ir", stages=throttle)
+    odom = MappingSpec(name="odom", source="/{robot}/odom", topic="fleet.odom", stages=throttle)
+    kind = RobotTypeSpec(name="tb4", match="/tb4_*", mappings=(ir, odom))
+    t = MappingTable(robot_types=[kind])
+    t.add_robot("tb4_01")
+    before = {b.name: b.stages for b in t.match("/tb4_01/ir_intensity") + t.match("/tb4_01/odom")}
+    changed = MappingSpec(
+        name="odom", source="/{robot}/odom", topic="fleet.odom", stages=({"type": "throttle", "hz": 5},)
+    )
+    added = MappingSpec(name="imu", source="/{robot}/imu", topic="fleet.imu")
+    t.reload([RobotTypeSpec(name="tb4", match="/tb4_*", mappings=(ir, changed, added))], [])
+    after = {b.name: b.stages for b in t.match("/tb4_01/ir_intensity") + t.match("/tb4_01/odom")}
+    assert after["ir"] is before["ir"]  # unchanged: the same objects
+    assert after["odom"] is not before["odom"]  # changed: rebuilt
+    assert [b.name for b in t.match("/tb4_01/imu")] == ["imu"]
+
+
 COMPILE_ERRORS: list[tuple[MappingSpec, str | None, str]] = [
     (
         MappingSpec(name="m", source="/{robot}/{sensor}", topic="fleet.{sensr}"),

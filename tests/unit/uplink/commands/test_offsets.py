@@ -46,3 +46,18 @@ def test_partitions_are_independent_and_revoked_ones_forgotten() -> None:
     assert tracker.in_flight() == 0
     tracker.done(TP, 0)
     assert tracker.committable() == {other: 11}
+
+
+def test_command_lag_is_the_age_of_the_oldest_record_in_flight() -> None:
+    now = [100.0]
+    tracker = OffsetTracker(clock=lambda: now[0])
+    assert tracker.oldest_age_s() == 0.0
+    tracker.begin(("cmd", 0), 5)
+    now[0] = 102.0
+    tracker.begin(("cmd", 1), 9)
+    now[0] = 110.0
+    assert tracker.oldest_age_s() == pytest.approx(10.0)
+    tracker.done(("cmd", 0), 5)
+    assert tracker.oldest_age_s() == pytest.approx(8.0)
+    tracker.done(("cmd", 1), 9)
+    assert tracker.oldest_age_s() == 0.0

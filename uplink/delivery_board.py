@@ -1,0 +1,94 @@
+"""What this uplink delivered to Kafka, per site (pure; thread-safe).
+
+``DeliveryBoard.on_batch(site, status, topics, dead_lettered)`` is called once per answered batch
+(``topics``: records Kafka acknowledged per Kafka topic, for a batch answered ``ok``).
+``figures(site)`` is the site's running totals as plain data: batches by status, records in
+Kafka per topic, dead letters. The uplink answers them on ``fleetlink/<site>/delivery/<id>``
+(``uplink.delivery_status``), and every console adds up the answers of every uplink: uplinks
+keep no state, several serve one fleet, and each sees only the batches it handled.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from fleetlink._native import ScannedBatch
+from fleetlink.wire import Record
+
+
+@dataclass
+class _Site:
+    batches: Counter[str] = field(default_factory=Counter)
+    records: int = 0
+    dead_lettered: int = 0
+    topics: Counter[str] = field(default_factory=Counter)
+
+
+class DeliveryBoard:
+    def __init__(self, *, max_sites: int = 10_000, max_topics: int = 10_000) -> None:
+        self.max_sites = max_sites
+        self.max_topics = max_topics
+        self._sites: dict[str, _Site] = {}
+        self._lock = threading.Lock()
+
+    def on_batch(
+        self, site: str, status: str, topics: Mapping[str, int] | None = None, dead_lettered: int = 0
+    ) -> None:
+        with self._lock:
+            entry = self._sites.get(site)
+            if entry is None:
+                if len(self._sites) >= self.max_sites:
+                    return
+                entry = self._sites[site] = _Site()
+            entry.batches[status] += 1
+            entry.dead_lettered += dead_lettered
+            for topic, n in (topics or {}).items():
+                if topic in entry.topics or len(entry.topics) < self.max_topics:
+                    entry.topics[topic] += n
+                    entry.records += n
+
+    def sites(self) -> list[str]:
+        with self._lock:
+            return sorted(self._sites)
+
+    def figures(self, site: str) -> dict[str, Any] | None:
+        """``{"batches": {status: n}, "records": n, "dead_lettered": n, "topics": {topic: n}}``
+        (records Kafka acknowledged), or ``None`` for a site this uplink never served."""
+        with self._lock:
+            entry = self._sites.get(site)
+            if entry is None:
+                return None
+            return {
+                "batches": dict(entry.batches),
+                "records": entry.records,
+                "dead_lettered": entry.dead_lettered,
+                "topics": dict(entry.topics),
+            }
+
+
+def acked_topics(records: Iterable[Record], dead_lettered: set[int]) -> Counter[str]:
+    """Records per Kafka topic of a batch answered ``ok``, less the dead-lettered ones (by seq)."""
+    return acked_pairs(((r.kafka_topic, r.seq) for r in records), dead_lettered)
+
+
+def acked_pairs(records: Iterable[tuple[str, int]], dead_lettered: set[int]) -> Counter[str]:
+    """``acked_topics`` of records given as ``(kafka_topic, seq)`` (a natively scanned batch)."""
+    return Counter(topic for topic, seq in records if seq not in dead_lettered)
+
+
+def scanned_pairs(
+    tails: list[str], tail_ids: Iterable[int], seqs: Iterable[int]
+) -> Iterable[tuple[str, int]]:
+    """``(kafka_topic, seq)`` of every record of a scanned batch, from its tails' topics, each
+    record's tail index and each record's seq (``ScannedBatch.tails/tail_ids/seqs``)."""
+    return ((tails[t], seq) for t, seq in zip(tail_ids, seqs, strict=True))
+
+
+def acked_scanned(scanned: ScannedBatch, dead_lettered: set[int]) -> Counter[str]:
+    """``acked_topics`` of a natively scanned batch."""
+    topics = [tail[0] for tail in scanned.tails()]
+    return acked_pairs(scanned_pairs(topics, scanned.tail_ids(), scanned.seqs()), dead_lettered)
