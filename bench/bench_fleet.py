@@ -1,6 +1,6 @@
 """Fleet benchmark: steady fleets of robots -> site router -> edge -> WAN -> uplink -> Kafka.
 
-    .venv/bin/python bench/bench_fleet.py [--shape 200x5x10 ...] [--seconds 30] [--runs 2]
+    .venv/bin/python bench/bench_fleet.py [--shape 200x5x10 ...] [--seconds 30] [--runs 2] [--sites 10]
 
 Each robot is its own Zenoh session (as an rmw_zenoh process is), publishing real recorded
 messages on five topics (Imu, Odometry, NavSatFix from the Husky bag; LaserScan, JointState from
@@ -23,6 +23,7 @@ import argparse
 import gc
 import json
 import os
+import socket
 import statistics
 import subprocess
 import sys
@@ -30,9 +31,11 @@ import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import yaml
 from confluent_kafka import Consumer, TopicPartition
@@ -112,12 +115,18 @@ class Result:
     behind: int = 0
     batches: int = 0
     batch_records: int = 0
+    sites: int = 1
+    registered: list[int] = field(default_factory=list)
+    """Robots each site's edge registered."""
+    misrouted: int = 0
+    """Robots whose records in Kafka name another site than the one they publish at (or several)."""
 
     def line(self) -> str:
         s = self.shape
         pct = 100.0 * self.delivered / self.offered if self.offered else float("nan")
         rate = self.window_records / self.window_s if self.window_s else 0.0
-        parts = [f"{s.name}: offered {self.offered:,}, delivered {self.delivered:,} ({pct:.2f} %)"]
+        where = f" at {self.sites} sites" if self.sites > 1 else ""
+        parts = [f"{s.name}{where}: offered {self.offered:,}, delivered {self.delivered:,} ({pct:.2f} %)"]
         if self.window_records:
             parts.append(f"{rate:,.0f} records/s")
             for proc in ("edge", "uplink"):
@@ -154,6 +163,11 @@ class Result:
             parts.append(f"WAN batches of {self.batch_records / self.batches:.0f} records on average")
         if self.behind:
             parts.append(f"publishers behind schedule {self.behind}")
+        if self.sites > 1:
+            parts.append(
+                f"robots registered per site {'/'.join(map(str, self.registered))}, "
+                f"robots misrouted {self.misrouted}"
+            )
         return "; ".join(parts)
 
 
@@ -184,6 +198,8 @@ class Reader(threading.Thread):
         )
         self.consumer.assign([TopicPartition(t, 0, 0) for t in topics])
         self.got: list[tuple[float, int]] = []
+        self.sites: dict[bytes, set[bytes]] = {}
+        """Robot (the record key) -> the ``fleetlink.site`` headers its records carried."""
         self.stop_event = threading.Event()
 
     def run(self) -> None:
@@ -191,121 +207,194 @@ class Reader(threading.Thread):
         while not self.stop_event.is_set():
             msgs = self.consumer.consume(2000, timeout=0.005)
             now = time.time()
-            self.got.extend((now, m.timestamp()[1]) for m in msgs if m.error() is None)
+            for m in msgs:
+                if m.error() is not None:
+                    continue
+                self.got.append((now, m.timestamp()[1]))
+                key = m.key() or b""
+                if key not in self.sites or len(self.sites[key]) == 1:
+                    site = dict(m.headers() or ()).get("fleetlink.site", b"")
+                    self.sites.setdefault(key, set()).add(site or b"")
         self.consumer.close()
 
 
+def start_site(
+    stack: ExitStack, work: Path, site: int, sites: int, cloud_port: int, mappings: list[dict[str, str]]
+) -> tuple[int, int, int, Path]:
+    """One site: its router and its edge (a client of it). Returns (router port, router pid, edge
+    pid, the edge's stats file)."""
+    site_port = free_port()
+    router = subprocess.Popen(
+        [
+            sys.executable,
+            str(ROOT / "bench" / "fleet_router.py"),
+            str(site_port),
+            f"tcp/127.0.0.1:{cloud_port}",
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    stack.callback(router.wait, 30)
+    stack.callback(router.stdin.close)  # type: ignore[union-attr]
+    if router.stdout is None or router.stdout.readline().strip() != "ready":
+        raise SystemExit("site router did not start")
+    name = "fleet" if sites == 1 else f"site-{site:02d}"
+    edge = {
+        "site": name,
+        "edge_id": f"edge-{site}",
+        "zenoh": {"mode": "client", "connect": [f"tcp/127.0.0.1:{site_port}"]},
+        "robot_types": {"bench": {"match": "/r*", "mappings": mappings}},
+        "spool": {"dir": str(work / f"spool-{site}"), "max_bytes": "1GiB"},
+    }
+    stats_path = work / f"edge-{site}.stats"
+    pid = start_process(
+        stack, work, f"edge-{site}", edge, ["edge", "run", "--stats-file", str(stats_path)], stats_path.exists
+    )
+    return site_port, router.pid, pid, stats_path
+
+
+def start_cloud_router(stack: ExitStack, work: Path, port: int) -> int:
+    config = work / "cloud-router.json5"
+    fleetlink = [sys.executable, "-m", "fleetlink", "zenoh"]
+    template = str(ROOT / "deploy" / "zenoh" / "cloud-router-dev.json5")
+    listen = f"tcp/127.0.0.1:{port}"
+    subprocess.run([*fleetlink, "render", template, "-l", listen, "-o", str(config)], check=True, cwd=ROOT)
+    router = subprocess.Popen(
+        [*fleetlink, "router", "-c", str(config)],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    stack.callback(router.wait, 30)
+    stack.callback(router.terminate)
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return router.pid
+        except OSError:
+            if time.monotonic() > deadline or router.poll() is not None:
+                raise SystemExit("the cloud router did not start") from None
+            time.sleep(0.1)
+
+
+def start_process(
+    stack: ExitStack, work: Path, name: str, config: Mapping[str, object], argv: list[str], ready: object
+) -> int:
+    path = work / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(config))
+    proc = ServerProcess(
+        name=name,
+        argv=[sys.executable, "-m", "fleetlink", *argv[:2], "-c", str(path), *argv[2:]],
+        log_path=work / f"{name}.log",
+        pid_path=work / f"{name}.pid",
+        ready=ready,  # type: ignore[arg-type]
+    )
+    proc.start(60)
+    stack.callback(proc.stop)
+    if proc.pid is None:
+        raise SystemExit(f"{name} did not start")
+    return proc.pid
+
+
 def run_shape(
-    work: Path, shape: Shape, bootstrap: str, registry: str, seconds: float, warmup: float
+    work: Path, shape: Shape, bootstrap: str, registry: str, seconds: float, warmup: float, sites: int = 1
 ) -> Result:
     work.mkdir(parents=True)
     suffix = uuid.uuid4().hex[:6]
     topic_names = [f"bench.fleet.{name}.{suffix}" for name, *_ in TOPICS[: shape.topics]]
     create_topics(bootstrap, topic_names)
-    cloud_port, site_port = free_port(), free_port()
-    result = Result(shape)
+    cloud_port = free_port()
+    result = Result(shape, sites=sites)
     with ExitStack() as stack:
         procs: dict[str, int] = {}
+        cloud = f"tcp/127.0.0.1:{cloud_port}"
+        zenoh: dict[str, object] = {"mode": "router", "listen": [cloud]}  # the uplink is the cloud router
+        if sites > 1:
+            # a cloud router of its own, from the shipped template: only fleetlink/** crosses it,
+            # so each site's robots stay on their site (a router without it would route every
+            # site's robot data to every edge subscribing to the same wildcard)
+            procs["cloud router"] = start_cloud_router(stack, work, cloud_port)
+            zenoh = {"mode": "client", "connect": [cloud]}
         uplink = {
             "kafka": {"bootstrap_servers": bootstrap, "linger": "5ms"},
             "registry": {"url": registry},
-            "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{cloud_port}"]},
+            "zenoh": zenoh,
         }
+        uplink_log = work / "uplink.log"
+        procs["uplink"] = start_process(
+            stack,
+            work,
+            "uplink",
+            uplink,
+            ["uplink", "run"],
+            lambda: "uplink running" in uplink_log.read_text(),
+        )
         mappings = [
             {"name": name, "from": f"/{{robot}}/{name}", "to": topic, "type": typename}
             for (name, typename, _bag_topic, _bag), topic in zip(TOPICS, topic_names, strict=False)
         ]
-        edge = {
-            "site": "fleet",
-            "edge_id": "edge-1",
-            "zenoh": {"mode": "client", "connect": [f"tcp/127.0.0.1:{site_port}"]},
-            "robot_types": {"bench": {"match": "/r*", "mappings": mappings}},
-            "spool": {"dir": str(work / "spool"), "max_bytes": "1GiB"},
-        }
-        router = subprocess.Popen(
-            [
-                sys.executable,
-                str(ROOT / "bench" / "fleet_router.py"),
-                str(site_port),
-                f"tcp/127.0.0.1:{cloud_port}",
-            ],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-            cwd=ROOT,
-        )
-        stack.callback(router.wait, 30)
-        stack.callback(router.stdin.close)  # type: ignore[union-attr]
-        if router.stdout is None or router.stdout.readline().strip() != "ready":
-            raise SystemExit("site router did not start")
-        procs["site router"] = router.pid
-        stats_path = work / "edge.stats"
-        for name, config, argv in (
-            ("uplink", uplink, ["uplink", "run"]),
-            ("edge", edge, ["edge", "run", "--stats-file", str(stats_path)]),
-        ):
-            path = work / f"{name}.yaml"
-            path.write_text(yaml.safe_dump(config))
-            log = work / f"{name}.log"
-
-            def ready(name: str = name, log: Path = log) -> bool:
-                return stats_path.exists() if name == "edge" else "uplink running" in log.read_text()
-
-            proc = ServerProcess(
-                name=name,
-                argv=[sys.executable, "-m", "fleetlink", *argv[:2], "-c", str(path), *argv[2:]],
-                log_path=log,
-                pid_path=work / f"{name}.pid",
-                ready=ready,
+        site_ports: list[int] = []
+        stats_paths: list[Path] = []
+        edges: list[int] = []
+        for site in range(sites):
+            port, router_pid, edge_pid, stats_path = start_site(
+                stack, work, site, sites, cloud_port, mappings
             )
-            proc.start(60)
-            stack.callback(proc.stop)
-            if proc.pid is None:
-                raise SystemExit(f"{name} did not start")
-            procs[name] = proc.pid
+            site_ports.append(port)
+            stats_paths.append(stats_path)
+            edges.append(edge_pid)
+            procs[f"site router {site}"] = router_pid
+            procs[f"edge {site}"] = edge_pid
 
         pubs: list[subprocess.Popen[str]] = []
-        for first in range(0, shape.robots, ROBOTS_PER_PROCESS):
-            n = min(ROBOTS_PER_PROCESS, shape.robots - first)
-            pub = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "bench.fleet_publisher",
-                    "--connect",
-                    f"tcp/127.0.0.1:{site_port}",
-                    "--first",
-                    str(first),
-                    "--robots",
-                    str(n),
-                    "--topics",
-                    str(shape.topics),
-                    "--hz",
-                    str(shape.hz),
-                    "--seconds",
-                    str(seconds),
-                ],
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                text=True,
-                cwd=ROOT,
+        robot_site: dict[bytes, str] = {}
+        per_site = -(-shape.robots // sites)
+        for site, port in enumerate(site_ports):
+            lo, hi = site * per_site, min(shape.robots, (site + 1) * per_site)
+            robot_site.update(
+                {f"r{i:04d}".encode(): "fleet" if sites == 1 else f"site-{site:02d}" for i in range(lo, hi)}
             )
-            pubs.append(pub)
-            stack.callback(pub.kill)
+            for first in range(lo, hi, ROBOTS_PER_PROCESS):
+                n = min(ROBOTS_PER_PROCESS, hi - first)
+                pub = subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "bench.fleet_publisher",
+                        "--connect",
+                        f"tcp/127.0.0.1:{port}",
+                        "--first",
+                        str(first),
+                        "--robots",
+                        str(n),
+                        "--topics",
+                        str(shape.topics),
+                        "--hz",
+                        str(shape.hz),
+                        "--seconds",
+                        str(seconds),
+                    ],
+                    stdin=subprocess.PIPE,
+                    stdout=subprocess.PIPE,
+                    text=True,
+                    cwd=ROOT,
+                )
+                pubs.append(pub)
+                stack.callback(pub.kill)
         for pub in pubs:
             if pub.stdout is None or pub.stdout.readline().strip() != "ready":
                 raise SystemExit("a publisher did not start")
         want = shape.robots * shape.topics
         deadline = time.monotonic() + 300
         while True:  # every robot registered and every topic subscribed
-            try:
-                subs = json.loads(stats_path.read_text()).get("subscriptions", {})
-            except (OSError, ValueError):
-                subs = {}
-            if len(subs) >= want:
+            subscribed = sum(len(read_stats(path).get("subscriptions", {})) for path in stats_paths)
+            if subscribed >= want:
                 break
             if time.monotonic() > deadline:
-                raise SystemExit(f"the edge subscribed {len(subs)} of {want} topics in 300 s")
+                raise SystemExit(f"the edges subscribed {subscribed} of {want} topics in 300 s")
             time.sleep(0.5)
         time.sleep(1.0)
 
@@ -321,8 +410,8 @@ def run_shape(
 
         def sample() -> None:
             while not stop_sampling.wait(1.0):
-                edge_pid = procs["edge"]
-                samples.append(Sample(time.time(), cpu_now(), rss_mb(edge_pid), threads(edge_pid)))
+                rss = sum(rss_mb(pid) for pid in edges)
+                samples.append(Sample(time.time(), cpu_now(), rss, max(threads(pid) for pid in edges)))
 
         sampler = threading.Thread(target=sample, daemon=True)
         for pub in pubs:
@@ -346,31 +435,53 @@ def run_shape(
         stop_sampling.set()
         reader.stop_event.set()
         reader.join(10)
-        stats = json.loads(stats_path.read_text())
+        all_stats = [read_stats(path) for path in stats_paths]
         for pub in pubs:
             assert pub.stdin is not None
             pub.stdin.write("bye\n")
             pub.stdin.flush()
     result.delivered = len(reader.got)
-    lo, hi = t0 * 1000, t1 * 1000
-    window = [(recv, stamp) for recv, stamp in reader.got if lo <= stamp < hi]
+    lo_ms, hi_ms = t0 * 1000, t1 * 1000
+    window = [(recv, stamp) for recv, stamp in reader.got if lo_ms <= stamp < hi_ms]
     result.window_records = len(window)
     result.window_s = t1 - t0
     result.latencies_ms = [recv * 1000 - stamp for recv, stamp in window]
-    result.cpu_s = {k: cpu1[k] - cpu0[k] for k in cpu1}
+    cpu = {k: cpu1[k] - cpu0[k] for k in cpu1}
+    result.cpu_s = {
+        "edge": sum(v for k, v in cpu.items() if k.startswith("edge ")),
+        "site router": sum(v for k, v in cpu.items() if k.startswith("site router ")),
+        **{k: v for k, v in cpu.items() if not k.startswith(("edge ", "site router "))},
+    }
     result.samples = samples
-    result.dropped = int(stats.get("intake", {}).get("dropped", 0))
-    sender = stats.get("streams", {}).get("durable", {}).get("sender", {})
-    if os.environ.get("BENCH_DEBUG"):
-        print(
-            "edge sender:", json.dumps(sender), "processor:", json.dumps(stats.get("processor")), flush=True
-        )
-    result.batches = int(sender.get("batches_sent", 0))
-    result.batch_records = int(sender.get("records_sent", 0))
-    subs = stats.get("subscriptions", {})
-    result.gaps = sum(int(s.get("gaps", 0)) for s in subs.values())
-    result.missing = sum(int(s.get("missing", 0)) for s in subs.values())
+    result.misrouted = sum(
+        1 for robot, seen in reader.sites.items() if seen != {robot_site.get(robot, "?").encode()}
+    ) + sum(1 for robot in robot_site if robot not in reader.sites)
+    for stats in all_stats:
+        result.dropped += int(stats.get("intake", {}).get("dropped", 0))
+        sender = stats.get("streams", {}).get("durable", {}).get("sender", {})
+        if os.environ.get("BENCH_DEBUG"):
+            print(
+                "edge sender:",
+                json.dumps(sender),
+                "processor:",
+                json.dumps(stats.get("processor")),
+                flush=True,
+            )
+        result.batches += int(sender.get("batches_sent", 0))
+        result.batch_records += int(sender.get("records_sent", 0))
+        subs = stats.get("subscriptions", {})
+        result.gaps += sum(int(s.get("gaps", 0)) for s in subs.values())
+        result.missing += sum(int(s.get("missing", 0)) for s in subs.values())
+        result.registered.append(len(stats.get("robots", {})))
     return result
+
+
+def read_stats(path: Path) -> dict[str, Any]:
+    try:
+        data: dict[str, Any] = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data
 
 
 def main() -> None:
@@ -382,6 +493,12 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=30.0, help="how long the robots publish")
     ap.add_argument("--warmup", type=float, default=5.0, help="seconds not counted at the start")
     ap.add_argument("--runs", type=int, default=2, help="runs of each shape (this machine is noisy)")
+    ap.add_argument(
+        "--sites",
+        type=int,
+        default=1,
+        help="split the robots over this many sites (a router and an edge each)",
+    )
     args = ap.parse_args()
     shapes = [Shape.parse(s) for s in (args.shape or DEFAULT_SHAPES)]
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-fleet-") as tmp:
@@ -405,6 +522,7 @@ def main() -> None:
                     registry,
                     args.seconds,
                     args.warmup,
+                    args.sites,
                 )
                 print(f"run {run + 1}: {result.line()}", flush=True)
 
