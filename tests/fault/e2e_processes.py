@@ -29,7 +29,7 @@ from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
 import yaml
-from confluent_kafka import Message
+from confluent_kafka import Consumer, Message, TopicPartition
 
 from fleetlink.localstack.relay import TcpRelay
 from fleetlink.localstack.zenoh_router import ZenohRouter
@@ -447,6 +447,18 @@ def count(reader: TopicReader, msgs: list[Message], sent: int) -> Count:
         unexpected=unexpected,
         out_of_order=out_of_order,
     )
+
+
+def read_to_end(reader: TopicReader, topic: str, timeout: float = 30.0) -> list[Message]:
+    """Every record on the topic now, up to its high watermark: for a test that lost records on
+    purpose, once the edge's spool is drained (everything acknowledged is in Kafka), rather than
+    waiting out ``read_all``'s deadline for values that will never come."""
+    probe = Consumer({"bootstrap.servers": reader.bootstrap, "group.id": f"e2e-{uuid.uuid4().hex}"})
+    try:
+        _low, high = probe.get_watermark_offsets(TopicPartition(topic, 0), timeout=10)
+    finally:
+        probe.close()
+    return reader.consume(topic, 0, lambda msgs: len(msgs) >= high, timeout)
 
 
 def read_all(reader: TopicReader, topic: str, sent: int, timeout: float = 30.0) -> list[Message]:
