@@ -13,7 +13,8 @@ from fleetlink.localstack.zenoh_router import ZenohRouter
 
 def main() -> int:
     port, *connect = sys.argv[1:]
-    with ZenohRouter(int(port), connect=tuple(connect)):
+    # a site of 1,000 robots is over 1,000 sessions: zenoh's default refuses the 1,001st
+    with ZenohRouter(int(port), connect=tuple(connect), extra={"transport/unicast/max_sessions": 20000}):
         print("ready", flush=True)
         sys.stdin.read()
     return 0
