@@ -13,8 +13,10 @@ from fleetlink.localstack.zenoh_router import ZenohRouter
 
 def main() -> int:
     port, *connect = sys.argv[1:]
-    # a site of 1,000 robots is over 1,000 sessions: zenoh's default refuses the 1,001st
-    with ZenohRouter(int(port), connect=tuple(connect), extra={"transport/unicast/max_sessions": 20000}):
+    # a site of 1,000 robots is over 1,000 sessions (zenoh's default refuses the 1,001st), and with
+    # shared memory on, a router has counters for some 350 same-host sessions only
+    extra = {"transport/unicast/max_sessions": 20000, "transport/shared_memory/enabled": False}
+    with ZenohRouter(int(port), connect=tuple(connect), extra=extra):
         print("ready", flush=True)
         sys.stdin.read()
     return 0

@@ -86,7 +86,16 @@ def edge_session_config(options: ZenohOptions) -> zenoh.Config:
     conf = options.to_config()
     if options.config_file is None:
         conf.insert_json5("timestamping/enabled", json.dumps(True))
+        if options.mode == "router":  # the site's router: every ROS 2 process is a session of it
+            for key, value in SITE_ROUTER_LIMITS.items():
+                conf.insert_json5(key, json.dumps(value))
     return conf
+
+
+SITE_ROUTER_LIMITS = {"transport/unicast/max_sessions": 20000, "transport/shared_memory/enabled": False}
+"""A router-mode edge serves a whole site: zenoh's default of 1,000 sessions refuses a fleet of some
+100 robots (each runs several ROS 2 processes), and with shared memory on, a router has counters
+for only some 350 sessions on its own host (as in deploy/zenoh/edge-router.json5)."""
 
 
 class EdgeAgent:

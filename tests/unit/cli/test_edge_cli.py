@@ -61,6 +61,14 @@ def test_session_defaults(options: ZenohOptions, expected: dict[str, object]) ->
     assert json.loads(conf.get_json("timestamping/enabled")) is True
 
 
+def test_a_router_mode_edge_takes_a_whole_site_of_sessions() -> None:
+    router = edge_session_config(ZenohOptions(mode="router"))
+    assert json.loads(router.get_json("transport/unicast/max_sessions")) == 20000
+    assert json.loads(router.get_json("transport/shared_memory/enabled")) is False
+    client = edge_session_config(ZenohOptions(mode="client"))
+    assert json.loads(client.get_json("transport/unicast/max_sessions")) == 1000  # zenoh's own default
+
+
 def config(tmp_path: Path, **extra: object) -> EdgeConfig:
     spool = {"dir": str(tmp_path / "spool")}
     return EdgeConfig.model_validate({"site": "s1", "edge_id": "e1", "spool": spool, **extra})
