@@ -20,9 +20,9 @@ import zenoh.ext
 from fleetlink.roswire.attachment import AttachmentVersion, encode
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.gid import entity_gid
-from fleetlink.roswire.names import data_key, mangle
+from fleetlink.roswire.names import data_key
 from fleetlink.roswire.qos import DEFAULT, History, QoS, Reliability
-from fleetlink.roswire.tokens import EntityKind, endpoint_token
+from fleetlink.roswire.tokens import EntityKind
 
 if TYPE_CHECKING:
     from fleetlink.roswire.node import RosNode
@@ -84,19 +84,13 @@ class RosPublisher:
         session = self.node.session
         self.key = data_key(self.node.domain_id, self.topic, self.typename, self.type_hash)
         self.eid = next_entity_id()
-        self.token_key = endpoint_token(
-            domain=self.node.domain_id,
-            zid=self.node.zid,
-            nid=self.node.nid,
-            eid=self.eid,
-            kind=EntityKind.PUBLISHER,
-            namespace=self.node.namespace,
-            node_name=self.node.name,
-            topic=self.topic,
-            typename=self.typename,
+        self.token_key = self.node.endpoint_token(
+            EntityKind.PUBLISHER,
+            self.topic,
+            self.typename,
             type_hash=self.type_hash,
             qos=self.qos,
-            enclave=self.node.enclave,
+            eid=self.eid,
         )
         self.gid = entity_gid(self.token_key)
         reliability = zenoh.Reliability.BEST_EFFORT if self.qos.best_effort else zenoh.Reliability.RELIABLE
@@ -165,12 +159,7 @@ class RosPublisher:
         matching = self.matching
         if matching is not None:
             return matching
-        pattern = (
-            f"@ros2_lv/{self.node.domain_id}/*/*/*/{EntityKind.SUBSCRIPTION.value}/*/*/*/"
-            f"{mangle(self.topic)}/**"
-        )
-        replies = self.node.session.liveliness().get(pattern, timeout=timeout)
-        return any(reply.ok is not None for reply in replies)
+        return self.node.announced(EntityKind.SUBSCRIPTION, self.topic, timeout)
 
     @property
     def matching(self) -> bool | None:
