@@ -129,9 +129,9 @@ class OutcomeBatch:
 # -- call envelope --------------------------------------------------------------------------
 
 
-def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
-    check_call(env)
-    header: dict[str, Any] = {
+def call_fields(env: CallEnvelope) -> dict[str, Any]:
+    """The header fields of ``env`` but its source (the repeater's journal keeps the same)."""
+    return {
         "kind": env.kind,
         "id": env.call_id,
         "robot": env.robot,
@@ -141,6 +141,11 @@ def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> b
         "issued": env.issued_at_ms,
         "deadline": env.deadline_ms,
     }
+
+
+def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    check_call(env)
+    header = call_fields(env)
     if env.source:
         header["source"] = env.source
     return pack_envelope(MAGIC, header, env.payload, compress_above=compress_above)
