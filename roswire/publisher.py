@@ -11,12 +11,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
 import zenoh
 import zenoh.ext
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.roswire.attachment import AttachmentVersion, encode
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.gid import entity_gid
@@ -33,7 +33,7 @@ Congestion = Literal["drop", "block"]
 SPORADIC_HEARTBEAT_S = 0.5
 
 
-class RosPublisher:
+class RosPublisher(StartStop):
     def __init__(
         self,
         node: RosNode,
@@ -125,14 +125,6 @@ class RosPublisher:
             publisher.undeclare()
             self._publisher = None
         self.node.forget(self)
-
-    def __enter__(self) -> RosPublisher:
-        return self.start()
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
 
     def publish_cdr(self, payload: bytes, *, source_ts_ns: int | None = None) -> int:
         """Put one CDR-encoded message; returns its sequence number."""

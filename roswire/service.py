@@ -22,11 +22,11 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.roswire.attachment import Attachment, encode
 from fleetlink.roswire.attachment import decode as decode_attachment
 from fleetlink.roswire.errors import AttachmentError, RoswireError
@@ -112,7 +112,7 @@ ServiceHandler = Callable[[ServiceCall], bytes | None]
 """Returns the response CDR, or None when it will answer the call later."""
 
 
-class RosServiceServer:
+class RosServiceServer(StartStop):
     def __init__(
         self,
         node: RosNode,
@@ -164,14 +164,6 @@ class RosServiceServer:
             self._queryable = None
         self.node.forget(self)
 
-    def __enter__(self) -> RosServiceServer:
-        return self.start()
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-
     def _on_query(self, query: zenoh.Query) -> None:
         raw = query.attachment
         try:
@@ -196,7 +188,7 @@ class RosServiceServer:
             call.reply(response)
 
 
-class RosServiceClient:
+class RosServiceClient(StartStop):
     def __init__(
         self,
         node: RosNode,
@@ -241,14 +233,6 @@ class RosServiceClient:
             undeclare(self._token, log, "token", self.service)
             self._token = None
         self.node.forget(self)
-
-    def __enter__(self) -> RosServiceClient:
-        return self.start()
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
 
     def server_available(self, timeout: float = 1.0) -> bool:
         """Whether an ``SS`` token for this service (any type) answers a liveliness query."""
