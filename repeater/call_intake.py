@@ -22,10 +22,10 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.repeater.call_store import CallStore, ident
 from fleetlink.repeater.errors import JournalError
 from fleetlink.repeater.shared import Shared
+from fleetlink.repeater.signed import signed_payload
 from fleetlink.wire.calls import CallEnvelope, Outcome, call_key, decode_call
-from fleetlink.wire.command_auth import verify_envelope
 from fleetlink.wire.commands import CommandReply, Result, encode_reply
-from fleetlink.wire.errors import CommandAuthError, EnvelopeError
+from fleetlink.wire.errors import EnvelopeError
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -83,21 +83,10 @@ class CallIntake:
 
     def on_query(self, query: zenoh.Query) -> None:
         shared = self._shared
-        payload = query.payload
-        data = payload.to_bytes() if payload is not None else b""
-        try:
-            attachment = query.attachment
-            verify_envelope(
-                data, attachment.to_bytes() if attachment is not None else None, shared.site, self._keys
-            )
-        except CommandAuthError as exc:
-            shared.stats.forged += 1
-            self._on_forged(exc.kind)
-            self._limiter.log(
-                logging.WARNING, f"forged:{exc.kind}", "refused a call on %s: %s", query.key_expr, exc
-            )
-            query.reply_err(str(exc).encode())
-            query.drop()
+        data = signed_payload(
+            query, shared, self._keys, what="call", on_forged=self._on_forged, limiter=self._limiter
+        )
+        if data is None:
             return
         try:
             env = decode_call(data)

@@ -23,7 +23,14 @@ from typing import Any
 
 from fleetlink.repeater.errors import JournalError
 from fleetlink.repeater.journal import Journal
-from fleetlink.wire.calls import CallEnvelope, Outcome, check_call, outcome_from_json, outcome_to_json
+from fleetlink.wire.calls import (
+    CallEnvelope,
+    Outcome,
+    call_fields,
+    check_call,
+    outcome_from_json,
+    outcome_to_json,
+)
 from fleetlink.wire.errors import EnvelopeError
 
 log = logging.getLogger(__name__)
@@ -55,18 +62,7 @@ class CallState:
 
 
 def call_line(env: CallEnvelope, received_at: float) -> dict[str, Any]:
-    return {
-        "op": "call",
-        "kind": env.kind,
-        "id": env.call_id,
-        "robot": env.robot,
-        "name": env.ros_name,
-        "type": env.ros_type,
-        "mapping": env.mapping,
-        "issued": env.issued_at_ms,
-        "deadline": env.deadline_ms,
-        "rx": received_at,
-    }
+    return {"op": "call", **call_fields(env), "rx": received_at}
 
 
 def replay_calls(lines: Iterable[bytes]) -> CallState:

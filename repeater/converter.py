@@ -15,10 +15,9 @@ import threading
 from typing import TYPE_CHECKING, Any
 
 import fastavro
-from fastavro.read import SchemaResolutionError
 
 from fleetlink.repeater.errors import ConversionError
-from fleetlink.schemas.codec import Codec, get_codec
+from fleetlink.schemas.codec import RESOLVE_ERRORS, Codec, get_codec
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.schemas.single_object import fingerprint
 from fleetlink.schemas.typestore import Distro
@@ -26,16 +25,6 @@ from fleetlink.wire.commands import CommandEnvelope
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
-
-_READ_ERRORS = (
-    SchemaResolutionError,
-    EOFError,
-    ValueError,
-    TypeError,
-    KeyError,
-    IndexError,
-    UnicodeDecodeError,
-)
 
 
 class Converter:
@@ -68,7 +57,7 @@ class Converter:
             writer = self._writer(env, writer_schema)
             try:
                 datum = fastavro.schemaless_reader(io.BytesIO(body), writer, codec.parsed_schema)
-            except _READ_ERRORS as exc:
+            except RESOLVE_ERRORS as exc:
                 raise ConversionError(
                     env.command_id, env.ros_type, f"value does not resolve to the type's schema: {exc}"
                 ) from None

@@ -17,10 +17,10 @@ from fleetlink.repeater.converter import Converter
 from fleetlink.repeater.errors import ConversionError, JournalError
 from fleetlink.repeater.schedule import Change, Offer, Publish
 from fleetlink.repeater.shared import Shared, to_command
+from fleetlink.repeater.signed import signed_payload
 from fleetlink.repeater.statuses import record
-from fleetlink.wire.command_auth import verify_envelope
 from fleetlink.wire.commands import CommandEnvelope, CommandReply, Result, decode_envelope, encode_reply
-from fleetlink.wire.errors import CommandAuthError, EnvelopeError
+from fleetlink.wire.errors import EnvelopeError
 from fleetlink.wire.keys import command_key
 
 log = logging.getLogger(__name__)
@@ -57,24 +57,13 @@ class Intake:
     def on_query(self, query: zenoh.Query) -> None:
         """A Zenoh query on ``fleetlink/<site>/command/**`` (on a Zenoh thread)."""
         shared = self._shared
-        payload = query.payload
-        data = payload.to_bytes() if payload is not None else b""
-        try:
-            attachment = query.attachment
-            verify_envelope(
-                data, attachment.to_bytes() if attachment is not None else None, shared.site, self._keys
-            )
-        except CommandAuthError as exc:
-            shared.stats.forged += 1
-            self._on_forged(exc.kind)
-            self._limiter.log(
-                logging.WARNING, f"forged:{exc.kind}", "refused a command on %s: %s", query.key_expr, exc
-            )
-            query.reply_err(str(exc).encode())
-            query.drop()
+        data = signed_payload(
+            query, shared, self._keys, what="command", on_forged=self._on_forged, limiter=self._limiter
+        )
+        if data is None:
             return
         try:
-            if payload is None:
+            if query.payload is None:
                 raise EnvelopeError("command envelope", "the query carries no payload")
             env = decode_envelope(data)
         except EnvelopeError as exc:

@@ -18,10 +18,10 @@ import zenoh
 
 from fleetlink.roswire.attachment import AttachmentVersion
 from fleetlink.roswire.errors import RoswireError
-from fleetlink.roswire.names import resolve_topic, validate_namespace, validate_node_name
+from fleetlink.roswire.names import mangle, resolve_topic, validate_namespace, validate_node_name
 from fleetlink.roswire.qos import DEFAULT, QoS
 from fleetlink.roswire.session import open_session
-from fleetlink.roswire.tokens import node_token
+from fleetlink.roswire.tokens import EntityKind, endpoint_token, node_token
 from fleetlink.schemas.typehash import type_hash as compute_type_hash
 from fleetlink.schemas.typestore import Distro
 
@@ -153,6 +153,38 @@ class RosNode:
         value = compute_type_hash(self.typestore, typename, self.distro)
         self._hashes[typename] = value
         return value
+
+    def endpoint_token(
+        self,
+        kind: EntityKind,
+        topic: str,
+        typename: str,
+        *,
+        type_hash: str,
+        qos: QoS,
+        eid: int | None = None,
+    ) -> str:
+        """The liveliness key of one of this node's endpoints (under a new entity id unless ``eid``)."""
+        return endpoint_token(
+            domain=self.domain_id,
+            zid=self.zid,
+            nid=self.nid,
+            eid=next_entity_id() if eid is None else eid,
+            kind=kind,
+            namespace=self.namespace,
+            node_name=self.name,
+            topic=topic,
+            typename=typename,
+            type_hash=type_hash,
+            qos=qos,
+            enclave=self.enclave,
+        )
+
+    def announced(self, kind: EntityKind, topic: str, timeout: float) -> bool:
+        """Whether any endpoint of ``kind`` on ``topic`` (any type) answers a liveliness query."""
+        pattern = f"@ros2_lv/{self.domain_id}/*/*/*/{kind.value}/*/*/*/{mangle(topic)}/**"
+        replies = self.session.liveliness().get(pattern, timeout=timeout)
+        return any(reply.ok is not None for reply in replies)
 
     def adopt(self, entity: Entity) -> None:
         """Stop ``entity`` together with the node."""

@@ -11,18 +11,18 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
 import zenoh
 import zenoh.ext
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.roswire.attachment import AttachmentVersion, encode
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.gid import entity_gid
-from fleetlink.roswire.names import data_key, mangle
+from fleetlink.roswire.names import data_key
 from fleetlink.roswire.qos import DEFAULT, History, QoS, Reliability
-from fleetlink.roswire.tokens import EntityKind, endpoint_token
+from fleetlink.roswire.tokens import EntityKind
 
 if TYPE_CHECKING:
     from fleetlink.roswire.node import RosNode
@@ -33,7 +33,7 @@ Congestion = Literal["drop", "block"]
 SPORADIC_HEARTBEAT_S = 0.5
 
 
-class RosPublisher:
+class RosPublisher(StartStop):
     def __init__(
         self,
         node: RosNode,
@@ -84,19 +84,13 @@ class RosPublisher:
         session = self.node.session
         self.key = data_key(self.node.domain_id, self.topic, self.typename, self.type_hash)
         self.eid = next_entity_id()
-        self.token_key = endpoint_token(
-            domain=self.node.domain_id,
-            zid=self.node.zid,
-            nid=self.node.nid,
-            eid=self.eid,
-            kind=EntityKind.PUBLISHER,
-            namespace=self.node.namespace,
-            node_name=self.node.name,
-            topic=self.topic,
-            typename=self.typename,
+        self.token_key = self.node.endpoint_token(
+            EntityKind.PUBLISHER,
+            self.topic,
+            self.typename,
             type_hash=self.type_hash,
             qos=self.qos,
-            enclave=self.node.enclave,
+            eid=self.eid,
         )
         self.gid = entity_gid(self.token_key)
         reliability = zenoh.Reliability.BEST_EFFORT if self.qos.best_effort else zenoh.Reliability.RELIABLE
@@ -132,14 +126,6 @@ class RosPublisher:
             self._publisher = None
         self.node.forget(self)
 
-    def __enter__(self) -> RosPublisher:
-        return self.start()
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-
     def publish_cdr(self, payload: bytes, *, source_ts_ns: int | None = None) -> int:
         """Put one CDR-encoded message; returns its sequence number."""
         publisher = self._publisher
@@ -165,12 +151,7 @@ class RosPublisher:
         matching = self.matching
         if matching is not None:
             return matching
-        pattern = (
-            f"@ros2_lv/{self.node.domain_id}/*/*/*/{EntityKind.SUBSCRIPTION.value}/*/*/*/"
-            f"{mangle(self.topic)}/**"
-        )
-        replies = self.node.session.liveliness().get(pattern, timeout=timeout)
-        return any(reply.ok is not None for reply in replies)
+        return self.node.announced(EntityKind.SUBSCRIPTION, self.topic, timeout)
 
     @property
     def matching(self) -> bool | None:

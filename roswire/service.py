@@ -22,18 +22,19 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.roswire.attachment import Attachment, encode
 from fleetlink.roswire.attachment import decode as decode_attachment
 from fleetlink.roswire.errors import AttachmentError, RoswireError
 from fleetlink.roswire.gid import entity_gid
-from fleetlink.roswire.names import data_key, mangle
+from fleetlink.roswire.names import data_key
 from fleetlink.roswire.qos import SERVICES, QoS
-from fleetlink.roswire.tokens import EntityKind, endpoint_token
+from fleetlink.roswire.session import undeclare
+from fleetlink.roswire.tokens import EntityKind
 
 if TYPE_CHECKING:
     from fleetlink.roswire.node import RosNode
@@ -111,28 +112,7 @@ ServiceHandler = Callable[[ServiceCall], bytes | None]
 """Returns the response CDR, or None when it will answer the call later."""
 
 
-def _service_token(
-    node: RosNode, kind: EntityKind, service: str, typename: str, *, type_hash: str, qos: QoS
-) -> str:
-    from fleetlink.roswire.node import next_entity_id
-
-    return endpoint_token(
-        domain=node.domain_id,
-        zid=node.zid,
-        nid=node.nid,
-        eid=next_entity_id(),
-        kind=kind,
-        namespace=node.namespace,
-        node_name=node.name,
-        topic=service,
-        typename=typename,
-        type_hash=type_hash,
-        qos=qos,
-        enclave=node.enclave,
-    )
-
-
-class RosServiceServer:
+class RosServiceServer(StartStop):
     def __init__(
         self,
         node: RosNode,
@@ -168,13 +148,8 @@ class RosServiceServer:
         session = self.node.session
         self.key = data_key(self.node.domain_id, self.service, self.typename, self.type_hash)
         self._queryable = session.declare_queryable(self.key, self._on_query, complete=True)
-        self.token_key = _service_token(
-            self.node,
-            EntityKind.SERVICE_SERVER,
-            self.service,
-            self.typename,
-            type_hash=self.type_hash,
-            qos=self.qos,
+        self.token_key = self.node.endpoint_token(
+            EntityKind.SERVICE_SERVER, self.service, self.typename, type_hash=self.type_hash, qos=self.qos
         )
         self._token = session.liveliness().declare_token(self.token_key)
         self.node.adopt(self)
@@ -182,26 +157,12 @@ class RosServiceServer:
 
     def stop(self) -> None:
         if self._token is not None:
-            try:
-                self._token.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("token undeclare on %s: %s", self.service, exc)
+            undeclare(self._token, log, "token", self.service)
             self._token = None
         if self._queryable is not None:
-            try:
-                self._queryable.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("queryable undeclare on %s: %s", self.service, exc)
+            undeclare(self._queryable, log, "queryable", self.service)
             self._queryable = None
         self.node.forget(self)
-
-    def __enter__(self) -> RosServiceServer:
-        return self.start()
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
 
     def _on_query(self, query: zenoh.Query) -> None:
         raw = query.attachment
@@ -227,7 +188,7 @@ class RosServiceServer:
             call.reply(response)
 
 
-class RosServiceClient:
+class RosServiceClient(StartStop):
     def __init__(
         self,
         node: RosNode,
@@ -259,13 +220,8 @@ class RosServiceClient:
         if self._token is not None:
             return self
         self.key = data_key(self.node.domain_id, self.service, self.typename, self.type_hash)
-        self.token_key = _service_token(
-            self.node,
-            EntityKind.SERVICE_CLIENT,
-            self.service,
-            self.typename,
-            type_hash=self.type_hash,
-            qos=self.qos,
+        self.token_key = self.node.endpoint_token(
+            EntityKind.SERVICE_CLIENT, self.service, self.typename, type_hash=self.type_hash, qos=self.qos
         )
         self.gid = entity_gid(self.token_key)
         self._token = self.node.session.liveliness().declare_token(self.token_key)
@@ -274,30 +230,14 @@ class RosServiceClient:
 
     def stop(self) -> None:
         if self._token is not None:
-            try:
-                self._token.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("token undeclare on %s: %s", self.service, exc)
+            undeclare(self._token, log, "token", self.service)
             self._token = None
         self.node.forget(self)
 
-    def __enter__(self) -> RosServiceClient:
-        return self.start()
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-
     def server_available(self, timeout: float = 1.0) -> bool:
         """Whether an ``SS`` token for this service (any type) answers a liveliness query."""
-        pattern = (
-            f"@ros2_lv/{self.node.domain_id}/*/*/*/{EntityKind.SERVICE_SERVER.value}/*/*/*/"
-            f"{mangle(self.service)}/**"
-        )
         try:
-            replies = self.node.session.liveliness().get(pattern, timeout=timeout)
-            return any(reply.ok is not None for reply in replies)
+            return self.node.announced(EntityKind.SERVICE_SERVER, self.service, timeout)
         except zenoh.ZError:
             return False
 

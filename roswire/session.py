@@ -9,6 +9,8 @@ not set on the command line or in a config file.
 from __future__ import annotations
 
 import json
+import logging
+from typing import Any
 
 import zenoh
 
@@ -40,3 +42,11 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
         return zenoh.open(config)
     except zenoh.ZError as exc:
         raise ConfigError(f"cannot open zenoh session: {exc}") from None
+
+
+def undeclare(entity: Any, log: logging.Logger, what: str, name: str) -> None:
+    """Undeclare a zenoh entity; an error (the session is closed already) is only logged."""
+    try:
+        entity.undeclare()
+    except zenoh.ZError as exc:
+        log.debug("%s undeclare on %s: %s", what, name, exc)

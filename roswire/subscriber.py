@@ -41,7 +41,8 @@ from fleetlink.roswire.errors import PayloadError, RoswireError
 from fleetlink.roswire.names import data_key_expr
 from fleetlink.roswire.qos import DEFAULT, QoS
 from fleetlink.roswire.sequence import SequenceTracker
-from fleetlink.roswire.tokens import EntityKind, endpoint_token
+from fleetlink.roswire.session import undeclare
+from fleetlink.roswire.tokens import EntityKind
 
 if TYPE_CHECKING:
     from fleetlink.roswire.node import RosNode
@@ -138,21 +139,8 @@ class RosSubscriber:
         if self.declare_token and self.typename is not None and token_hash is None and self.node.typestore:
             token_hash = self.node.type_hash(self.typename)
         if self.declare_token and self.typename is not None and token_hash is not None:
-            from fleetlink.roswire.node import next_entity_id
-
-            self.token_key = endpoint_token(
-                domain=self.node.domain_id,
-                zid=self.node.zid,
-                nid=self.node.nid,
-                eid=next_entity_id(),
-                kind=EntityKind.SUBSCRIPTION,
-                namespace=self.node.namespace,
-                node_name=self.node.name,
-                topic=self.topic,
-                typename=self.typename,
-                type_hash=token_hash,
-                qos=self.qos,
-                enclave=self.node.enclave,
+            self.token_key = self.node.endpoint_token(
+                EntityKind.SUBSCRIPTION, self.topic, self.typename, type_hash=token_hash, qos=self.qos
             )
             self._token = session.liveliness().declare_token(self.token_key)
         self.node.adopt(self)
@@ -163,16 +151,10 @@ class RosSubscriber:
         """Undeclare; with a ring, the samples still in it are handed on before its thread ends.
         (A session already closed has undeclared everything: that is not an error here.)"""
         if self._token is not None:
-            try:
-                self._token.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("token undeclare on %s: %s", self.topic, exc)
+            undeclare(self._token, log, "token", self.topic)
             self._token = None
         if self._sub is not None:
-            try:
-                self._sub.undeclare()
-            except zenoh.ZError as exc:
-                log.debug("subscriber undeclare on %s: %s", self.topic, exc)
+            undeclare(self._sub, log, "subscriber", self.topic)
             self._sub = None
         if self._thread is not None:
             self._thread.join(5)

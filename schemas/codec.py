@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import fastavro
+from fastavro.read import SchemaResolutionError
 
 from fleetlink.schemas.avro_schema import avro_schema
 from fleetlink.schemas.errors import DecodeError, EncodeError, ValueRangeError
@@ -30,6 +31,17 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 Converter = Callable[[bytes], bytes]
+
+RESOLVE_ERRORS = (
+    SchemaResolutionError,
+    EOFError,
+    ValueError,
+    TypeError,
+    KeyError,
+    IndexError,
+    UnicodeDecodeError,
+)
+"""What fastavro raises reading a body written with one schema into another (schema resolution)."""
 
 
 class Codec:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-from types import TracebackType
 from typing import Any
 from urllib.parse import quote
 
@@ -25,6 +24,7 @@ import httpx
 from confluent_kafka.schema_registry import Schema, SchemaRegistryClient
 from confluent_kafka.schema_registry.error import SchemaRegistryError
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.schemas.errors import IncompatibleSchemaError, RegistryError
 from fleetlink.schemas.single_object import fingerprint
 
@@ -43,7 +43,7 @@ def subject_for_topic(topic: str) -> str:
     return f"{topic}-value"
 
 
-class SchemaRegistry:
+class SchemaRegistry(StartStop):
     """Register, look up and check Avro schemas; ids are cached per (subject, schema)."""
 
     def __init__(self, url: str, *, timeout: float = 10.0) -> None:
@@ -70,15 +70,6 @@ class SchemaRegistry:
             client.__exit__()
         if http is not None:
             http.close()
-
-    def __enter__(self) -> SchemaRegistry:
-        self.start()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
 
     def _sr(self) -> SchemaRegistryClient:
         if self._client is None:

@@ -11,11 +11,11 @@ name is skipped and counted.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 from collections.abc import Iterable
 from pathlib import Path
 
+from fleetlink.common.durable import write_atomically
 from fleetlink.edge.runtime.errors import RuntimeSetupError
 from fleetlink.schemas.single_object import fingerprint
 
@@ -70,7 +70,10 @@ class SchemaBook:
                 return
             if self.directory is not None:
                 try:
-                    _write_durably(self.directory / f"{fp.hex()}.json", text.encode("utf-8"))
+                    path = self.directory / f"{fp.hex()}.json"
+                    write_atomically(
+                        path, text.encode("utf-8"), tmp=path.with_suffix(".tmp"), sync_folder=True
+                    )
                 except OSError as exc:  # kept in memory: records still flow while this process lives
                     self.write_errors += 1
                     log.warning(
@@ -92,22 +95,3 @@ class SchemaBook:
             else:
                 found[fp] = text
         return found, missing
-
-
-def _write_durably(final: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file, fsync it, rename it to ``final``, fsync the folder."""
-    tmp = final.with_suffix(".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    try:
-        view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view) :]
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, final)
-    dir_fd = os.open(final.parent, os.O_RDONLY)
-    try:
-        os.fsync(dir_fd)
-    finally:
-        os.close(dir_fd)

@@ -38,9 +38,9 @@ from fleetlink.roswire.discovery import GraphWatcher
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.graph import EventKind, GraphEvent
 from fleetlink.roswire.names import dds_type_name
-from fleetlink.roswire.node import RosNode, next_entity_id
+from fleetlink.roswire.node import RosNode
 from fleetlink.roswire.qos import DEFAULT
-from fleetlink.roswire.tokens import EndpointInfo, EntityKind, endpoint_token
+from fleetlink.roswire.tokens import EndpointInfo, EntityKind
 from fleetlink.schemas.errors import SchemaError
 
 log = logging.getLogger(__name__)
@@ -300,19 +300,8 @@ class SubscriptionManager:
         node = self.node
         token: zenoh.LivelinessToken | None = None
         if typename is not None and self._known_type(typename):
-            key = endpoint_token(
-                domain=node.domain_id,
-                zid=node.zid,
-                nid=node.nid,
-                eid=next_entity_id(),
-                kind=EntityKind.SUBSCRIPTION,
-                namespace=node.namespace,
-                node_name=node.name,
-                topic=topic,
-                typename=typename,
-                type_hash=node.type_hash(typename),
-                qos=DEFAULT,
-                enclave=node.enclave,
+            key = node.endpoint_token(
+                EntityKind.SUBSCRIPTION, topic, typename, type_hash=node.type_hash(typename), qos=DEFAULT
             )
             token = node.session.liveliness().declare_token(key)
         return _Active(typename, token)

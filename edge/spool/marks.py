@@ -23,11 +23,12 @@ crc32 of both``.
 from __future__ import annotations
 
 import logging
-import os
 import struct
 import zlib
 from collections.abc import Iterable
 from pathlib import Path
+
+from fleetlink.common.durable import write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -103,16 +104,7 @@ def write_snapshot(path: Path, marks: Iterable[Mark]) -> None:
     """Replace the snapshot file atomically (temp file, fsync, rename); raises ``OSError``."""
     body = SNAPSHOT_MAGIC + encode_marks(marks)
     data = body + zlib.crc32(body).to_bytes(4, "little")
-    tmp = path.with_name(path.name + ".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    try:
-        view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view) :]
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
+    write_atomically(path, data)
 
 
 def read_snapshot(path: Path) -> list[Mark] | None:

@@ -17,6 +17,8 @@ from typing import Any
 
 from confluent_kafka import OFFSET_END, Consumer, KafkaError, TopicPartition
 
+from fleetlink.common.worker import Worker
+
 log = logging.getLogger(__name__)
 
 
@@ -36,7 +38,7 @@ class TailRecord:
         return ""
 
 
-class KafkaTail:
+class KafkaTail(Worker):
     def __init__(
         self,
         consumer_config: Mapping[str, Any],
@@ -45,6 +47,7 @@ class KafkaTail:
         keep: int = 500,
         on_record: Callable[[TailRecord], None] | None = None,
     ) -> None:
+        super().__init__(f"kafka-tail-{topic}")
         self.topic = topic
         self.keep = keep
         self._config = {
@@ -56,24 +59,9 @@ class KafkaTail:
         self._on_record = on_record
         self._records: deque[TailRecord] = deque(maxlen=keep)
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self.ready = threading.Event()
         """Set once the partitions are assigned (the tail of the topic is being read)."""
         self.error: str | None = None
-
-    def start(self) -> KafkaTail:
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name=f"kafka-tail-{self.topic}", daemon=True)
-            self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(10)
-            self._thread = None
 
     def records(self) -> list[TailRecord]:
         """Newest first."""

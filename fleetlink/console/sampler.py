@@ -10,11 +10,11 @@ the age of its oldest record, per second or as counts. Per mapping (``("mapping"
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
+from fleetlink.common.worker import Worker
 from fleetlink.console.history import History, Key
 from fleetlink.console.rates import RateBoard
 from fleetlink.console.sources import Sites
@@ -58,7 +58,7 @@ def site_points(view: dict[str, Any]) -> dict[Key, dict[str, float | None]]:
     return points
 
 
-class HistorySampler:
+class HistorySampler(Worker):
     def __init__(
         self,
         sites: Sites,
@@ -67,13 +67,12 @@ class HistorySampler:
         interval_s: float | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
+        super().__init__("console-history")
         self.sites = sites
         self.history = history
         self.interval_s = interval_s if interval_s is not None else history.step_s
         self._clock = clock
         self._board = RateBoard(window_s=self.interval_s * 2.5, min_span_s=self.interval_s * 0.5)
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self.samples = 0
 
     def sample(self) -> None:
@@ -87,19 +86,6 @@ class HistorySampler:
             for key, values in site_points(view).items():
                 self.history.add(key, values, now)
         self.samples += 1
-
-    def start(self) -> HistorySampler:
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="console-history", daemon=True)
-            self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(10)
-            self._thread = None
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -15,10 +15,12 @@ from confluent_kafka.schema_registry import SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer
 from confluent_kafka.serialization import MessageField, SerializationContext
 
+from fleetlink.common.worker import Worker
+
 Handler = Callable[[str, bytes | None, dict[str, Any] | None, Message], None]
 
 
-class TopicWatcher:
+class TopicWatcher(Worker):
     """Consumes ``topics`` in a thread, skipping records stamped before ``since_ms``;
     decodes Avro values if asked."""
 
@@ -32,6 +34,7 @@ class TopicWatcher:
         on_record: Handler,
         since_ms: int = 0,
     ) -> None:
+        super().__init__("demo-watch")
         self._conf = {
             "bootstrap.servers": bootstrap,
             "group.id": f"fleetlink-demo-{uuid.uuid4().hex[:8]}",
@@ -43,20 +46,8 @@ class TopicWatcher:
         self._deserializer = AvroDeserializer(SchemaRegistryClient({"url": registry_url})) if decode else None
         self._on_record = on_record
         self._since_ms = since_ms
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self.counts: Counter[str] = Counter()
         self.assigned = threading.Event()
-
-    def start(self) -> TopicWatcher:
-        self._thread = threading.Thread(target=self._run, name="demo-watch", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(10)
 
     def _run(self) -> None:
         consumer = Consumer(self._conf)
@@ -92,25 +83,14 @@ def app_has_committed(bootstrap: str, group: str, topics: Sequence[str]) -> bool
     return set(topics) <= committed
 
 
-class LogFollower:
+class LogFollower(Worker):
     """Reads the lines a process appends to its log file, in a thread, and hands each to ``on_line``."""
 
     def __init__(self, path: Path, on_line: Callable[[str], None], *, every_s: float = 0.1) -> None:
+        super().__init__("demo-log-follower", join_s=5)
         self._path = path
         self._on_line = on_line
         self._every_s = every_s
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    def start(self) -> LogFollower:
-        self._thread = threading.Thread(target=self._run, name="demo-log-follower", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(5)
 
     def _run(self) -> None:
         with self._path.open("rb") as log:

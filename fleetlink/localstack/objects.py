@@ -11,11 +11,11 @@ from __future__ import annotations
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 
 import httpx
 from pydantic import SecretStr
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.common.objects import ObjectStore, ObjectStoreSection
 from fleetlink.localstack.artifacts import fetch_s3proxy
 from fleetlink.localstack.java import KAFKA_MIN_JAVA, find_java
@@ -38,7 +38,7 @@ class ObjectStoreSettings:
         return f"http://{self.host}:{self.port}"
 
 
-class ObjectStoreServer:
+class ObjectStoreServer(StartStop):
     """s3proxy as a process: ``start`` returns once it answers and the bucket exists."""
 
     def __init__(
@@ -133,15 +133,6 @@ class ObjectStoreServer:
 
     def log_tail(self) -> str:
         return log_tail(self.settings.data_dir / "s3proxy.log")
-
-    def __enter__(self) -> ObjectStoreServer:
-        self.start()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
 
 
 def local_object_store(data_dir: Path, port: int | None = None) -> ObjectStoreServer:

@@ -7,8 +7,8 @@ import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from types import TracebackType
 
+from fleetlink.common.lifecycle import StartStop
 from fleetlink.localstack.artifacts import APICURIO_JAVA17_VERSION, APICURIO_VERSION, fetch_all
 from fleetlink.localstack.errors import StackError
 from fleetlink.localstack.java import KAFKA_MIN_JAVA, REGISTRY_MIN_JAVA, find_java
@@ -43,7 +43,7 @@ class StackInfo:
             return None
 
 
-class LocalStack:
+class LocalStack(StartStop):
     """Real Kafka (KRaft) and Apicurio Registry as processes under ``directory``."""
 
     def __init__(
@@ -120,15 +120,6 @@ class LocalStack:
             if server is not None:
                 server.stop()
         (self.directory / STATE_FILE).unlink(missing_ok=True)
-
-    def __enter__(self) -> LocalStack:
-        self.start()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
 
 
 def stop_recorded(directory: Path) -> bool:

@@ -22,22 +22,25 @@ from __future__ import annotations
 
 import base64
 import binascii
-import json
-import struct
-import zlib
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
 
 from fleetlink.common.names import ros_action_type_problem, ros_service_type_problem, ros_topic_problem
-from fleetlink.wire.commands import COMPRESS_ABOVE, MAX_ENVELOPE, _Fields, _inflate, _json_object
+from fleetlink.wire.envelope import (
+    COMPRESS_ABOVE,
+    MAX_ENVELOPE,
+    Fields,
+    json_object,
+    pack_envelope,
+    pack_json,
+    unpack_envelope,
+    unpack_json,
+)
 from fleetlink.wire.errors import EnvelopeError, WireError
 from fleetlink.wire.keys import check_key_chunk, check_key_name, site_prefix
 
 MAGIC = b"FLK"
-VERSION = 1
-FLAG_ZLIB = 0x01
 MAX_ID = 200
-_HEADER_LEN = struct.Struct(">I")
 
 CallKind = Literal["service", "goal", "cancel"]
 CALL_KINDS: frozenset[str] = frozenset(get_args(CallKind))
@@ -126,9 +129,9 @@ class OutcomeBatch:
 # -- call envelope --------------------------------------------------------------------------
 
 
-def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
-    check_call(env)
-    header: dict[str, Any] = {
+def call_fields(env: CallEnvelope) -> dict[str, Any]:
+    """The header fields of ``env`` but its source (the repeater's journal keeps the same)."""
+    return {
         "kind": env.kind,
         "id": env.call_id,
         "robot": env.robot,
@@ -138,37 +141,20 @@ def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> b
         "issued": env.issued_at_ms,
         "deadline": env.deadline_ms,
     }
+
+
+def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    check_call(env)
+    header = call_fields(env)
     if env.source:
         header["source"] = env.source
-    head = json.dumps(header, separators=(",", ":"), ensure_ascii=False).encode()
-    rest = _HEADER_LEN.pack(len(head)) + head + env.payload
-    flags = 0
-    if len(rest) > compress_above:
-        packed = zlib.compress(rest, 6)
-        if len(packed) < len(rest):
-            rest, flags = packed, FLAG_ZLIB
-    return MAGIC + bytes((VERSION, flags)) + rest
+    return pack_envelope(MAGIC, header, env.payload, compress_above=compress_above)
 
 
 def decode_call(data: bytes) -> CallEnvelope:
     what = "call envelope"
-    if len(data) < 5 or data[:3] != MAGIC:
-        raise EnvelopeError(what, f"does not start with {MAGIC!r}", data)
-    if data[3] != VERSION:
-        raise EnvelopeError(what, f"version {data[3]} is not {VERSION}", data)
-    flags, rest = data[4], bytes(data[5:])
-    if flags & ~FLAG_ZLIB:
-        raise EnvelopeError(what, f"unknown flags 0x{flags:02x}", data)
-    if flags & FLAG_ZLIB:
-        rest = _inflate(rest, what, data)
-    if len(rest) < _HEADER_LEN.size:
-        raise EnvelopeError(what, "truncated before the header length", data)
-    (size,) = _HEADER_LEN.unpack_from(rest)
-    end = _HEADER_LEN.size + size
-    if end > len(rest):
-        raise EnvelopeError(what, f"header of {size} bytes runs past the end", data)
-    header = _json_object(rest[_HEADER_LEN.size : end], f"{what} header", data)
-    get = _Fields(header, what, data)
+    header, payload = unpack_envelope(data, MAGIC, what)
+    get = Fields(header, what, data)
     kind = get.text("kind")
     if kind not in CALL_KINDS:
         raise EnvelopeError(what, f"kind {kind!r} is not one of {sorted(CALL_KINDS)}", data)
@@ -181,7 +167,7 @@ def decode_call(data: bytes) -> CallEnvelope:
         mapping=get.text("mapping"),
         issued_at_ms=get.integer("issued"),
         deadline_ms=get.integer("deadline"),
-        payload=rest[end:],
+        payload=payload,
         source=get.text("source", allow_empty=True),
     )
     try:
@@ -247,7 +233,7 @@ def outcome_to_json(out: Outcome) -> dict[str, Any]:
 def outcome_from_json(obj: object, data: bytes = b"") -> Outcome:
     if not isinstance(obj, dict):
         raise EnvelopeError("outcome", "not a JSON object", data)
-    get = _Fields(obj, "outcome", data)
+    get = Fields(obj, "outcome", data)
     kind = get.text("kind")
     if kind not in OUTCOME_KINDS:
         raise EnvelopeError("outcome", f"kind {kind!r} is not one of {sorted(OUTCOME_KINDS)}", data)
@@ -299,30 +285,22 @@ def encode_outcomes(batch: OutcomeBatch, *, compress_above: int = COMPRESS_ABOVE
     """JSON, zlib-compressed when larger than ``compress_above`` bytes (JSON starts with ``{``)."""
     for out in batch.outcomes:
         check_outcome(out)
-    text = json.dumps(
+    return pack_json(
         {
             "repeater": batch.repeater,
             "site": batch.site,
             "outcomes": [outcome_to_json(o) for o in batch.outcomes],
         },
-        separators=(",", ":"),
-        ensure_ascii=False,
-    ).encode()
-    if len(text) > compress_above:
-        packed = zlib.compress(text, 6)
-        if len(packed) < len(text):
-            return packed
-    return text
+        compress_above=compress_above,
+    )
 
 
 def decode_outcomes(data: bytes) -> OutcomeBatch:
-    raw = data
-    if data[:1] != b"{":
-        raw = _inflate(data, "outcome batch")
+    raw = unpack_json(data, "outcome batch")
     if len(raw) > MAX_ENVELOPE:
         raise EnvelopeError("outcome batch", f"larger than {MAX_ENVELOPE} bytes", data)
-    obj = _json_object(raw, "outcome batch", data)
-    get = _Fields(obj, "outcome batch", data)
+    obj = json_object(raw, "outcome batch", data)
+    get = Fields(obj, "outcome batch", data)
     outcomes = obj.get("outcomes")
     if not isinstance(outcomes, list):
         raise EnvelopeError("outcome batch", "field 'outcomes' must be a list", data)

@@ -22,24 +22,24 @@ Every decoder checks every field and raises :class:`~fleetlink.wire.errors.Envel
 from __future__ import annotations
 
 import json
-import struct
-import zlib
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
 
 from fleetlink.common.names import ros_topic_problem, ros_type_problem
+from fleetlink.wire.envelope import (
+    COMPRESS_ABOVE,
+    Fields,
+    json_object,
+    pack_envelope,
+    pack_json,
+    unpack_envelope,
+    unpack_json,
+)
 from fleetlink.wire.errors import EnvelopeError, WireError
 from fleetlink.wire.keys import check_key_chunk, check_key_name
 from fleetlink.wire.records import single_object, split_single_object
 
 MAGIC = b"FLC"
-VERSION = 1
-FLAG_ZLIB = 0x01
-COMPRESS_ABOVE = 160
-"""Envelopes and status batches larger than this many bytes are sent zlib-compressed (when that
-makes them smaller): the WAN is the scarce resource, and the CPU cost is microseconds."""
-MAX_ENVELOPE = 8 << 20
-_HEADER_LEN = struct.Struct(">I")
 
 Result = Literal["applied", "duplicate", "expired", "superseded", "rejected", "need-schema"]
 RESULTS: frozenset[str] = frozenset(get_args(Result))
@@ -158,39 +158,18 @@ def encode_envelope(env: CommandEnvelope, *, compress_above: int = COMPRESS_ABOV
         header["schema"] = env.schema
     if env.qos is not None:
         header["qos"] = env.qos
-    head = json.dumps(header, separators=(",", ":"), ensure_ascii=False).encode()
-    rest = _HEADER_LEN.pack(len(head)) + head + single_object(env.schema_fp, env.body)
-    flags = 0
-    if len(rest) > compress_above:
-        packed = zlib.compress(rest, 6)
-        if len(packed) < len(rest):
-            rest, flags = packed, FLAG_ZLIB
-    return MAGIC + bytes((VERSION, flags)) + rest
+    tail = single_object(env.schema_fp, env.body)
+    return pack_envelope(MAGIC, header, tail, compress_above=compress_above)
 
 
 def decode_envelope(data: bytes) -> CommandEnvelope:
-    if len(data) < 5 or data[:3] != MAGIC:
-        raise EnvelopeError("command envelope", f"does not start with {MAGIC!r}", data)
-    if data[3] != VERSION:
-        raise EnvelopeError("command envelope", f"version {data[3]} is not {VERSION}", data)
-    flags, rest = data[4], data[5:]
-    if flags & ~FLAG_ZLIB:
-        raise EnvelopeError("command envelope", f"unknown flags 0x{flags:02x}", data)
-    if flags & FLAG_ZLIB:
-        rest = _inflate(rest, "command envelope", data)
-    if len(rest) < _HEADER_LEN.size:
-        raise EnvelopeError("command envelope", "truncated before the header length", data)
-    (size,) = _HEADER_LEN.unpack_from(rest)
-    end = _HEADER_LEN.size + size
-    if end > len(rest):
-        raise EnvelopeError("command envelope", f"header of {size} bytes runs past the end", data)
-    header = _json_object(rest[_HEADER_LEN.size : end], "command envelope header", data)
+    header, value = unpack_envelope(data, MAGIC, "command envelope")
     try:
-        fp, view = split_single_object(bytes(rest[end:]))
+        fp, view = split_single_object(value)
         body = bytes(view)
     except WireError as exc:
         raise EnvelopeError("command envelope", f"value: {exc}", data) from None
-    get = _Fields(header, "command envelope", data)
+    get = Fields(header, "command envelope", data)
     env = CommandEnvelope(
         command_id=get.text("id"),
         robot=get.text("robot"),
@@ -261,7 +240,7 @@ def encode_reply(reply: CommandReply) -> bytes:
 
 
 def decode_reply(data: bytes) -> CommandReply:
-    get = _Fields(_json_object(data, "command reply", data), "command reply", data)
+    get = Fields(json_object(data, "command reply", data), "command reply", data)
     result = get.text("result")
     if result not in RESULTS:
         raise EnvelopeError("command reply", f"result {result!r} is not one of {sorted(RESULTS)}", data)
@@ -283,20 +262,14 @@ def encode_status_batch(batch: StatusBatch, *, compress_above: int = COMPRESS_AB
     for event in batch.events:
         if event.status not in STATUSES:
             raise EnvelopeError("status batch", f"status {event.status!r} is not one of {sorted(STATUSES)}")
-    text = json.dumps(
+    return pack_json(
         {
             "repeater": batch.repeater,
             "site": batch.site,
             "events": [status_to_json(e) for e in batch.events],
         },
-        separators=(",", ":"),
-        ensure_ascii=False,
-    ).encode()
-    if len(text) > compress_above:
-        packed = zlib.compress(text, 6)
-        if len(packed) < len(text):
-            return packed
-    return text
+        compress_above=compress_above,
+    )
 
 
 def status_to_json(event: StatusEvent) -> dict[str, Any]:
@@ -314,7 +287,7 @@ def status_to_json(event: StatusEvent) -> dict[str, Any]:
 def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
     if not isinstance(obj, dict):
         raise EnvelopeError("status event", "not a JSON object", data)
-    get = _Fields(obj, "status event", data)
+    get = Fields(obj, "status event", data)
     status = get.text("status")
     if status not in STATUSES:
         raise EnvelopeError("status event", f"status {status!r} is not one of {sorted(STATUSES)}", data)
@@ -330,11 +303,8 @@ def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
 
 
 def decode_status_batch(data: bytes) -> StatusBatch:
-    raw = data
-    if data[:1] != b"{":
-        raw = _inflate(data, "status batch")
-    obj = _json_object(raw, "status batch", data)
-    get = _Fields(obj, "status batch", data)
+    obj = json_object(unpack_json(data, "status batch"), "status batch", data)
+    get = Fields(obj, "status batch", data)
     events = obj.get("events")
     if not isinstance(events, list):
         raise EnvelopeError("status batch", "field 'events' must be a list", data)
@@ -348,62 +318,5 @@ def encode_status_ack(ack: StatusAck) -> bytes:
 
 
 def decode_status_ack(data: bytes) -> StatusAck:
-    get = _Fields(_json_object(data, "status ack", data), "status ack", data)
+    get = Fields(json_object(data, "status ack", data), "status ack", data)
     return StatusAck(get.integer("accepted"), get.text("detail", allow_empty=True))
-
-
-# -- helpers --------------------------------------------------------------------------------
-
-
-def _inflate(packed: bytes, what: str, data: bytes | None = None) -> bytes:
-    data = packed if data is None else data
-    try:
-        inflater = zlib.decompressobj()
-        out = inflater.decompress(packed, MAX_ENVELOPE)
-        if inflater.unconsumed_tail:
-            raise EnvelopeError(what, f"inflates beyond {MAX_ENVELOPE} bytes", data)
-    except zlib.error as exc:
-        raise EnvelopeError(what, f"bad zlib data: {exc}", data) from None
-    return out
-
-
-def _json_object(raw: bytes, what: str, data: bytes) -> dict[str, Any]:
-    try:
-        obj = json.loads(raw)
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise EnvelopeError(what, f"not JSON: {exc}", data) from None
-    if not isinstance(obj, dict):
-        raise EnvelopeError(what, "not a JSON object", data)
-    return obj
-
-
-class _Fields:
-    def __init__(self, obj: dict[str, Any], what: str, data: bytes) -> None:
-        self._obj, self._what, self._data = obj, what, data
-
-    def _fail(self, name: str, reason: str) -> EnvelopeError:
-        return EnvelopeError(self._what, f"field {name!r} {reason}", self._data)
-
-    def text(self, name: str, *, allow_empty: bool = False) -> str:
-        value = self._obj.get(name, "" if allow_empty else None)
-        if not isinstance(value, str):
-            raise self._fail(name, "must be a string")
-        if not value and not allow_empty:
-            raise self._fail(name, "must not be empty")
-        return value
-
-    def optional_text(self, name: str) -> str | None:
-        value = self._obj.get(name)
-        if value is None:
-            return None
-        if not isinstance(value, str):
-            raise self._fail(name, "must be a string")
-        return value
-
-    def integer(self, name: str) -> int:
-        value = self._obj.get(name)
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise self._fail(name, "must be an integer")
-        if value < 0:
-            raise self._fail(name, "must not be negative")
-        return value

@@ -26,6 +26,7 @@ from fleetlink.console.edge import console_extension
 from fleetlink.console.uplink import UplinkConsole, console_extensions
 from fleetlink.edge.admin import EdgeAdmin
 from fleetlink.edge.agent import EdgeAgent
+from fleetlink.edge.config import EdgeConfig
 from fleetlink.localstack.zenoh_router import ZenohRouter
 from fleetlink.roswire.sim.fleet import Fleet
 from fleetlink.schemas.bundled import bundled_message_paths
@@ -70,6 +71,20 @@ class Stack:
         return httpx.Client(base_url=base, headers=self.bearer, timeout=15)
 
 
+def console_agent(stack: ExitStack, edge: EdgeConfig, token: str) -> tuple[EdgeAdmin, EdgeAgent]:
+    """An edge agent behind an admin API that serves the console's edge part; both end with ``stack``."""
+    admin = EdgeAdmin(
+        edge,
+        token=SecretStr(token),
+        listen="127.0.0.1:0",
+        extensions=[console_extension(SecretStr(token), edge.edge_id)],
+    )
+    agent = stack.enter_context(EdgeAgent(admin.load(), stop_timeout_s=0.5))
+    admin.attach(agent)
+    stack.callback(admin.stop)
+    return admin, agent
+
+
 @contextmanager
 def console_stack(
     bootstrap: str, registry_url: str, tmp_path: Path, *, robots: int = 2, rate: float = 10.0
@@ -107,15 +122,7 @@ def console_stack(
             robot_types={"tb4": {"match": "/tb4_*", "mappings": [IR_MAPPING]}},
         )
         sim = stack.enter_context(fleet(site_router.endpoint, domain, robots=robots, rate=rate))
-        admin = EdgeAdmin(
-            edge,
-            token=SecretStr(token),
-            listen="127.0.0.1:0",
-            extensions=[console_extension(SecretStr(token), edge.edge_id)],
-        )
-        agent = stack.enter_context(EdgeAgent(admin.load(), stop_timeout_s=0.5))
-        admin.attach(agent)
-        stack.callback(admin.stop)
+        admin, agent = console_agent(stack, edge, token)
         names = sim.names()
         wait_until(lambda: sorted(agent.robots()) == names, 15, message=f"robots {names} registered")
         if len(uplink.extensions) != 1 or not isinstance(uplink.extensions[0], UplinkConsole):

@@ -28,18 +28,15 @@ from typing import Any
 import httpx
 import pytest
 from confluent_kafka import Consumer
-from pydantic import SecretStr
 
 from fleetlink.common.console_config import ConsoleSection
-from fleetlink.console.edge import console_extension
 from fleetlink.console.uplink import UplinkConsole, console_extensions
 from fleetlink.console.users import hash_password
-from fleetlink.edge.admin import EdgeAdmin
 from fleetlink.edge.agent import EdgeAgent
 from fleetlink.localstack.zenoh_router import ZenohRouter
 from fleetlink.schemas.bundled import bundled_message_paths
 from fleetlink.uplink.service import Uplink
-from tests.browser.stack import IR_MAPPING
+from tests.browser.stack import IR_MAPPING, console_agent
 from tests.helpers import wait_until
 from tests.integration.e2e_stack import Cloud, edge_config, unique_site, uplink_config
 from tests.integration.test_admin_api import fleet, next_domain
@@ -117,15 +114,7 @@ def two_sites(bootstrap: str, registry_url: str, tmp_path: Path) -> Iterator[Fle
                 robot_types={kind: {"match": f"/{prefix}*", "mappings": [IR_MAPPING]}},
             )
             sim = stack.enter_context(fleet(router.endpoint, domain, robots=2, rate=10.0, prefix=prefix))
-            admin = EdgeAdmin(
-                edge,
-                token=SecretStr(token),
-                listen="127.0.0.1:0",
-                extensions=[console_extension(SecretStr(token), edge.edge_id)],
-            )
-            agent = stack.enter_context(EdgeAgent(admin.load(), stop_timeout_s=0.5))
-            admin.attach(agent)
-            stack.callback(admin.stop)
+            _admin, agent = console_agent(stack, edge, token)
             names = sim.names()
             wait_until(registered(agent, names), 15, message=f"{names} registered")
         consoles = []

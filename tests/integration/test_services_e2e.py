@@ -33,6 +33,7 @@ from fleetlink.roswire.service import RosServiceServer, ServiceCall
 from fleetlink.schemas.avro_schema import avro_schema
 from fleetlink.uplink.calls.records import CANCEL_SCHEMA
 from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.service import Uplink
 from tests.helpers import wait_until
 from tests.integration.test_commands_harness import (
     LedLog,
@@ -172,6 +173,15 @@ def _register(bed: Bed, robot: str) -> None:
     producer.register(bed.config.topics.registrations, robot, bed.site.name)
 
 
+def _wait_registered(uplink: Uplink, robot: str) -> None:
+    """Wait until the uplink's command router knows ``robot`` is at site-a."""
+    wait_until(
+        lambda: uplink.commands is not None and uplink.commands.directory.site_of(robot) == "site-a",
+        timeout=10,
+        message="registered",
+    )
+
+
 def _one(log: TopicLog, predicate: Any, message: str, timeout: float = 15.0) -> dict[str, Any]:
     wait_until(lambda: any(predicate(v) for v in log.values()), timeout=timeout, message=message)
     return next(v for v in log.values() if predicate(v))
@@ -194,9 +204,7 @@ def test_services_and_actions_from_kafka_reach_the_robot_and_come_back(
             with running_uplink(bed.config) as uplink:
                 router = uplink.commands
                 assert router is not None
-                wait_until(
-                    lambda: router.directory.site_of("tb4_01") == "site-a", timeout=10, message="registered"
-                )
+                _wait_registered(uplink, "tb4_01")
 
                 # a service call: the robot's e-stop goes on, the response comes back keyed by robot
                 req.request(t["estop"], "tb4_01", ESTOP, {"e_stop_on": True}, f"stop-{bed.run}")
@@ -282,14 +290,7 @@ def test_a_service_that_never_answers_times_out(
             RosServiceServer(node, "take_a_while", TRIGGER, hold).start()
             with running_uplink(bed.config) as uplink:
                 assert uplink.commands is not None
-                wait_until(
-                    lambda: (
-                        uplink.commands is not None
-                        and uplink.commands.directory.site_of("tb4_01") == "site-a"
-                    ),
-                    timeout=10,
-                    message="registered",
-                )
+                _wait_registered(uplink, "tb4_01")
                 req.request(
                     t["slow"],
                     "tb4_01",
@@ -343,14 +344,7 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
                 running_uplink(bed.config) as uplink,
             ):
                 assert uplink.commands is not None
-                wait_until(
-                    lambda: (
-                        uplink.commands is not None
-                        and uplink.commands.directory.site_of("tb4_01") == "site-a"
-                    ),
-                    timeout=10,
-                    message="registered",
-                )
+                _wait_registered(uplink, "tb4_01")
                 goal = str(uuid.uuid4())
                 req.goal(t["dock"], "tb4_01", goal)
                 _one(

@@ -8,9 +8,8 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
 import fastavro
-from fastavro.read import SchemaResolutionError
 
-from fleetlink.schemas.codec import Codec, get_codec
+from fleetlink.schemas.codec import RESOLVE_ERRORS, Codec, get_codec
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.schemas.single_object import fingerprint
 from fleetlink.schemas.typestore import Distro
@@ -42,17 +41,6 @@ class UplinkConfigLike(Protocol):
     def ros(self) -> _Ros: ...
 
 
-_READ_ERRORS = (
-    SchemaResolutionError,
-    EOFError,
-    ValueError,
-    TypeError,
-    KeyError,
-    IndexError,
-    UnicodeDecodeError,
-)
-
-
 class CallTypes:
     def __init__(self, typestore: Typestore, distro: Distro) -> None:
         self.typestore = typestore
@@ -80,7 +68,7 @@ class CallTypes:
                     io.BytesIO(body), decoded.writer.parsed, codec.parsed_schema
                 )
                 body = codec.encode_datum(datum)
-            except (*_READ_ERRORS, SchemaError) as exc:
+            except (*RESOLVE_ERRORS, SchemaError) as exc:
                 raise UndecodableValueError(
                     f"the value does not resolve to {typename}'s schema: {exc}", decoded.body
                 ) from None

@@ -32,30 +32,13 @@ from pydantic import ConfigDict, Field, field_validator, model_validator
 from fleetlink.common.configfile import Section
 from fleetlink.common.durations import PositiveSeconds
 from fleetlink.common.names import KafkaTopic, KeyChunk, RosActionType, RosServiceType
-from fleetlink.roswire.errors import InvalidNameError
-from fleetlink.roswire.names import validate_topic
-from fleetlink.uplink.commands.mapping import Ref, Template, parse_template
-
-
-def _check_to(value: str) -> str:
-    template = parse_template(value)
-    if not value.startswith("/"):
-        raise ValueError(f"{value!r} must be an absolute ROS name (start with '/')")
-    if any(ref.kind != "robot" for ref in template.refs):
-        raise ValueError(f"{value!r} may use {{robot}} only (the robot comes from 'robot')")
-    sample = template.sample()
-    try:
-        validate_topic(sample)
-    except InvalidNameError as exc:
-        raise ValueError(f"{value!r} makes no valid ROS name ({sample!r}: {exc.reason})") from None
-    return value
-
-
-def _check_robot(value: str) -> str:
-    refs = parse_template(value).refs
-    if len(refs) != 1 or value.strip() != refs[0].text or refs[0].kind == "robot":
-        raise ValueError(f'robot {value!r} must be exactly one of "{{key}}" or "{{msg.<field>}}"')
-    return value
+from fleetlink.uplink.commands.mapping import (
+    Ref,
+    Template,
+    check_robot_template,
+    check_ros_template,
+    parse_template,
+)
 
 
 class CallMapping(Section):
@@ -73,12 +56,12 @@ class CallMapping(Section):
     @field_validator("to")
     @classmethod
     def _to(cls, value: str) -> str:
-        return _check_to(value)
+        return check_ros_template(value, "ROS name", robot_only=True)
 
     @field_validator("robot")
     @classmethod
     def _robot(cls, value: str) -> str:
-        return _check_robot(value)
+        return check_robot_template(value)
 
     @property
     def to_template(self) -> Template:

@@ -20,22 +20,19 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.schemas.errors import RegistryError, SchemaError
 from fleetlink.schemas.registry import subject_for_topic
 from fleetlink.schemas.single_object import confluent_frame
+from fleetlink.uplink.batch_writes import DeliveryTally, Done, ack_when_written, refuse, wait_written
 from fleetlink.uplink.calls.convert import CallTypes
 from fleetlink.uplink.calls.mapping import ActionMapping, ServiceMapping
 from fleetlink.uplink.calls.plan import CORRELATION_HEADER, GOAL_HEADER
 from fleetlink.uplink.calls.records import RecordWriter, record_schema
 from fleetlink.uplink.commands.ownership import Owner
-from fleetlink.uplink.errors import ProduceError
 from fleetlink.uplink.ingest import Sink
-from fleetlink.uplink.producer import Delivery
 from fleetlink.wire.calls import Outcome, OutcomeBatch, decode_outcomes
-from fleetlink.wire.commands import StatusAck, encode_status_ack
 from fleetlink.wire.errors import EnvelopeError
 
 log = logging.getLogger(__name__)
 
 OUTCOME_KEY = "fleetlink/*/call-outcome/*"
-Done = Callable[[str | None], None]
 
 
 class Registry(Protocol):
@@ -162,42 +159,20 @@ class OutcomeWriter:
         if not records:
             done(None)
             return
-        left = [len(records)]
-        problems: list[str] = []
-        lock = threading.Lock()
-
-        def delivered(report: Delivery) -> None:
-            with lock:
-                if report.error is not None:
-                    problems.append(str(report.error))
-                else:
-                    self.written += 1
-                left[0] -= 1
-                finished = left[0] == 0
-            if finished:
-                done(problems[0] if problems else None)
-
+        tally = DeliveryTally(len(records), done, self._count_written)
         for topic, key, value, headers, at_ms in records:
             try:
                 self._sink.produce(
-                    topic, key, value, headers=headers, timestamp_ms=at_ms, on_delivery=delivered
+                    topic, key, value, headers=headers, timestamp_ms=at_ms, on_delivery=tally.delivered
                 )
             except Exception as exc:  # noqa: BLE001 - a fatal producer error fails this batch only
-                failure = ProduceError(f"produce failed: {exc}", code="_PRODUCE", retriable=True)
-                delivered(Delivery(topic, -1, -1, failure, 0.0))
+                tally.failed(topic, exc)
+
+    def _count_written(self) -> None:
+        self.written += 1
 
     def write_and_wait(self, outcomes: Sequence[Outcome], timeout: float = 60.0) -> str | None:
-        finished = threading.Event()
-        outcome: list[str | None] = []
-
-        def done(problem: str | None) -> None:
-            outcome.append(problem)
-            finished.set()
-
-        self.write(outcomes, done)
-        if not finished.wait(timeout):
-            return "Kafka did not acknowledge the outcome records in time"
-        return outcome[0]
+        return wait_written(lambda done: self.write(outcomes, done), timeout, "outcome")
 
 
 def site_of_outcome_key(key: str) -> str | None:
@@ -246,8 +221,7 @@ class OutcomeIntake:
             self._limiter.log(
                 logging.WARNING, "bad", "refused a malformed outcome batch on %s: %s", query.key_expr, exc
             )
-            query.reply_err(str(exc).encode())
-            query.drop()
+            refuse(query, str(exc))
             return
         kept, dropped, problem = check_outcomes(str(query.key_expr), batch, self._owner_of)
         if problem is not None:
@@ -255,22 +229,18 @@ class OutcomeIntake:
             self._limiter.log(
                 logging.WARNING, "forged", "refused an outcome batch on %s: %s", query.key_expr, problem
             )
-            query.reply_err(f"refused: {problem}".encode())
-            query.drop()
+            refuse(query, f"refused: {problem}")
             return
         self.dropped += dropped
         self.batches += 1
         count = len(batch.outcomes)
 
-        def done(problem: str | None) -> None:
-            try:
-                ack = StatusAck(count) if problem is None else StatusAck(0, problem[:500])
-                if problem is not None:
-                    self._limiter.log(
-                        logging.WARNING, "write", "outcomes from %s not written: %s", batch.repeater, problem
-                    )
-                query.reply(query.key_expr, encode_status_ack(ack))
-            finally:
-                query.drop()
+        done = ack_when_written(
+            query,
+            count,
+            lambda problem: self._limiter.log(
+                logging.WARNING, "write", "outcomes from %s not written: %s", batch.repeater, problem
+            ),
+        )
 
         self._writer.write(kept, done)

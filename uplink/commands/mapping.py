@@ -159,6 +159,30 @@ class CommandQoS(Section):
         ).to_keyexpr()
 
 
+def check_ros_template(value: str, what: str, *, robot_only: bool = False) -> str:
+    """``value`` if it is an absolute ROS name template whose sample is a valid ``what``
+    (with ``robot_only``, one that refers to ``{robot}`` at most), else a ValueError."""
+    template = parse_template(value)
+    if not value.startswith("/"):
+        raise ValueError(f"{value!r} must be an absolute {what} (start with '/')")
+    if robot_only and any(ref.kind != "robot" for ref in template.refs):
+        raise ValueError(f"{value!r} may use {{robot}} only (the robot comes from 'robot')")
+    sample = template.sample()
+    try:
+        validate_topic(sample)
+    except InvalidNameError as exc:
+        raise ValueError(f"{value!r} makes no valid {what} ({sample!r}: {exc.reason})") from None
+    return value
+
+
+def check_robot_template(value: str) -> str:
+    """``value`` if it is exactly one ``{key}`` or ``{msg.<field>}`` reference, else a ValueError."""
+    refs = parse_template(value).refs
+    if len(refs) != 1 or value.strip() != refs[0].text or refs[0].kind == "robot":
+        raise ValueError(f'robot {value!r} must be exactly one of "{{key}}" or "{{msg.<field>}}"')
+    return value
+
+
 class CommandMapping(Section):
     """One Kafka topic -> one ROS topic per addressed robot."""
 
@@ -176,25 +200,12 @@ class CommandMapping(Section):
     @field_validator("to")
     @classmethod
     def _to(cls, value: str) -> str:
-        template = parse_template(value)
-        if not value.startswith("/"):
-            raise ValueError(f"{value!r} must be an absolute ROS topic (start with '/')")
-        sample = template.sample()
-        try:
-            validate_topic(sample)
-        except InvalidNameError as exc:
-            raise ValueError(f"{value!r} makes no valid ROS topic ({sample!r}: {exc.reason})") from None
-        return value
+        return check_ros_template(value, "ROS topic")
 
     @field_validator("robot")
     @classmethod
     def _robot(cls, value: str | None) -> str | None:
-        if value is None:
-            return None
-        refs = parse_template(value).refs
-        if len(refs) != 1 or value.strip() != refs[0].text or refs[0].kind == "robot":
-            raise ValueError(f'robot {value!r} must be exactly one of "{{key}}" or "{{msg.<field>}}"')
-        return value
+        return None if value is None else check_robot_template(value)
 
     @model_validator(mode="after")
     def _targets(self) -> CommandMapping:

@@ -13,20 +13,17 @@ import zenoh
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.schemas.errors import RegistryError
 from fleetlink.schemas.registry import subject_for_topic
+from fleetlink.uplink.batch_writes import DeliveryTally, Done, ack_when_written, refuse, wait_written
 from fleetlink.uplink.commands.ownership import Owner
 from fleetlink.uplink.commands.status_checks import check_status
 from fleetlink.uplink.commands.status_records import STATUS_SCHEMA, status_value
-from fleetlink.uplink.errors import ProduceError
 from fleetlink.uplink.ingest import Sink
-from fleetlink.uplink.producer import Delivery
 from fleetlink.wire.commands import StatusAck, StatusEvent, decode_status_batch, encode_status_ack
 from fleetlink.wire.errors import EnvelopeError
 
 log = logging.getLogger(__name__)
 
 STATUS_KEY = "fleetlink/*/command-status/*"
-Done = Callable[[str | None], None]
-"""Called once with None when every record is in Kafka, else with the first problem."""
 
 
 class Registry(Protocol):
@@ -57,21 +54,7 @@ class StatusWriter:
         except RegistryError as exc:
             done(f"cannot register the status schema: {exc}")
             return
-        left = [len(events)]
-        problems: list[str] = []
-        lock = threading.Lock()
-
-        def delivered(report: Delivery) -> None:
-            with lock:
-                if report.error is not None:
-                    problems.append(str(report.error))
-                else:
-                    self.written += 1
-                left[0] -= 1
-                finished = left[0] == 0
-            if finished:
-                done(problems[0] if problems else None)
-
+        tally = DeliveryTally(len(events), done, self._count_written)
         for event in events:
             try:
                 self._sink.produce(
@@ -79,24 +62,16 @@ class StatusWriter:
                     event.robot.encode(),
                     status_value(schema_id, event),
                     timestamp_ms=event.at_ms,
-                    on_delivery=delivered,
+                    on_delivery=tally.delivered,
                 )
             except Exception as exc:  # noqa: BLE001 - a fatal producer error fails this batch only
-                failure = ProduceError(f"produce failed: {exc}", code="_PRODUCE", retriable=True)
-                delivered(Delivery(self.topic, -1, -1, failure, 0.0))
+                tally.failed(self.topic, exc)
+
+    def _count_written(self) -> None:
+        self.written += 1
 
     def write_and_wait(self, events: Sequence[StatusEvent], timeout: float = 60.0) -> str | None:
-        finished = threading.Event()
-        outcome: list[str | None] = []
-
-        def done(problem: str | None) -> None:
-            outcome.append(problem)
-            finished.set()
-
-        self.write(events, done)
-        if not finished.wait(timeout):
-            return "Kafka did not acknowledge the status records in time"
-        return outcome[0]
+        return wait_written(lambda done: self.write(events, done), timeout, "status")
 
 
 class StatusIntake:
@@ -127,8 +102,7 @@ class StatusIntake:
                 query.key_expr,
                 exc,
             )
-            query.reply_err(str(exc).encode())
-            query.drop()
+            refuse(query, str(exc))
             return
         checked = check_status(str(query.key_expr), batch, self._owner_of)
         if checked.problem is not None:
@@ -140,8 +114,7 @@ class StatusIntake:
                 query.key_expr,
                 checked.problem,
             )
-            query.reply_err(f"refused: {checked.problem}".encode())
-            query.drop()
+            refuse(query, f"refused: {checked.problem}")
             return
         if checked.dropped:
             self.dropped += checked.dropped
@@ -161,20 +134,17 @@ class StatusIntake:
         count = len(batch.events)
         events = checked.events
 
-        def done(problem: str | None) -> None:
-            try:
-                ack = StatusAck(count) if problem is None else StatusAck(0, problem[:500])
-                if problem is not None:
-                    self._limiter.log(
-                        logging.WARNING,
-                        "status-write",
-                        "status batch from %s not written: %s",
-                        batch.repeater,
-                        problem,
-                    )
-                query.reply(query.key_expr, encode_status_ack(ack))
-            finally:
-                query.drop()
+        done = ack_when_written(
+            query,
+            count,
+            lambda problem: self._limiter.log(
+                logging.WARNING,
+                "status-write",
+                "status batch from %s not written: %s",
+                batch.repeater,
+                problem,
+            ),
+        )
 
         if not events:
             done(None)

@@ -10,7 +10,6 @@ from dataclasses import replace
 import pytest
 
 from fleetlink.wire.commands import (
-    FLAG_ZLIB,
     MAGIC,
     CommandEnvelope,
     CommandReply,
@@ -26,6 +25,7 @@ from fleetlink.wire.commands import (
     encode_status_ack,
     encode_status_batch,
 )
+from fleetlink.wire.envelope import FLAG_ZLIB
 from fleetlink.wire.errors import EnvelopeError
 
 SCHEMA = json.dumps({"type": "record", "name": "R", "fields": [{"name": "x", "type": "long"}] * 1}) * 40

@@ -13,32 +13,9 @@ import pytest
 
 from fleetlink.edge.spool import Spool, SpoolOptions
 from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
-from fleetlink.wire.groups import HEAD_SIZE
+from tests.unit.edge.spool.one_record_frames import FRAME, OPTIONS, RECORD, fill, reopen_and_read
 
-OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)  # a frame per record
-RECORD = b"p" * 100
-FRAME = HEADER_SIZE + HEAD_SIZE + 4 + len(RECORD)
 PER_SEGMENT = (OPTIONS.segment_bytes - SEGMENT_HEADER_SIZE) // FRAME
-
-
-def fill(directory: Path, count: int, *, ack_first: int = 0) -> list[Path]:
-    with Spool(directory, OPTIONS) as spool:
-        spool.append_many([RECORD] * count)
-        if ack_first:
-            batch = spool.read_unacked(ack_first, 1 << 20)
-            assert batch is not None
-            assert batch.count == ack_first
-            spool.ack(batch.first_seq)
-    return sorted(directory.glob("*.seg"))
-
-
-def drain(directory: Path) -> tuple[list[int], Spool]:
-    spool = Spool(directory, OPTIONS).open()
-    seqs: list[int] = []
-    while (batch := spool.read_unacked(1000, 1 << 20)) is not None:
-        seqs.extend(r.seq for r in batch.records)
-        spool.ack(batch.first_seq)
-    return seqs, spool
 
 
 def crash(spool: Spool) -> None:
@@ -63,7 +40,7 @@ def test_a_deleted_middle_segment_is_counted_exactly_once_and_reported_until_ack
     gone = seqs_of(segments[1], segments[2], 200)
     segments[1].unlink()
     caplog.set_level(logging.ERROR)
-    seqs, spool = drain(tmp_path)
+    seqs, spool = reopen_and_read(tmp_path)
     assert seqs == [s for s in range(1, 201) if s not in gone]
     stats = spool.stats()
     assert stats.lost_missing == len(gone) == PER_SEGMENT
@@ -74,7 +51,7 @@ def test_a_deleted_middle_segment_is_counted_exactly_once_and_reported_until_ack
     spool.close()
 
     caplog.clear()
-    _seqs, spool = drain(tmp_path)  # reopened: the same damage is not counted again ...
+    _seqs, spool = reopen_and_read(tmp_path)  # reopened: the same damage is not counted again ...
     assert spool.stats().lost_missing == 0
     assert "is missing" not in caplog.text
     assert spool.stats().damage_unacknowledged == 1  # ... but still awaits an operator
@@ -113,14 +90,14 @@ def test_a_damaged_middle_segment_loses_exactly_its_records(
             handle.truncate(cut)
     lost = held[kept:]
     caplog.set_level(logging.ERROR)
-    seqs, spool = drain(tmp_path)
+    seqs, spool = reopen_and_read(tmp_path)
     assert seqs == [s for s in range(1, 201) if s not in lost]
     assert spool.stats().corrupt_skipped == len(lost)
     assert f"in {target} at offset" in caplog.text
     assert f"record(s) lost (seqs {lost[0]}..{lost[-1]})" in caplog.text
     assert sum(f.records for f in spool.damage()) == len(lost)
     spool.close()
-    _seqs, spool = drain(tmp_path)
+    _seqs, spool = reopen_and_read(tmp_path)
     assert spool.stats().corrupt_skipped == 0  # found once, counted once
     spool.close()
 
@@ -132,7 +109,7 @@ def test_all_segments_deleted_with_the_ledger_kept_counts_every_unacked_record(
     for path in tmp_path.glob("*.seg"):
         path.unlink()
     caplog.set_level(logging.ERROR)
-    seqs, spool = drain(tmp_path)
+    seqs, spool = reopen_and_read(tmp_path)
     assert seqs == []
     assert spool.stats().lost_missing == 170  # the 30 acknowledged ones are in Kafka
     missing = [f for f in spool.damage() if f.reason == "segment_missing"]
@@ -153,7 +130,7 @@ def test_the_newest_segment_of_a_crashed_run_deleted_counts_what_was_synced(
     newest = sorted(tmp_path.glob("*.seg"))[-1]
     newest.unlink()
     caplog.set_level(logging.ERROR)
-    seqs, spool = drain(tmp_path)
+    seqs, spool = reopen_and_read(tmp_path)
     assert seqs == list(range(1, PER_SEGMENT + 1))
     assert spool.stats().lost_missing == 80 - PER_SEGMENT
     assert "after seq 80 in the last fsync interval before the unclean stop are not counted" in caplog.text

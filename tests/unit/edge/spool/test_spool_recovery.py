@@ -7,35 +7,16 @@ from pathlib import Path
 
 import pytest
 
-from fleetlink.edge.spool import Spool, SpoolOptions
+from fleetlink.edge.spool import Spool
 from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
 from fleetlink.edge.spool.ledger import ENTRY_SIZE
-from fleetlink.wire.groups import HEAD_SIZE
-
-GROUP_OVERHEAD = HEAD_SIZE + 4  # the group header and the record's length
-
-OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)  # a frame per record
-RECORD = b"p" * 100
-FRAME = HEADER_SIZE + GROUP_OVERHEAD + len(RECORD)  # a group of one record per frame
-
-
-def fill(directory: Path, count: int, *, ack_first: int = 0) -> list[Path]:
-    with Spool(directory, OPTIONS) as spool:
-        spool.append_many([RECORD] * count)
-        if ack_first:
-            batch = spool.read_unacked(ack_first, 1 << 20)
-            assert batch is not None
-            spool.ack(batch.first_seq)
-    return sorted(directory.glob("*.seg"))
-
-
-def reopen_and_read(directory: Path) -> tuple[list[int], Spool]:
-    spool = Spool(directory, OPTIONS).open()
-    seqs: list[int] = []
-    while (batch := spool.read_unacked(1000, 1 << 20)) is not None:
-        seqs.extend(r.seq for r in batch.records)
-        spool.ack(batch.first_seq)
-    return seqs, spool
+from tests.unit.edge.spool.one_record_frames import (
+    FRAME,
+    OPTIONS,
+    RECORD,
+    fill,
+    reopen_and_read,
+)
 
 
 def test_a_cut_last_record_is_truncated_counted_exactly_and_logged(

@@ -1,0 +1,25 @@
+"""``StartStop``: ``with`` for objects that are started and stopped."""
+
+from __future__ import annotations
+
+from types import TracebackType
+from typing import Self
+
+
+class StartStop:
+    """``with obj:`` calls ``obj.start()`` on entry (and gives ``obj``) and ``obj.stop()`` on exit."""
+
+    def start(self) -> object:
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        self.start()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
