@@ -136,6 +136,13 @@ def test_oversized_record_is_dead_lettered_with_a_reference_and_the_spool_advanc
         with EdgeAgent(config) as agent, talker as robot:
             publisher = robot.create_publisher("/tb4_02/chatter", STRING, congestion="block")
             wait_until(publisher.has_subscribers, 10, message="edge subscribed")
+            # the edge learns the uplink's limit from its first ack (the robot's registration
+            # event); before that it cannot know, and the uplink dead-letters instead (row 22)
+            wait_until(
+                lambda: agent.snapshot()["record_limit"]["learned"] is not None,
+                20,
+                message="the edge learned the uplink's record limit",
+            )
             publisher.publish_cdr(cdr.encode_string("small 1"))
             publisher.publish_cdr(cdr.encode_string(huge))
             publisher.publish_cdr(cdr.encode_string("small 2"))
