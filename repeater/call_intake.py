@@ -59,6 +59,9 @@ def final_outcome(env: CallEnvelope, status: str, detail: str, at_ms: int) -> Ou
 
 
 class CallIntake:
+    """Takes call envelopes from Zenoh queries: refuses forged and malformed ones,
+    journals and answers the rest, and hands the applied ones to the runner."""
+
     def __init__(
         self,
         shared: Shared,
@@ -82,6 +85,10 @@ class CallIntake:
         self.duplicates = 0
 
     def on_query(self, query: zenoh.Query) -> None:
+        """Check, journal (fsynced) and answer one call query; then run the call or emit its final outcome.
+
+        A call that cannot be made durable is answered with an error and not run.
+        """
         shared = self._shared
         data = signed_payload(
             query, shared, self._keys, what="call", on_forged=self._on_forged, limiter=self._limiter

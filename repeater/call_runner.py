@@ -57,12 +57,20 @@ _CANCEL_STATE = {
 
 @dataclass
 class RunnerStats:
+    """Counters of a ``CallRunner``: calls started, feedback passed on, outcomes emitted per status."""
+
     calls: int = 0
     feedback: int = 0
     outcomes: dict[str, int] = field(default_factory=dict)
 
 
 class CallRunner:
+    """Runs accepted calls, goals and cancels as an rmw_zenoh client on a pool of worker threads.
+
+    Each call ends in exactly one final outcome given to ``emit``; clients are kept per (name, type),
+    at most ``MAX_CLIENTS`` (the least recently used one is stopped).
+    """
+
     def __init__(
         self, node: RosNode, emit: Emit, *, clock: Callable[[], float] = time.time, workers: int = 32
     ) -> None:
@@ -80,6 +88,7 @@ class CallRunner:
         self._pool.submit(self._run, env, resume)
 
     def stop(self) -> None:
+        """Stop waiting for servers, drop queued calls, wait for the running ones and stop every client."""
         self._stop.set()
         self._pool.shutdown(wait=True, cancel_futures=True)
         with self._lock:

@@ -42,11 +42,15 @@ CallIdent = tuple[str, str, str]
 
 
 def ident(env: CallEnvelope) -> CallIdent:
+    """The key a call is remembered by: (kind, call id, robot)."""
     return (env.kind, env.call_id, env.robot)
 
 
 @dataclass
 class StoredCall:
+    """An accepted call without its payload, when it was received (seconds since the epoch) and whether it
+    has its final outcome."""
+
     envelope: CallEnvelope
     received_at: float
     done: bool = False
@@ -54,6 +58,9 @@ class StoredCall:
 
 @dataclass
 class CallState:
+    """What replaying the call journal gives: the calls, the unacknowledged outcomes by number, the next
+    outcome number, and how many lines were read and skipped."""
+
     calls: dict[CallIdent, StoredCall] = field(default_factory=dict)
     pending: dict[int, Outcome] = field(default_factory=dict)
     next_number: int = 1
@@ -62,6 +69,7 @@ class CallState:
 
 
 def call_line(env: CallEnvelope, received_at: float) -> dict[str, Any]:
+    """The journal line saying ``env`` was accepted at ``received_at`` (its payload left out)."""
     return {"op": "call", **call_fields(env), "rx": received_at}
 
 
@@ -109,6 +117,12 @@ def _apply(state: CallState, obj: Any) -> None:
 
 
 class CallStore:
+    """The calls this repeater accepted and the outcomes waiting for the uplink, mirrored in
+    ``calls.journal``.
+
+    Not thread-safe: the repeater calls it under its lock.
+    """
+
     def __init__(self, state_dir: Path) -> None:
         self._journal = Journal(state_dir, FILENAME)
         self.calls: dict[CallIdent, StoredCall] = {}
@@ -118,6 +132,8 @@ class CallStore:
         self.skipped_lines = 0
 
     def open(self) -> None:
+        """Replay ``calls.journal`` into memory, then open it for appending; raises ``JournalError`` when it
+        cannot be read or opened."""
         path = self._journal.path
         state = CallState()
         try:
@@ -134,13 +150,16 @@ class CallStore:
         self.skipped_lines = state.skipped
 
     def close(self) -> None:
+        """Close the journal file; appends fail until it is opened again."""
         self._journal.close()
 
     def accept(self, env: CallEnvelope, now: float) -> None:
+        """Remember ``env`` as accepted at ``now`` and journal it (not yet durable: call :meth:`sync`)."""
         self.calls[ident(env)] = StoredCall(replace(env, payload=b""), now)
         self._journal.append(call_line(env, now))
 
     def done(self, key: CallIdent) -> None:
+        """Mark the call ``key`` as finished and journal that once (an unknown call is ignored)."""
         stored = self.calls.get(key)
         if stored is not None and not stored.done:
             stored.done = True
@@ -157,6 +176,7 @@ class CallStore:
         return number
 
     def acked(self, numbers: list[int]) -> None:
+        """Drop the journalled outcomes the uplink acknowledged and journal that (other numbers: ignored)."""
         lines = []
         for number in numbers:
             if number in self._journalled:
@@ -167,6 +187,7 @@ class CallStore:
             self._journal.append(*lines)
 
     def sync(self) -> None:
+        """fsync the journal: the accepted calls and outcomes written so far become durable."""
         self._journal.sync()
 
     def forget_before(self, now_ms: int) -> None:

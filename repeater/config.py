@@ -35,6 +35,9 @@ def default_repeater_id() -> str:
 
 
 class RepeaterSection(Section):
+    """The ``repeater:`` section: the site served, the state directory, the trusted command keys and
+    the timing of the link to the uplink."""
+
     site: Site = Field(examples=["warehouse-a"])
     state_dir: Path
     command_keys: list[Path] = Field(
@@ -55,6 +58,8 @@ class RepeaterSection(Section):
 
 
 class RosSection(Section):
+    """The ``ros:`` section: the ROS domain id, the distro and the folders of extra message packages."""
+
     domain_id: int = Field(default=0, ge=0, le=232)
     distro: Distro = "jazzy"
     """Decides type hashes (and so the data keys robots subscribe on)."""
@@ -64,6 +69,9 @@ class RosSection(Section):
 
 
 class RepeaterConfig(Section):
+    """A repeater's whole config file: the ``repeater``, ``ros`` and ``zenoh`` sections and the optional
+    ``metrics`` one."""
+
     repeater: RepeaterSection
     ros: RosSection = RosSection()
     zenoh: ZenohSection = ZenohSection()

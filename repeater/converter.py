@@ -28,6 +28,11 @@ if TYPE_CHECKING:
 
 
 class Converter:
+    """Turns the Avro value of a command envelope into the CDR payload of its ROS type.
+
+    Thread-safe; the fingerprints of the types' own schemas and parsed writer schemas are cached.
+    """
+
     def __init__(self, typestore: Typestore, distro: Distro) -> None:
         self.typestore = typestore
         self.distro: Distro = distro
@@ -36,6 +41,7 @@ class Converter:
         self._writers: dict[bytes, Any] = {}
 
     def codec(self, env: CommandEnvelope) -> Codec:
+        """The codec of ``env``'s ROS type; raises ``ConversionError`` when the type cannot be loaded."""
         try:
             return get_codec(self.typestore, env.ros_type, self.distro)
         except SchemaError as exc:

@@ -21,6 +21,7 @@ class SubscriberWatch:
         self._joined: set[str] = set()
 
     def on_graph(self, event: GraphEvent) -> None:
+        """Count a subscription that appeared or went away, and wake the publish loop."""
         # runs on a zenoh thread under the watcher's lock: never take the repeater's lock here
         entity = event.entity
         if not isinstance(entity, EndpointInfo) or entity.kind is not EntityKind.SUBSCRIPTION:
@@ -36,6 +37,7 @@ class SubscriberWatch:
         self._poke.set()
 
     def count(self, topic: str) -> int:
+        """How many subscribers the ROS graph shows on ``topic`` now."""
         with self._lock:
             return self._subscribers.get(topic, 0)
 

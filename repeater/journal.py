@@ -45,6 +45,9 @@ FILENAME = "commands.journal"
 
 @dataclass
 class StoredCommand:
+    """A journalled command (its envelope without the schema), when it was received (seconds since the
+    epoch) and whether it was delivered and has ended."""
+
     envelope: CommandEnvelope
     received_at: float
     delivered: bool = False
@@ -53,6 +56,9 @@ class StoredCommand:
 
 @dataclass
 class JournalState:
+    """What replaying a command journal gives: schemas by fingerprint, commands by (id, robot), the
+    unacknowledged status events by number, the next number, and the lines read and skipped."""
+
     schemas: dict[bytes, str] = field(default_factory=dict)
     commands: dict[tuple[str, str], StoredCommand] = field(default_factory=dict)
     pending: dict[int, StatusEvent] = field(default_factory=dict)
@@ -61,6 +67,7 @@ class JournalState:
     skipped: int = 0
 
     def live_lines(self) -> int:
+        """About how many lines a compacted journal of this state holds (a command counted with one mark)."""
         return len(self.schemas) + 2 * len(self.commands) + len(self.pending)
 
 
@@ -68,23 +75,28 @@ class JournalState:
 
 
 def schema_line(fp: bytes, text: str) -> dict[str, Any]:
+    """The journal line keeping the writer schema ``text`` under its fingerprint ``fp``."""
     return {"op": "schema", "fp": fp.hex(), "text": text}
 
 
 def command_line(env: CommandEnvelope, received_at: float) -> dict[str, Any]:
+    """The journal line for a command received at ``received_at``, without its schema."""
     raw = encode_envelope(env.without_schema(), compress_above=1 << 30)
     return {"op": "cmd", "env": base64.b64encode(raw).decode(), "rx": received_at}
 
 
 def mark_line(op: str, command_id: str, robot: str) -> dict[str, Any]:
+    """The journal line marking a command ``delivered`` or ``end``."""
     return {"op": op, "id": command_id, "robot": robot}
 
 
 def status_line(number: int, event: StatusEvent) -> dict[str, Any]:
+    """The journal line for status event ``number``, waiting for the uplink."""
     return {"op": "status", "n": number, "ev": status_to_json(event)}
 
 
 def acked_line(number: int) -> dict[str, Any]:
+    """The journal line saying the uplink acknowledged status event ``number``."""
     return {"op": "acked", "n": number}
 
 
@@ -152,6 +164,7 @@ class Journal:
         return state
 
     def close(self) -> None:
+        """Close the file, if open; appends fail until it is opened again."""
         if self._file is not None:
             self._file.close()
             self._file = None
@@ -165,6 +178,10 @@ class Journal:
         self.close()
 
     def append(self, *entries: dict[str, Any], sync: bool = False) -> None:
+        """Write ``entries`` as lines and flush them (fsynced too with ``sync``).
+
+        Raises ``JournalError`` when the journal is not open or the write fails.
+        """
         out = self._file
         if out is None:
             raise JournalError(str(self.path), "journal is not open")

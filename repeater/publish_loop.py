@@ -23,6 +23,9 @@ MAX_WAIT_S = 0.5
 
 
 class PublishLoop:
+    """The thread that publishes what is due: restored commands, repeats, late joiners; it also ends
+    expired commands and compacts the journal."""
+
     def __init__(self, shared: Shared, subscribers: SubscriberWatch) -> None:
         self._shared = shared
         self._subscribers = subscribers
@@ -31,11 +34,13 @@ class PublishLoop:
         self._thread: threading.Thread | None = None
 
     def start(self) -> None:
+        """Start the ``repeater-schedule`` thread, which publishes what falls due until :meth:`stop`."""
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="repeater-schedule", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop the thread and wait for it (at most 5 s)."""
         self._stop.set()
         self._shared.poke.set()
         if self._thread is not None:

@@ -73,9 +73,11 @@ class Publishers:
             self._stop(topic)
 
     def topics(self) -> list[str]:
+        """The topics that have a publisher now, idle ones included, sorted."""
         return sorted(self._pubs)
 
     def stop_all(self) -> None:
+        """Undeclare every publisher, idle or not (the repeater is stopping)."""
         for topic in list(self._pubs):
             self._stop(topic)
 

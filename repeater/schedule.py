@@ -27,6 +27,8 @@ from fleetlink.wire.commands import Status
 
 
 class Offer(Enum):
+    """What became of a command offered to the schedule."""
+
     APPLIED = "applied"
     DUPLICATE = "duplicate"
     EXPIRED = "expired"
@@ -47,17 +49,22 @@ class Command:
 
     @property
     def lease(self) -> float:
+        """The lease's length in seconds (its end minus the issue time)."""
         return self.lease_until - self.issued_at
 
     @property
     def slot(self) -> tuple[str, str]:
+        """The (robot, ROS topic) the command is for: one command is active per slot."""
         return (self.robot, self.ros_topic)
 
     @property
     def ident(self) -> tuple[str, str]:
+        """(command id, robot): a command is applied once per pair."""
         return (self.command_id, self.robot)
 
     def newer_than(self, other: Command) -> bool:
+        """Whether this command supersedes ``other``: issued later, or at the same time with a larger
+        ``order``."""
         return (self.issued_at, self.order) > (other.issued_at, other.order)
 
 
@@ -91,6 +98,9 @@ class _Active:
 
 @dataclass
 class Outcome:
+    """The answer to :meth:`Schedule.offer`: what became of the command, the status changes it caused and
+    what to publish now."""
+
     offer: Offer
     changes: list[Change] = field(default_factory=list)
     publish: list[Publish] = field(default_factory=list)
@@ -98,6 +108,11 @@ class Outcome:
 
 
 class Schedule:
+    """The active command of each slot, when it is due and when it ends; which command ids it has seen.
+
+    Not thread-safe: the repeater calls it under its lock.
+    """
+
     def __init__(self, *, dead_man: float | None = None) -> None:
         if dead_man is not None and dead_man <= 0:
             raise ValueError(f"dead_man must be positive, got {dead_man}")
@@ -160,9 +175,11 @@ class Schedule:
         ]
 
     def link_up(self) -> None:
+        """The uplink answered: the dead-man stops counting."""
         self._link_lost_since = None
 
     def link_down(self, now: float) -> None:
+        """The uplink did not answer at ``now``; the dead-man counts from the first such failure."""
         if self._link_lost_since is None:
             self._link_lost_since = now
 
@@ -211,22 +228,28 @@ class Schedule:
     # -- views ----------------------------------------------------------------------------
 
     def active(self) -> list[Command]:
+        """The commands active now, one per slot."""
         return [a.command for a in self._active.values()]
 
     def is_active(self, command: Command) -> bool:
+        """Whether ``command`` is still the active command of its slot."""
         current = self._active.get(command.slot)
         return current is not None and current.command.ident == command.ident
 
     def delivered(self, command: Command) -> bool:
+        """Whether ``command`` is active and a subscriber has seen it."""
         current = self._active.get(command.slot)
         return current is not None and current.command.ident == command.ident and current.delivered
 
     def topics(self) -> set[str]:
+        """The ROS topics with an active command."""
         return {a.command.ros_topic for a in self._active.values()}
 
     def seen(self) -> Iterable[tuple[str, str]]:
+        """The (command id, robot) pairs offered so far, each remembered until its lease ends."""
         return self._seen.keys()
 
     @property
     def link_lost_since(self) -> float | None:
+        """When the link to the uplink was lost (seconds since the epoch; ``None``: it is up)."""
         return self._link_lost_since

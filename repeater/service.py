@@ -72,6 +72,9 @@ __all__ = ["Repeater", "RepeaterStats"]
 
 
 class Repeater:
+    """One repeater process: takes commands and calls from the uplink over Zenoh and repeats or runs them
+    near the robots. Start it with :meth:`start` (or ``with``), end it with :meth:`stop`."""
+
     def __init__(
         self,
         config: RepeaterConfig,
@@ -117,6 +120,11 @@ class Repeater:
     # -- lifecycle ------------------------------------------------------------------------
 
     def start(self) -> Repeater:
+        """Load the message types, replay the journals, open the Zenoh session and the ROS node, and start
+        serving commands and calls; returns the repeater.
+
+        Raises ``RepeaterConfigError`` when the message types or the command keys cannot be loaded.
+        """
         ros, cfg, shared = self.config.ros, self.config.repeater, self._shared
         try:
             typestore = load_typestore(ros.distro, ros.message_paths)
@@ -217,6 +225,8 @@ class Repeater:
             self._emit(final_outcome(env, "error", detail, int(now * 1000)), True)
 
     def stop(self) -> None:
+        """Stop taking commands and calls, stop every thread, client and publisher, then close the session
+        and the journals."""
         shared = self._shared
         if self._call_queryable is not None:
             self._call_queryable.undeclare()
@@ -324,9 +334,11 @@ class Repeater:
         return self._metrics_server.url if self._metrics_server is not None else None
 
     def subscribers(self, topic: str) -> int:
+        """How many subscribers the ROS graph shows on ``topic``."""
         return self._subscribers.count(topic)
 
     def pending_statuses(self) -> int:
+        """How many status events wait for the uplink's acknowledgement (0 before :meth:`start`)."""
         return self._shared.link.pending() if self._shared.link is not None else 0
 
 

@@ -17,6 +17,8 @@ from fleetlink.wire.commands import CommandEnvelope
 
 @dataclass
 class RepeaterStats:
+    """Running totals of what the repeater did with commands, read by the metrics and the health."""
+
     applied: int = 0
     duplicates: int = 0
     expired_on_arrival: int = 0
@@ -34,6 +36,7 @@ class RepeaterStats:
 
 
 def to_command(env: CommandEnvelope) -> Command:
+    """What the schedule needs of a command envelope (its times in seconds)."""
     return Command(
         env.command_id,
         env.robot,

@@ -34,6 +34,9 @@ Ident = tuple[str, str]
 
 
 class CommandStore:
+    """The journalled state in memory: writer schemas, commands whose lease has not ended, and the status
+    events not yet acknowledged by the uplink."""
+
     def __init__(self, state_dir: Path) -> None:
         self._journal = Journal(state_dir)
         self.schemas: dict[bytes, str] = {}
@@ -45,6 +48,8 @@ class CommandStore:
         self._limiter = LogLimiter(log)
 
     def open(self) -> JournalState:
+        """Open the journal, replay it into memory and return what it held; raises ``JournalError`` when it
+        cannot be read or opened."""
         state = self._journal.open()
         self.schemas = dict(state.schemas)
         self.commands = dict(state.commands)
@@ -54,6 +59,7 @@ class CommandStore:
         return state
 
     def close(self) -> None:
+        """Close the journal file; writes fail until it is opened again."""
         self._journal.close()
 
     # -- writes ---------------------------------------------------------------------------
@@ -78,6 +84,8 @@ class CommandStore:
         self._journal.sync()
 
     def mark(self, ident: Ident, op: str) -> None:
+        """Mark a known command ``delivered`` or ``end`` and journal it (a write failure is counted, not
+        raised)."""
         stored = self.commands.get(ident)
         if stored is None:
             return
@@ -88,6 +96,7 @@ class CommandStore:
         self._append_softly(mark_line(op, *ident))
 
     def status(self, event: StatusEvent) -> int:
+        """Keep a status event until the uplink acknowledges it and journal it; returns its number."""
         number = self._next
         self._next += 1
         self.pending[number] = event
@@ -95,6 +104,7 @@ class CommandStore:
         return number
 
     def acked(self, numbers: list[int]) -> None:
+        """Drop the status events the uplink acknowledged and journal that (a write failure is counted)."""
         done = [n for n in numbers if self.pending.pop(n, None) is not None]
         if done:
             self._append_softly(*(acked_line(n) for n in done))
@@ -123,6 +133,8 @@ class CommandStore:
         return True
 
     def live_entries(self) -> list[dict[str, Any]]:
+        """The lines a compacted journal holds: the schemas in use, each command with its marks,
+        the pending status events."""
         used = {c.envelope.schema_fp for c in self.commands.values()}
         entries = [schema_line(fp, text) for fp, text in self.schemas.items() if fp in used]
         for ident, stored in self.commands.items():
@@ -136,4 +148,5 @@ class CommandStore:
 
     @property
     def journal_lines(self) -> int:
+        """How many lines the journal file holds now."""
         return self._journal.lines

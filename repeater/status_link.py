@@ -32,10 +32,14 @@ AckCallback = Callable[[list[int]], None]
 
 
 def status_key(site: str, repeater_id: str) -> str:
+    """The key the uplink takes a repeater's status batches on."""
     return f"{site_prefix(site)}/command-status/{repeater_id}"
 
 
 class StatusLink:
+    """Sends pending events to the uplink in batches from its own thread, and reports whether the uplink
+    answers (``on_link``) and which events it took (``on_acked``)."""
+
     def __init__(
         self,
         session: zenoh.Session,
@@ -74,12 +78,14 @@ class StatusLink:
         self.failures = 0
 
     def start(self) -> StatusLink:
+        """Start the ``repeater-status`` thread; returns the link."""
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="repeater-status", daemon=True)
         self._thread.start()
         return self
 
     def stop(self) -> None:
+        """Stop the thread, waiting at most the query timeout plus 5 s; pending events stay unsent."""
         self._stop.set()
         with self._cond:
             self._cond.notify_all()
@@ -96,6 +102,7 @@ class StatusLink:
         self.stop()
 
     def submit(self, number: int, event: Any) -> None:
+        """Queue event ``number`` for the next batch (an event queued under the same number is replaced)."""
         with self._cond:
             self._pending[number] = event
             if self._oldest is None:
@@ -103,6 +110,7 @@ class StatusLink:
             self._cond.notify_all()
 
     def pending(self) -> int:
+        """How many events wait for the uplink's acknowledgement."""
         with self._cond:
             return len(self._pending)
 

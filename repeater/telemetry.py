@@ -17,12 +17,19 @@ from fleetlink.repeater.shared import RepeaterStats
 
 
 class RepeaterTelemetry:
+    """Turns the repeater's running totals into metrics and its health (thread-safe)."""
+
     def __init__(self, metrics: Metrics) -> None:
         self.metrics = metrics
         self._deltas = CounterDeltas()
         self._lock = threading.Lock()
 
     def observe(self, stats: RepeaterStats, *, link_up: bool | None, active: int, pending: int) -> Health:
+        """Report what ``stats`` gained since the last call, set the gauges and return the health.
+
+        ``link_up`` ``None`` (no answer yet) counts as up; while it is down, the health names the
+        ``pending`` status events.
+        """
         with self._lock:
             m, d = self.metrics, self._deltas.delta
             for topic, n in sorted(stats.by_topic.items()):

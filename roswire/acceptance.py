@@ -44,6 +44,8 @@ class RosSample(NamedTuple):
 
 @dataclass
 class SubscriberStats:
+    """What one subscription received: delivered and rejected samples, sequence gaps, callback failures."""
+
     received: int = 0
     delivered: int = 0
     no_attachment: int = 0
@@ -58,6 +60,7 @@ class SubscriberStats:
 
     @property
     def rejected(self) -> int:
+        """Samples turned away: without or with a bad attachment, with a bad key or a bad payload."""
         return self.no_attachment + self.bad_attachment + self.bad_key + self.bad_payload
 
 
@@ -66,6 +69,8 @@ Decoder = Callable[[str, str, bytes], Any]
 
 
 class SampleAcceptor:
+    """Checks samples of one subscription as an rmw_zenoh subscriber does and counts the outcome."""
+
     def __init__(
         self,
         *,

@@ -101,6 +101,7 @@ class GoalHandle:
     waiters: list[ServiceCall] = field(default_factory=list)
 
     def publish_feedback(self, feedback: Any) -> None:
+        """Publish ``feedback`` (a ``Name_Feedback`` message) for this goal."""
         self.server.publish_feedback(self, feedback)
 
     def finish(self, status: GoalStatus, result: Any = None) -> None:
@@ -114,6 +115,8 @@ Accept = Callable[[Any], bool]
 
 
 class RosActionServer:
+    """Serves one ROS 2 action: accepts goals, runs each in its own thread, publishes feedback and status."""
+
     def __init__(
         self,
         node: RosNode,
@@ -139,6 +142,7 @@ class RosActionServer:
         self.goals_received = 0
 
     def start(self) -> RosActionServer:
+        """Declare the feedback and status publishers and the three services; returns self."""
         if self._services:
             return self
         node, t = self.node, self.typename
@@ -154,6 +158,7 @@ class RosActionServer:
         return self
 
     def stop(self) -> None:
+        """Undeclare the services and publishers and ask every running goal to cancel."""
         for server in self._services:
             server.stop()
         self._services = []
@@ -167,6 +172,7 @@ class RosActionServer:
             handle.cancel_requested.set()
 
     def goals(self) -> dict[bytes, GoalStatus]:
+        """Goal id -> status of every goal still known (finished ones until their result expires)."""
         with self._lock:
             return {gid: h.status for gid, h in self._goals.items()}
 
@@ -211,6 +217,12 @@ class RosActionServer:
         self.finish(handle, status, result)
 
     def finish(self, handle: GoalHandle, status: GoalStatus, result: Any) -> None:
+        """End a goal with a terminal status and result; publish the status and answer waiting results.
+
+        Waiting results are the ``get_result`` calls made while the goal ran. A goal already finished
+        is left as it is; a status that is not terminal raises ``RoswireError``; a None result becomes
+        a default ``Name_Result``.
+        """
         if not status.terminal:
             raise RoswireError(f"goal status {status.label} does not end a goal")
         with self._lock:
@@ -276,6 +288,7 @@ class RosActionServer:
     # -- topics -------------------------------------------------------------------------------
 
     def publish_feedback(self, handle: GoalHandle, feedback: Any) -> None:
+        """Publish ``feedback`` for the goal of ``handle`` (nothing once the server is stopped)."""
         ts, t = self._ts, self.typename
         pub = self._feedback
         if pub is None:
@@ -311,18 +324,24 @@ class RosActionServer:
 
 @dataclass(frozen=True, slots=True)
 class GoalResponse:
+    """The server's answer to a goal: accepted or not, and its stamp (Unix ns)."""
+
     accepted: bool
     stamp_ns: int
 
 
 @dataclass(frozen=True, slots=True)
 class ResultResponse:
+    """A goal's final status (a plain int when unknown) and its result as ``Name_Result`` CDR."""
+
     status: GoalStatus | int
     result_cdr: bytes
 
 
 @dataclass(frozen=True, slots=True)
 class CancelResponse:
+    """A cancel request's return code (a plain int when unknown) and the ids of the goals canceling."""
+
     code: CancelCode | int
     canceling: tuple[bytes, ...]
 
@@ -332,6 +351,8 @@ FeedbackListener = Callable[[bytes], object]
 
 
 class RosActionClient:
+    """Calls one ROS 2 action: sends goals, waits for results, cancels, and routes feedback per goal."""
+
     def __init__(self, node: RosNode, action: str, typename: str) -> None:
         self.node = node
         self.action = node.resolve(action)
@@ -350,6 +371,7 @@ class RosActionClient:
         self.feedback_received = 0
 
     def start(self) -> RosActionClient:
+        """Start the three service clients and subscribe to the feedback topic; returns self."""
         if self._feedback_sub is not None:
             return self
         for client in (self.send_goal_client, self.get_result_client, self.cancel_client):
@@ -364,6 +386,7 @@ class RosActionClient:
         return self
 
     def stop(self) -> None:
+        """Unsubscribe from feedback and stop the service clients."""
         if self._feedback_sub is not None:
             self._feedback_sub.stop()
             self._feedback_sub = None
@@ -371,9 +394,11 @@ class RosActionClient:
             client.stop()
 
     def server_available(self, timeout: float = 1.0) -> bool:
+        """Whether an action server's ``send_goal`` service is announced (waits up to ``timeout`` s)."""
         return self.send_goal_client.server_available(timeout)
 
     def wait_for_server(self, timeout: float, *, stop: threading.Event | None = None) -> bool:
+        """Wait until an action server is announced (at most ``timeout`` s, or until ``stop`` is set)."""
         return self.send_goal_client.wait_for_server(timeout, stop=stop)
 
     def listen(self, goal_id: bytes, listener: FeedbackListener | None) -> None:
@@ -413,6 +438,7 @@ class RosActionClient:
         return ResultResponse(status, bytes(ts.serialize_cdr(response.result, f"{t}_Result")))
 
     def cancel(self, goal_id: bytes, timeout: float) -> CancelResponse:
+        """Ask the server to cancel ``goal_id``; raises ``ServiceError`` when it does not answer."""
         ts = self._ts
         info = ts.types["action_msgs/msg/GoalInfo"](goal_id=_uuid(ts, goal_id), stamp=_time(ts, 0))
         request = ts.types[f"{CANCEL_TYPE}_Request"](goal_info=info)

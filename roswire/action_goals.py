@@ -33,10 +33,12 @@ class GoalStatus(IntEnum):
 
     @property
     def label(self) -> str:
+        """The status name in lower case (``succeeded``)."""
         return self.name.lower()
 
     @property
     def terminal(self) -> bool:
+        """Whether the goal has finished: SUCCEEDED, CANCELED or ABORTED."""
         return self in TERMINAL
 
 
@@ -54,6 +56,7 @@ class CancelCode(IntEnum):
 
     @property
     def meaning(self) -> str:
+        """A sentence saying what the code means for the cancel request."""
         return _CANCEL_MEANING[self]
 
 
@@ -75,6 +78,8 @@ def status_label(code: int) -> str:
 
 @dataclass(frozen=True, slots=True)
 class CancelDecision:
+    """A cancel request's answer: the return code and the ids of the goals now canceling."""
+
     code: CancelCode
     canceling: tuple[bytes, ...]
 

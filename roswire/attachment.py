@@ -36,6 +36,7 @@ class Attachment(NamedTuple):
     version: AttachmentVersion = 2
 
     def encode(self) -> bytes:
+        """Serialize this attachment in its own layout version."""
         return encode(self.seq, self.source_ts_ns, self.gid, self.version)
 
 

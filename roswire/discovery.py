@@ -27,6 +27,8 @@ GraphListener = Callable[[GraphEvent], object]
 
 @dataclass
 class WatcherStats:
+    """Liveliness token changes seen by a watcher, malformed tokens and listener failures."""
+
     puts: int = 0
     deletes: int = 0
     malformed: int = 0
@@ -35,6 +37,8 @@ class WatcherStats:
 
 
 class GraphWatcher:
+    """Keeps a :class:`Graph` current from a domain's liveliness tokens and tells listeners of each change."""
+
     def __init__(
         self,
         session: zenoh.Session,
@@ -53,10 +57,12 @@ class GraphWatcher:
         self._sub: zenoh.Subscriber[None] | None = None
 
     def add_listener(self, listener: GraphListener) -> None:
+        """Also hand every later graph event to ``listener`` (called on a zenoh thread)."""
         with self._lock:
             self._listeners.append(listener)
 
     def start(self) -> GraphWatcher:
+        """Declare the liveliness subscriber (with history) on the domain's tokens; returns self."""
         if self._sub is not None:
             return self
         if self.ignore_own:
@@ -79,6 +85,7 @@ class GraphWatcher:
         return count
 
     def stop(self) -> None:
+        """Undeclare the liveliness subscriber; the graph keeps its last state."""
         if self._sub is not None:
             self._sub.undeclare()
             self._sub = None
@@ -120,18 +127,22 @@ class GraphWatcher:
     # --- thread-safe queries -----------------------------------------------------------------
 
     def nodes(self) -> list[NodeInfo]:
+        """Every node known now, sorted by fully qualified name."""
         with self._lock:
             return self._graph.nodes()
 
     def endpoints(self) -> list[EndpointInfo]:
+        """Every endpoint known now, sorted by topic, kind and id."""
         with self._lock:
             return self._graph.endpoints()
 
     def topics(self) -> dict[str, TopicInfo]:
+        """Topic name -> types, publishers and subscribers known now."""
         with self._lock:
             return self._graph.topics()
 
     def services(self) -> dict[str, TopicInfo]:
+        """Service name -> types, servers and clients known now."""
         with self._lock:
             return self._graph.services()
 

@@ -16,12 +16,16 @@ from fleetlink.roswire.tokens import EndpointInfo, Entity, EntityKind, NodeInfo,
 
 
 class EventKind(Enum):
+    """Whether a graph entity appeared or disappeared."""
+
     APPEARED = "appeared"
     DISAPPEARED = "disappeared"
 
 
 @dataclass(frozen=True)
 class GraphEvent:
+    """A node or endpoint that appeared in or disappeared from the graph."""
+
     kind: EventKind
     entity: Entity
 
@@ -65,6 +69,10 @@ class Graph:
         raise ValueError(f"token change kind must be 'put' or 'delete', not {kind!r}")
 
     def put(self, key: str) -> list[GraphEvent]:
+        """Add a token's entity (and its node if new); the events caused, none for a known or ignored token.
+
+        A malformed token raises :class:`TokenError`.
+        """
         if key in self._entities:
             return []
         entity = parse_token(key)
@@ -93,6 +101,7 @@ class Graph:
         return events
 
     def delete(self, key: str) -> list[GraphEvent]:
+        """Remove the entity of a token (and its node with its last token); the events it caused."""
         entity = self._entities.pop(key, None)
         if entity is None:
             return []
@@ -124,9 +133,11 @@ class Graph:
         return key in self._entities
 
     def nodes(self) -> list[NodeInfo]:
+        """Every node, sorted by fully qualified name."""
         return sorted((n.info for n in self._nodes.values()), key=lambda i: (i.fqn, i.zid, i.nid))
 
     def endpoints(self, kinds: Iterable[EntityKind] | None = None) -> list[EndpointInfo]:
+        """Every endpoint of the given kinds (all when None), sorted by topic, kind and id."""
         wanted = set(kinds) if kinds is not None else None
         found = [
             e
@@ -136,6 +147,7 @@ class Graph:
         return sorted(found, key=lambda e: (e.topic, e.kind.value, e.zid, e.eid))
 
     def node_endpoints(self, node_id: tuple[str, int]) -> list[EndpointInfo]:
+        """The endpoints of one node, by entity id (empty for an unknown node)."""
         node = self._nodes.get(node_id)
         return [] if node is None else sorted(node.endpoints.values(), key=lambda e: e.eid)
 

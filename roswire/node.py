@@ -40,15 +40,21 @@ _ids_lock = threading.Lock()
 
 
 def next_entity_id() -> int:
+    """A node or entity id not used before in this process."""
     with _ids_lock:
         return next(_ids)
 
 
 class Entity(Protocol):
-    def stop(self) -> None: ...
+    """Anything a node stops together with itself."""
+
+    def stop(self) -> None:
+        """Undeclare what the entity declared."""
 
 
 class RosNode:
+    """A ROS 2 node on the rmw_zenoh wire: its session, its ``NN`` token, and the entities it created."""
+
     def __init__(
         self,
         name: str,
@@ -82,6 +88,7 @@ class RosNode:
     # --- lifecycle --------------------------------------------------------------------------
 
     def start(self) -> RosNode:
+        """Open a session (or use the one lent to the node) and declare the ``NN`` token; returns self."""
         if self._session is not None:
             return self
         if self._borrowed is not None:
@@ -99,6 +106,7 @@ class RosNode:
         return self
 
     def stop(self) -> None:
+        """Stop every entity of the node, undeclare its token and close the session if the node opened it."""
         with self._lock:
             entities, self._entities = self._entities, []
         for entity in reversed(entities):
@@ -128,19 +136,23 @@ class RosNode:
 
     @property
     def session(self) -> zenoh.Session:
+        """The node's zenoh session; raises ``RoswireError`` before :meth:`start`."""
         if self._session is None:
             raise RoswireError(f"node {self.name!r} is not started")
         return self._session
 
     @property
     def zid(self) -> str:
+        """The session's zenoh id as hex text."""
         return str(self.session.zid())
 
     @property
     def started(self) -> bool:
+        """Whether the node has a session."""
         return self._session is not None
 
     def resolve(self, topic: str) -> str:
+        """The fully qualified name of ``topic`` relative to this node's namespace and name."""
         return resolve_topic(topic, self.namespace, self.name)
 
     def type_hash(self, typename: str) -> str:
@@ -192,6 +204,7 @@ class RosNode:
             self._entities.append(entity)
 
     def forget(self, entity: Entity) -> None:
+        """No longer stop ``entity`` with the node (it stopped on its own)."""
         with self._lock:
             if entity in self._entities:
                 self._entities.remove(entity)
@@ -199,6 +212,7 @@ class RosNode:
     # --- factories --------------------------------------------------------------------------
 
     def create_publisher(self, topic: str, typename: str, qos: QoS = DEFAULT, **kwargs: Any) -> RosPublisher:
+        """A started :class:`RosPublisher` on ``topic``; ``kwargs`` go to its constructor."""
         from fleetlink.roswire.publisher import RosPublisher
 
         return RosPublisher(self, topic, typename, qos, **kwargs).start()
@@ -211,6 +225,7 @@ class RosNode:
         qos: QoS = DEFAULT,
         **kwargs: Any,
     ) -> RosSubscriber:
+        """A started :class:`RosSubscriber` on ``topic``; ``kwargs`` go to its constructor."""
         from fleetlink.roswire.subscriber import RosSubscriber
 
         return RosSubscriber(self, topic, typename, callback, qos, **kwargs).start()

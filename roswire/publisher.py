@@ -34,6 +34,8 @@ SPORADIC_HEARTBEAT_S = 0.5
 
 
 class RosPublisher(StartStop):
+    """One ROS 2 topic publisher as rmw_zenoh declares it: data key, ``MP`` token, CDR with an attachment."""
+
     def __init__(
         self,
         node: RosNode,
@@ -63,6 +65,7 @@ class RosPublisher(StartStop):
 
     @property
     def type_hash(self) -> str:
+        """The type's hash as given, else computed once from the node's type store."""
         if self._type_hash is None:
             self._type_hash = self.node.type_hash(self.typename)
         return self._type_hash
@@ -77,6 +80,11 @@ class RosPublisher(StartStop):
         return zenoh.CongestionControl.DROP
 
     def start(self) -> RosPublisher:
+        """Declare the Zenoh publisher and the ``MP`` token; returns self.
+
+        TRANSIENT_LOCAL topics get an advanced publisher whose cache (``depth`` samples) answers late
+        joiners.
+        """
         if self._publisher is not None:
             return self
         from fleetlink.roswire.node import next_entity_id
@@ -117,6 +125,7 @@ class RosPublisher(StartStop):
         return self
 
     def stop(self) -> None:
+        """Undeclare the token and the publisher, and detach from the node."""
         if self._token is not None:
             self._token.undeclare()
             self._token = None

@@ -17,6 +17,8 @@ E = TypeVar("E", bound=IntEnum)
 
 
 class Reliability(IntEnum):
+    """Reliability policy: retransmit lost samples or not (rmw numbering)."""
+
     SYSTEM_DEFAULT = 0
     RELIABLE = 1
     BEST_EFFORT = 2
@@ -25,6 +27,8 @@ class Reliability(IntEnum):
 
 
 class Durability(IntEnum):
+    """Durability policy: whether late joiners get cached samples (rmw numbering)."""
+
     SYSTEM_DEFAULT = 0
     TRANSIENT_LOCAL = 1
     VOLATILE = 2
@@ -33,6 +37,8 @@ class Durability(IntEnum):
 
 
 class History(IntEnum):
+    """History policy: keep the last ``depth`` samples or all (rmw numbering)."""
+
     SYSTEM_DEFAULT = 0
     KEEP_LAST = 1
     KEEP_ALL = 2
@@ -40,6 +46,8 @@ class History(IntEnum):
 
 
 class Liveliness(IntEnum):
+    """Liveliness policy: how an entity shows it is alive (rmw numbering)."""
+
     SYSTEM_DEFAULT = 0
     AUTOMATIC = 1
     MANUAL_BY_NODE = 2
@@ -57,9 +65,11 @@ class Duration:
 
     @property
     def is_infinite(self) -> bool:
+        """Whether this is RMW_DURATION_INFINITE."""
         return self == INFINITE
 
     def to_ns(self) -> int:
+        """The duration in nanoseconds."""
         return self.sec * 1_000_000_000 + self.nsec
 
 
@@ -72,6 +82,8 @@ ZENOH_DEFAULT_DEPTH = 42
 
 @dataclass(frozen=True)
 class QoS:
+    """A ROS 2 QoS profile; the defaults are ``rclcpp::QoS(10)``."""
+
     reliability: Reliability = Reliability.RELIABLE
     durability: Durability = Durability.VOLATILE
     history: History = History.KEEP_LAST
@@ -83,13 +95,16 @@ class QoS:
 
     @property
     def transient_local(self) -> bool:
+        """Whether late joiners get the publisher's cached samples."""
         return self.durability == Durability.TRANSIENT_LOCAL
 
     @property
     def best_effort(self) -> bool:
+        """Whether samples may be dropped rather than retransmitted."""
         return self.reliability == Reliability.BEST_EFFORT
 
     def with_depth(self, depth: int) -> QoS:
+        """The same profile with history depth ``depth``."""
         return replace(self, depth=depth)
 
     def to_keyexpr(self) -> str:

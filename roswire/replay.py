@@ -72,6 +72,7 @@ class ReplaySchedule:
     rate: float
 
     def due(self, timestamp_ns: int) -> float:
+        """The monotonic time the message recorded at ``timestamp_ns`` goes out (the start with rate 0)."""
         if self.rate <= 0:
             return self.start
         return self.start + (timestamp_ns - self.first_ns) / 1e9 / self.rate
@@ -79,6 +80,8 @@ class ReplaySchedule:
 
 @dataclass
 class ReplayStats:
+    """What a replay has done: messages published per topic, loops played, worst lateness, duration."""
+
     published: Counter[str] = field(default_factory=Counter)
     loops: int = 0
     max_lateness_s: float = 0.0
@@ -86,10 +89,13 @@ class ReplayStats:
 
     @property
     def total(self) -> int:
+        """Messages published across all topics."""
         return sum(self.published.values())
 
 
 class BagReplayer:
+    """Replays a rosbag2 recording onto Zenoh as the publishers of one robot's namespace."""
+
     def __init__(
         self,
         bag: Path,
@@ -131,6 +137,11 @@ class BagReplayer:
         self._stop = threading.Event()
 
     def start(self) -> BagReplayer:
+        """Open the bag, start the node and create one publisher per selected topic; returns self.
+
+        Raises :class:`BagError` when the bag is missing, unreadable, has none of the topics, or stores
+        something other than CDR.
+        """
         if self.node is not None:
             return self
         from rosbags.rosbag2 import Reader, ReaderError
@@ -165,6 +176,7 @@ class BagReplayer:
         return self
 
     def stop(self) -> None:
+        """Stop a running :meth:`run`, the node with its publishers, and close the bag."""
         self._stop.set()
         if self.node is not None:
             self.node.stop()

@@ -23,17 +23,20 @@ class RateMeter:
         self.unparsed = 0
 
     def on_key(self, key: str) -> None:
+        """Count one sample on the topic of data key ``key`` (a key that does not parse is counted apart)."""
         try:
             self.counts[parse_data_key(key).topic] += 1
         except KeyParseError:
             self.unparsed += 1
 
     def rates(self, elapsed_s: float) -> dict[str, float]:
+        """Topic -> samples per second over ``elapsed_s`` seconds (empty when no time has passed)."""
         if elapsed_s <= 0:
             return {}
         return {topic: count / elapsed_s for topic, count in self.counts.items()}
 
     def reset(self) -> None:
+        """Start counting afresh (the unparsed count is kept)."""
         self.counts.clear()
 
 
@@ -71,6 +74,7 @@ def graph_report(
     rates: Mapping[str, float] | None = None,
     malformed_tokens: int = 0,
 ) -> dict[str, Any]:
+    """The report as plain data (JSON-ready): robots, nodes, topics with endpoints and rates, services."""
     return {
         "domain_id": domain_id,
         "robots": [
@@ -98,6 +102,7 @@ def graph_report(
 
 
 def render_text(report: Mapping[str, Any]) -> str:
+    """The report from :func:`graph_report` as lines of text for a terminal."""
     lines = [f"domain {report['domain_id']}"]
     lines.append(f"robots ({len(report['robots'])}):")
     lines += [

@@ -55,6 +55,8 @@ def event_json(event: RobotEvent) -> str:
 
 
 class RobotWatcher:
+    """Keeps a :class:`RobotRegistry` current from a node's live graph; thread-safe."""
+
     def __init__(
         self,
         node: RosNode,
@@ -83,9 +85,11 @@ class RobotWatcher:
         self._register_sub: RosSubscriber | None = None
 
     def add_listener(self, listener: RobotListener) -> None:
+        """Also hand every later registration and deregistration to ``listener``."""
         self._listeners.append(listener)
 
     def start(self) -> RobotWatcher:
+        """Start the node, events publisher, graph watcher, registrations and grace timer; returns self."""
         if self.watcher is not None:
             return self
         self.node.start()
@@ -108,6 +112,7 @@ class RobotWatcher:
         return self
 
     def stop(self) -> None:
+        """Stop the timer, registration subscriber, events publisher and graph watcher (not the node)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
@@ -135,10 +140,12 @@ class RobotWatcher:
         return 0 if self.watcher is None else self.watcher.prime(timeout_s)
 
     def robots(self) -> list[Robot]:
+        """Copies of every registered robot, sorted by name."""
         with self._lock:
             return self.registry.robots()
 
     def register(self, robot_type: str, name: str) -> None:
+        """Register a robot by hand and emit the event; raises :class:`RobotError` on a bad type or name."""
         with self._lock:
             events = self.registry.register(robot_type, name, self.clock())
         self._emit(events)

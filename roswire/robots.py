@@ -21,11 +21,15 @@ from fleetlink.roswire.names import first_segment
 
 
 class RobotEventKind(Enum):
+    """Whether a robot joined or left the registry."""
+
     REGISTERED = "registered"
     DEREGISTERED = "deregistered"
 
 
 class Reason(Enum):
+    """Why a robot was registered or deregistered."""
+
     DISCOVERED = "discovered"
     EXPLICIT = "explicit"
     LIVELINESS_LOST = "liveliness_lost"
@@ -46,11 +50,14 @@ class RobotType:
             )
 
     def matches(self, segment: str) -> bool:
+        """Whether the namespace segment ``segment`` (without its ``/``) fits this type's pattern."""
         return fnmatch.fnmatchcase("/" + segment, self.match)
 
 
 @dataclass(frozen=True)
 class RobotEvent:
+    """A robot registered or deregistered, why, and when (clock seconds)."""
+
     kind: RobotEventKind
     robot: str
     robot_type: str
@@ -60,6 +67,11 @@ class RobotEvent:
 
 @dataclass
 class Robot:
+    """A registered robot: its type, when it was registered, and the token keys of its live entities.
+
+    ``empty_since`` is when its last entity disappeared; None while it has entities (or never had any).
+    """
+
     name: str
     robot_type: str
     registered_at: float
@@ -69,6 +81,7 @@ class Robot:
 
     @property
     def namespace(self) -> str:
+        """The robot's namespace, ``/<name>``."""
         return f"/{self.name}"
 
 
@@ -81,6 +94,8 @@ def parse_registration(text: str) -> tuple[str, str]:
 
 
 class RobotRegistry:
+    """Which robots exist, from graph events and explicit registrations; not thread-safe."""
+
     def __init__(self, types: Iterable[RobotType], grace_s: float = 5.0) -> None:
         self.types = tuple(types)
         if grace_s < 0:
@@ -103,6 +118,10 @@ class RobotRegistry:
         return None
 
     def on_graph_event(self, event: GraphEvent, now: float) -> list[RobotEvent]:
+        """Update the robot a node or endpoint belongs to; the registration it caused, if any.
+
+        A disappearing entity never deregisters at once: :meth:`tick` does after the grace period.
+        """
         found = self.classify(event.entity.namespace)
         if found is None:
             return []
@@ -139,6 +158,7 @@ class RobotRegistry:
         return [RobotEvent(RobotEventKind.REGISTERED, name, robot_type, Reason.EXPLICIT, now)]
 
     def deregister(self, name: str, now: float) -> list[RobotEvent]:
+        """Remove a robot at once, whatever its entities; the event, or none for an unknown robot."""
         robot = self._robots.pop(name, None)
         if robot is None:
             return []
@@ -159,12 +179,14 @@ class RobotRegistry:
         ]
 
     def robots(self) -> list[Robot]:
+        """Copies of every registered robot, sorted by name."""
         return [
             Robot(r.name, r.robot_type, r.registered_at, r.explicit, set(r.entities), r.empty_since)
             for r in sorted(self._robots.values(), key=lambda r: r.name)
         ]
 
     def get(self, name: str) -> Robot | None:
+        """The registered robot called ``name`` (the live record, not a copy), or None."""
         return self._robots.get(name)
 
     def __contains__(self, name: object) -> bool:

@@ -13,6 +13,8 @@ from enum import Enum
 
 
 class SeqStatus(Enum):
+    """How a sequence number relates to the last one from the same publisher."""
+
     FIRST = "first"
     NEXT = "next"
     GAP = "gap"
@@ -21,6 +23,8 @@ class SeqStatus(Enum):
 
 @dataclass(frozen=True)
 class SeqResult:
+    """The status of one observed sequence number and, for a gap, how many were skipped."""
+
     status: SeqStatus
     missing: int = 0
 
@@ -41,6 +45,10 @@ class SequenceTracker:
         self.duplicates = 0
 
     def observe(self, gid: bytes, seq: int) -> SeqResult:
+        """Record ``seq`` from publisher ``gid``: its first, the next, after a gap, or a duplicate.
+
+        A number at or below the last one counts as a duplicate and does not move the last one back.
+        """
         last_seen = self._last
         last = last_seen.get(gid)
         if last is None:
@@ -65,8 +73,10 @@ class SequenceTracker:
         return result
 
     def last(self, gid: bytes) -> int | None:
+        """The last sequence number seen from ``gid`` (None when it is not tracked)."""
         return self._last.get(gid)
 
     @property
     def sources(self) -> int:
+        """The number of publishers being tracked."""
         return len(self._last)

@@ -75,6 +75,7 @@ class ServiceCall:
 
     @property
     def answered(self) -> bool:
+        """Whether the call has been replied to (or failed) already."""
         return self._query is None
 
     def reply(self, response_cdr: bytes) -> bool:
@@ -113,6 +114,8 @@ ServiceHandler = Callable[[ServiceCall], bytes | None]
 
 
 class RosServiceServer(StartStop):
+    """Serves one ROS 2 service as rmw_zenoh does: a queryable on the data key and an ``SS`` token."""
+
     def __init__(
         self,
         node: RosNode,
@@ -138,11 +141,13 @@ class RosServiceServer(StartStop):
 
     @property
     def type_hash(self) -> str:
+        """The service type's hash as given, else computed once from the node's type store."""
         if self._type_hash is None:
             self._type_hash = self.node.type_hash(self.typename)
         return self._type_hash
 
     def start(self) -> RosServiceServer:
+        """Declare the queryable and the ``SS`` token; returns self."""
         if self._queryable is not None:
             return self
         session = self.node.session
@@ -156,6 +161,7 @@ class RosServiceServer(StartStop):
         return self
 
     def stop(self) -> None:
+        """Undeclare the token and the queryable, and detach from the node."""
         if self._token is not None:
             undeclare(self._token, log, "token", self.service)
             self._token = None
@@ -189,6 +195,8 @@ class RosServiceServer(StartStop):
 
 
 class RosServiceClient(StartStop):
+    """Calls one ROS 2 service as rmw_zenoh does: an ``SC`` token and one query per request."""
+
     def __init__(
         self,
         node: RosNode,
@@ -212,11 +220,13 @@ class RosServiceClient(StartStop):
 
     @property
     def type_hash(self) -> str:
+        """The service type's hash as given, else computed once from the node's type store."""
         if self._type_hash is None:
             self._type_hash = self.node.type_hash(self.typename)
         return self._type_hash
 
     def start(self) -> RosServiceClient:
+        """Declare the ``SC`` token (which also fixes the client's GID); returns self."""
         if self._token is not None:
             return self
         self.key = data_key(self.node.domain_id, self.service, self.typename, self.type_hash)
@@ -229,6 +239,7 @@ class RosServiceClient(StartStop):
         return self
 
     def stop(self) -> None:
+        """Undeclare the token and detach from the node."""
         if self._token is not None:
             undeclare(self._token, log, "token", self.service)
             self._token = None

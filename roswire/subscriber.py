@@ -62,6 +62,8 @@ ErrorHandler = Callable[[RoswireError], object]
 
 
 class RosSubscriber:
+    """One ROS 2 topic subscription: checks each sample as rmw_zenoh does and hands the good ones on."""
+
     def __init__(
         self,
         node: RosNode,
@@ -106,6 +108,10 @@ class RosSubscriber:
         self.token_key = ""
 
     def start(self) -> RosSubscriber:
+        """Declare the Zenoh subscriber (with the ring's drain thread) and the ``MS`` token; returns self.
+
+        The token needs ``declare_token``, a type name, and a type hash given or computable.
+        """
         if self._sub is not None:
             return self
         if self.decode and self.node.typestore is None:
@@ -163,10 +169,12 @@ class RosSubscriber:
 
     @property
     def stats(self) -> SubscriberStats:
+        """Counts of the samples received, delivered and rejected so far."""
         return self._acceptor.stats
 
     @property
     def sequences(self) -> SequenceTracker:
+        """The last sequence number seen from each publisher GID."""
         return self._acceptor.sequences
 
     def __enter__(self) -> RosSubscriber:

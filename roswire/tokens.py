@@ -38,6 +38,8 @@ _ZID_RE = re.compile(r"[0-9a-f]{1,32}")
 
 
 class EntityKind(Enum):
+    """The kind chunk of a liveliness token: node, publisher, subscription, service server or client."""
+
     NODE = "NN"
     PUBLISHER = "MP"
     SUBSCRIPTION = "MS"
@@ -55,6 +57,8 @@ def liveliness_prefix(domain: int) -> str:
 
 @dataclass(frozen=True)
 class NodeInfo:
+    """What a node (``NN``) token says."""
+
     domain: int
     zid: str
     nid: int
@@ -65,6 +69,7 @@ class NodeInfo:
 
     @property
     def fqn(self) -> str:
+        """The node's fully qualified name (namespace and name)."""
         return join_namespace(self.namespace, self.name)
 
     @property
@@ -75,6 +80,8 @@ class NodeInfo:
 
 @dataclass(frozen=True)
 class EndpointInfo:
+    """What an endpoint (``MP``, ``MS``, ``SS``, ``SC``) token says."""
+
     domain: int
     zid: str
     nid: int
@@ -92,14 +99,17 @@ class EndpointInfo:
 
     @property
     def node_id(self) -> tuple[str, int]:
+        """The (session zid, node id) of the node the endpoint belongs to."""
         return (self.zid, self.nid)
 
     @property
     def node_fqn(self) -> str:
+        """The fully qualified name of the endpoint's node."""
         return join_namespace(self.namespace, self.node_name)
 
     @property
     def gid(self) -> bytes:
+        """The endpoint's 16-byte GID, derived from its token key."""
         return entity_gid(self.key)
 
 
@@ -107,6 +117,7 @@ Entity = NodeInfo | EndpointInfo
 
 
 def node_token(domain: int, zid: str, nid: int, namespace: str, name: str, *, enclave: str = "/") -> str:
+    """The liveliness key of a node's ``NN`` token; ``InvalidNameError`` for a bad namespace or name."""
     validate_namespace(namespace)
     validate_node_name(name)
     return (
@@ -130,6 +141,10 @@ def endpoint_token(
     qos: QoS,
     enclave: str = "/",
 ) -> str:
+    """The liveliness key of an endpoint's token.
+
+    Raises :class:`TokenError` for a node kind and ``InvalidNameError`` for a bad name or type hash.
+    """
     if kind not in ENDPOINT_KINDS:
         raise TokenError(str(kind), "an endpoint token needs kind MP, MS, SS or SC")
     validate_namespace(namespace)

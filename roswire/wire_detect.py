@@ -26,6 +26,8 @@ HashStyle = Literal["humble", "rihs01"]
 
 @dataclass(frozen=True)
 class WireVerdict:
+    """Which wire variant a network speaks, and the counts it was decided from."""
+
     attachment_version: AttachmentVersion | None
     """The layout seen on most samples, None when no sample carried a known one."""
     hash_style: HashStyle | None
@@ -35,15 +37,19 @@ class WireVerdict:
 
     @property
     def mixed(self) -> bool:
+        """Whether both v1 and v2 attachments were seen."""
         return self.attachments.get("v1", 0) > 0 and self.attachments.get("v2", 0) > 0
 
 
 class WireTally:
+    """Counts attachment layouts and hash styles seen; not thread-safe."""
+
     def __init__(self) -> None:
         self.attachments: Counter[str] = Counter()
         self.hashes: Counter[str] = Counter()
 
     def observe_attachment(self, raw: bytes | None) -> None:
+        """Count one sample's attachment by layout (``v1``, ``v2``, ``unknown``, or ``none`` when absent)."""
         if raw is None:
             self.attachments["none"] += 1
             return
@@ -51,9 +57,11 @@ class WireTally:
         self.attachments[f"v{version}" if version else "unknown"] += 1
 
     def observe_endpoint(self, endpoint: EndpointInfo) -> None:
+        """Count one endpoint token's hash style (Humble's TypeHashNotSupported or RIHS01)."""
         self.hashes["humble" if endpoint.type_hash == HASH_NOT_SUPPORTED else "rihs01"] += 1
 
     def verdict(self) -> WireVerdict:
+        """The variant most of what was seen speaks (v2 and RIHS01 on a tie); None where nothing was seen."""
         v1, v2 = self.attachments.get("v1", 0), self.attachments.get("v2", 0)
         version: AttachmentVersion | None = None
         if v1 or v2:

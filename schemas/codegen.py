@@ -68,6 +68,7 @@ class Source:
         self._consts: dict[Hashable, str] = {}
 
     def line(self, text: str) -> None:
+        """Append ``text`` indented to the current depth."""
         self.lines.append("    " * self.depth + text)
 
     def var(self, prefix: str) -> str:
@@ -86,9 +87,14 @@ class Source:
         return name
 
     def text(self) -> str:
+        """The generated module's source text."""
         return "\n".join(self.lines) + "\n"
 
     def compile(self, funcname: str, filename: str) -> Callable[..., Any]:
+        """Execute the source with the registered constants as globals; returns the function ``funcname``.
+
+        ``filename`` is what tracebacks through the generated code name.
+        """
         code = compile(self.text(), filename, "exec")
         exec(code, self.namespace)  # noqa: S102 (source built from a type definition, constants passed as globals)
         func: Callable[..., Any] = self.namespace[funcname]
@@ -96,6 +102,7 @@ class Source:
 
 
 def round_up(value: int, alignment: int) -> int:
+    """``value`` rounded up to a multiple of ``alignment`` (a power of two)."""
     return (value + alignment - 1) & -alignment
 
 
@@ -109,6 +116,7 @@ class NodeWalker(ABC):
     """A generator's walk over a type's layout: one method per kind of node, in wire order."""
 
     def node(self, node: Node) -> None:
+        """Dispatch ``node`` to the method for its kind; a record's fields are walked in order."""
         if isinstance(node, Prim):
             self.prim(node)
         elif isinstance(node, Text):
@@ -125,16 +133,21 @@ class NodeWalker(ABC):
             self.repeated(node)
 
     @abstractmethod
-    def prim(self, node: Prim) -> None: ...
+    def prim(self, node: Prim) -> None:
+        """Handle one primitive field."""
 
     @abstractmethod
-    def text(self, node: Text) -> None: ...
+    def text(self, node: Text) -> None:
+        """Handle one string field."""
 
     @abstractmethod
-    def prim_array(self, kind: str, size: int, path: str) -> None: ...
+    def prim_array(self, kind: str, size: int, path: str) -> None:
+        """Handle a fixed-size array of ``size`` primitives of ``kind``."""
 
     @abstractmethod
-    def prim_sequence(self, kind: str, bound: int, path: str) -> None: ...
+    def prim_sequence(self, kind: str, bound: int, path: str) -> None:
+        """Handle a sequence of primitives of ``kind``, at most ``bound`` long (0: unbounded)."""
 
     @abstractmethod
-    def repeated(self, node: Array) -> None: ...
+    def repeated(self, node: Array) -> None:
+        """Handle an array or sequence whose elements are strings, records or arrays."""

@@ -24,6 +24,8 @@ _READ_ERRORS = (EOFError, ValueError, TypeError, KeyError, IndexError, UnicodeDe
 
 
 class ConfluentValues:
+    """Decodes and encodes Confluent-framed Avro values, with parsed schemas cached per id; thread-safe."""
+
     def __init__(self, schema_by_id: Callable[[int], dict[str, Any]]) -> None:
         self._schema_by_id = schema_by_id
         self._parsed: dict[int, Any] = {}

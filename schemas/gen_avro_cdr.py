@@ -52,14 +52,17 @@ class AvroToCdr(NodeWalker):
 
     # --- input -----------------------------------------------------------------------------
     def ain(self, off: int) -> str:
+        """The source expression of the input position ``off`` bytes after the current input base."""
         if self.abase is None:
             return str(off)
         return f"{self.abase} + {off}" if off else self.abase
 
     def set_input(self, name: str) -> None:
+        """Make the variable ``name`` the input base, with the input offset back at 0."""
         self.abase, self.aoff = name, 0
 
     def flush_input(self) -> None:
+        """Emit one bounds check over the input taken since the last flush, then the checks queued on it."""
         if not self.table:
             return
         extent = max(end for _, end, _ in self.table)
@@ -70,6 +73,7 @@ class AvroToCdr(NodeWalker):
         self.table, self.checks = [], []
 
     def take_raw(self, nbytes: int, path: str) -> tuple[str | None, int, int]:
+        """Take ``nbytes`` of input (bounds-checked at the next flush); returns (base, start, end)."""
         start = self.aoff
         self.table.append((start, start + nbytes, path))
         self.aoff += nbytes
@@ -86,14 +90,17 @@ class AvroToCdr(NodeWalker):
 
     # --- output ----------------------------------------------------------------------------
     def qat(self, off: int) -> str:
+        """The source expression of the output position ``off`` bytes after the current output base."""
         if self.qbase is None:
             return str(off)
         return f"{self.qbase} + {off}" if off else self.qbase
 
     def set_output(self, name: str, alignment: int) -> None:
+        """Make the variable ``name`` the output base, known ``alignment``-aligned; offset and padding 0."""
         self.qbase, self.qoff, self.qalign, self.pad = name, 0, alignment, 0
 
     def out_align(self, a: int) -> None:
+        """Align the output to ``a`` bytes: pending zeros when the base allows, else padding at run time."""
         if a <= self.qalign:
             pad = (-self.qoff) % a
             self.pad += pad
@@ -112,6 +119,7 @@ class AvroToCdr(NodeWalker):
             self.const(bytes(pad))
 
     def const(self, data: bytes) -> None:
+        """Append constant output bytes after any pending padding (merged with a preceding constant)."""
         self._take_pad()
         if self.pieces and self.pieces[-1][0] == "c":
             self.pieces[-1] = ("c", self.pieces[-1][1] + data)
@@ -119,6 +127,7 @@ class AvroToCdr(NodeWalker):
             self.pieces.append(("c", data))
 
     def expr(self, text: str) -> None:
+        """Append the value of the source expression ``text`` (bytes) after any pending padding."""
         self._take_pad()
         self.pieces.append(("e", text))
 
@@ -134,6 +143,7 @@ class AvroToCdr(NodeWalker):
         self.qoff += Struct(char).size
 
     def raw(self, source: tuple[str | None, int, int]) -> None:
+        """Copy an input span from :meth:`take_raw` to the output unchanged (merged with one it continues)."""
         base, start, end = source
         last = self.pieces[-1] if self.pieces else _NO_PIECE
         if not self.pad and last[0] == "r" and last[1][0] == base and last[1][2] == start:
@@ -144,6 +154,7 @@ class AvroToCdr(NodeWalker):
         self.qoff += end - start
 
     def render(self, piece: Piece) -> str:
+        """The source expression of one output piece: constant, expression, packed run, or input slice."""
         kind, value = piece
         if kind == "c":
             return repr(value)
@@ -161,23 +172,27 @@ class AvroToCdr(NodeWalker):
         return text
 
     def flush_pieces(self) -> None:
+        """Emit the pending output pieces (and padding) as one extension of the output list ``o``."""
         self._take_pad()
         if self.pieces:
             self.src.line(f"o += ({', '.join(self.render(p) for p in self.pieces)},)")
             self.pieces = []
 
     def advance_output(self, length_expr: str, alignment: int) -> None:
+        """Move the output base past ``length_expr`` bytes; the new base is ``alignment``-aligned."""
         name = self.src.var("q")
         self.src.line(f"{name} = {self.qat(self.qoff)} + {length_expr}")
         self.set_output(name, alignment)
 
     # --- nodes -----------------------------------------------------------------------------
     def range_check(self, kind: str, value: str, path: str, at: str) -> None:
+        """Emit the check that ``value`` fits the ROS integer ``kind`` (``_WireRange`` at offset ``at``)."""
         lo, hi = RANGES[kind]
         self.src.line(f"if not {lo} <= {value} <= {hi}:")
         self.src.line(f"    raise _WireRange({path!r}, {value}, 'outside [{lo}, {hi}]', {at})")
 
     def prim(self, node: Prim) -> None:
+        """Convert one scalar: floats copied, bools checked and copied, integers range-checked and packed."""
         kind, size = node.kind, SIZES[node.kind]
         if kind in FLOATS:
             self.out_align(size)
@@ -194,6 +209,7 @@ class AvroToCdr(NodeWalker):
             self.pack(FORMATS[kind], value)
 
     def text(self, node: Text) -> None:
+        """Convert a string: read it (UTF-8 and bound checked) and write CDR length, bytes and NUL."""
         self.flush_input()
         raw, pos = self.src.var("s"), self.src.var("a")
         self.src.line(f"{raw}, {pos} = _read_text(buf, {self.ain(self.aoff)}, {node.bound})")
@@ -232,6 +248,7 @@ class AvroToCdr(NodeWalker):
         return data
 
     def prim_array(self, kind: str, size: int, path: str) -> None:
+        """Convert a fixed array of primitives; any count but ``size`` items raises ``_WireError``."""
         itemsize = SIZES[kind]
         if kind in BYTES_KINDS:
             data = self.framed(zz(size), size, 0, path)
@@ -256,6 +273,7 @@ class AvroToCdr(NodeWalker):
         self.qoff += size * itemsize
 
     def bound_check(self, length: str, bound: int, path: str, at: str) -> None:
+        """Emit the check that ``length`` stays within ``bound`` (nothing for an unbounded sequence)."""
         if bound:
             self.src.line(
                 f"if {length} > {bound}: raise _WireError({at}, "
@@ -263,6 +281,7 @@ class AvroToCdr(NodeWalker):
             )
 
     def prim_sequence(self, kind: str, bound: int, path: str) -> None:
+        """Convert a sequence of primitives: read the items, check the bound, write count, padding, items."""
         src, itemsize = self.src, SIZES[kind]
         self.flush_input()
         at, pos = self.ain(self.aoff), src.var("a")
@@ -297,6 +316,11 @@ class AvroToCdr(NodeWalker):
             self.advance_output(size_expr, min(itemsize, 4))
 
     def repeated(self, node: Array) -> None:
+        """Convert an array or sequence of strings, records or arrays with a loop over the Avro blocks.
+
+        A fixed array must have exactly ``size`` items; a sequence's CDR count is filled in once the
+        blocks are read.
+        """
         src = self.src
         self.flush_input()
         slot = None
@@ -343,6 +367,7 @@ class AvroToCdr(NodeWalker):
 
     # --- the function ----------------------------------------------------------------------
     def generate(self) -> str:
+        """Write the whole ``convert`` function; returns the module source."""
         src = self.src
         src.namespace["_U32"] = Struct("<I").pack
         src.line("def convert(buf):")
@@ -363,6 +388,7 @@ class AvroToCdr(NodeWalker):
         return src.text()
 
     def compile(self, namespace: dict[str, Any]) -> Callable[[bytes], bytes]:
+        """Generate and compile ``convert``, with ``namespace`` (error classes, type name) in its globals."""
         self.generate()
         self.src.namespace.update(namespace)
         return self.src.compile("convert", f"<avro->cdr {self.root.typename}>")

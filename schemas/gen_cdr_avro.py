@@ -55,14 +55,20 @@ class CdrToAvro(NodeWalker):
 
     # --- positions -------------------------------------------------------------------------
     def at(self, off: int) -> str:
+        """The source expression of the input position ``off`` bytes after the current base."""
         if self.base is None:
             return str(4 + off)
         return f"{self.base} + {off}" if off else self.base
 
     def set_base(self, name: str, alignment: int) -> None:
+        """Make the variable ``name`` the base, known to be ``alignment``-aligned; offsets restart at 0."""
         self.base, self.off, self.align = name, 0, alignment
 
     def align_to(self, a: int) -> None:
+        """Align the offset to ``a`` bytes: a constant step when the base allows, else a new base.
+
+        CDR alignment counts from byte 4, the first after the encapsulation header.
+        """
         if a <= self.align:
             self.off = round_up(self.off, a)
             return
@@ -77,6 +83,7 @@ class CdrToAvro(NodeWalker):
 
     # --- the current run of fixed offsets --------------------------------------------------
     def read(self, kind: str, path: str) -> str:
+        """Queue a read of one ``kind`` primitive at the current offset; returns the variable it goes into."""
         name = self.src.var("v")
         size = SIZES[kind]
         self.reads.append((self.off, FORMATS[kind], name))
@@ -85,6 +92,10 @@ class CdrToAvro(NodeWalker):
         return name
 
     def raw(self, nbytes: int, itemsize: int, path: str) -> None:
+        """Copy ``nbytes`` of input to the output unchanged (swapped per ``itemsize`` item when big-endian).
+
+        A copy that continues the previous one from the same base is merged into it.
+        """
         start = self.off
         self.table.append((start, start + nbytes, path))
         self.off += nbytes
@@ -101,6 +112,7 @@ class CdrToAvro(NodeWalker):
             self.pieces.append(("r", (self.base, start, start + nbytes, itemsize)))
 
     def flush_segment(self) -> None:
+        """Emit the current run: one bounds check over it, one ``struct`` unpack, array reads, checks."""
         if not self.table:
             return
         src = self.src
@@ -124,15 +136,18 @@ class CdrToAvro(NodeWalker):
 
     # --- output ----------------------------------------------------------------------------
     def const(self, data: bytes) -> None:
+        """Append constant output bytes (merged with a preceding constant)."""
         if self.pieces and self.pieces[-1][0] == "c":
             self.pieces[-1] = ("c", self.pieces[-1][1] + data)
         elif data:
             self.pieces.append(("c", data))
 
     def expr(self, text: str) -> None:
+        """Append the value of the source expression ``text`` (bytes) to the output."""
         self.pieces.append(("e", text))
 
     def render(self, piece: Piece) -> str:
+        """The source expression of one output piece: a constant, an expression, or an input slice."""
         kind, value = piece
         if kind == "c":
             return repr(value)
@@ -148,6 +163,7 @@ class CdrToAvro(NodeWalker):
         return f"_swap(buf, {lo}, {end - start}, {itemsize})"
 
     def flush_pieces(self) -> None:
+        """Emit the pending output pieces as one extension of the output list ``o``."""
         if self.pieces:
             self.uses_list = True
             items = ", ".join(self.render(p) for p in self.pieces)
@@ -156,6 +172,7 @@ class CdrToAvro(NodeWalker):
 
     # --- nodes -----------------------------------------------------------------------------
     def prim(self, node: Prim) -> None:
+        """Convert one scalar: floats copied, bools checked, integers zigzag-encoded (uint64 <= 2**63-1)."""
         kind, size = node.kind, SIZES[node.kind]
         self.align_to(size)
         if kind in FLOATS:
@@ -198,6 +215,7 @@ class CdrToAvro(NodeWalker):
         return start, end, length
 
     def text(self, node: Text) -> None:
+        """Convert a string: check its length, NUL, bound and UTF-8; write Avro length and bytes."""
         start, end, length = self.text_span(node)
         text = self.src.var("s")
         self.src.line(f"{text} = buf[{start}:{end} - 1]")
@@ -207,6 +225,7 @@ class CdrToAvro(NodeWalker):
         self.set_base(end, 1)
 
     def prim_array(self, kind: str, size: int, path: str) -> None:
+        """Convert a fixed array of primitives: byte kinds as Avro bytes, others as one Avro array block."""
         itemsize = SIZES[kind]
         self.align_to(itemsize)
         start = self.off
@@ -233,6 +252,7 @@ class CdrToAvro(NodeWalker):
                 self.checks.append(f"_check_uint64({name}, {path!r}, {self.at(start)})")
 
     def sequence_count(self, bound: int, path: str) -> tuple[str, int]:
+        """Emit the read of a sequence's count and its bound check; returns the count variable and offset."""
         self.align_to(4)
         cpos = self.off
         name = self.read("uint32", path)
@@ -263,6 +283,7 @@ class CdrToAvro(NodeWalker):
         return n_items, start, end
 
     def prim_sequence(self, kind: str, bound: int, path: str) -> None:
+        """Convert a sequence of primitives: byte kinds as Avro bytes, others as one Avro array block."""
         src, itemsize = self.src, SIZES[kind]
         n_items, start, end = self.sequence_span(kind, bound, path)
         self.uses_view = True
@@ -291,6 +312,7 @@ class CdrToAvro(NodeWalker):
         self.set_base(end, min(itemsize, 4))
 
     def repeated(self, node: Array) -> None:
+        """Convert an array or sequence of strings, records or arrays with a generated loop over its items."""
         src = self.src
         elem = node.elem
         if node.fixed:
@@ -322,6 +344,7 @@ class CdrToAvro(NodeWalker):
 
     # --- the function ----------------------------------------------------------------------
     def generate(self) -> str:
+        """Write the whole ``convert`` function; returns the module source."""
         src = self.src
         src.line("def convert(buf):")
         src.depth = 1
@@ -358,6 +381,7 @@ class CdrToAvro(NodeWalker):
         return src.text()
 
     def compile(self, namespace: dict[str, Any]) -> Callable[[bytes], bytes]:
+        """Generate and compile ``convert``, with ``namespace`` (error classes, type name) in its globals."""
         self.generate()
         self.src.namespace.update(namespace)
         return self.src.compile("convert", f"<cdr->avro {self.root.typename}>")

@@ -37,6 +37,10 @@ class CdrToDict(CdrToAvro):
     """Writes ``def convert(buf) -> dict`` for one type and byte order."""
 
     def value(self, node: Node) -> str:
+        """Emit the reads of ``node``; returns the source expression of its value.
+
+        Values read in the current run of fixed offsets exist only once :meth:`flush_segment` has emitted it.
+        """
         if isinstance(node, Prim):
             return self.prim_value(node)
         if isinstance(node, Text):
@@ -51,6 +55,7 @@ class CdrToDict(CdrToAvro):
         return self.repeated_value(node)
 
     def prim_value(self, node: Prim) -> str:
+        """Queue the read of one scalar (bools and uint64 checked); returns its expression."""
         kind = node.kind
         self.align_to(SIZES[kind])
         at = self.at(self.off)
@@ -66,6 +71,7 @@ class CdrToDict(CdrToAvro):
         return name
 
     def text_value(self, node: Text) -> str:
+        """Emit the reads and checks of a string; returns the variable holding it decoded."""
         start, end, _length = self.text_span(node)
         text = self.src.var("s")
         self.src.line(f"{text} = _utf8(buf[{start}:{end} - 1], {start})")
@@ -73,6 +79,7 @@ class CdrToDict(CdrToAvro):
         return text
 
     def prim_array_value(self, kind: str, size: int, path: str) -> str:
+        """Queue a fixed array of primitives: bytes for byte kinds, else a list; returns its expression."""
         itemsize = SIZES[kind]
         self.align_to(itemsize)
         start, end = self.off, self.off + size * itemsize
@@ -95,6 +102,7 @@ class CdrToDict(CdrToAvro):
         return f"list({name})"
 
     def prim_sequence_value(self, kind: str, bound: int, path: str) -> str:
+        """Emit the reads of a primitive sequence (bytes for byte kinds, else a list); returns its value."""
         src, itemsize = self.src, SIZES[kind]
         n_items, start, end = self.sequence_span(kind, bound, path)
         self.set_base(end, min(itemsize, 4))
@@ -110,6 +118,7 @@ class CdrToDict(CdrToAvro):
         return f"list({values})"
 
     def repeated_value(self, node: Array) -> str:
+        """Emit a loop collecting the items of an array or sequence of non-primitives; returns the list."""
         src = self.src
         if node.fixed:
             n_items = str(node.size)
@@ -137,6 +146,7 @@ class CdrToDict(CdrToAvro):
         return items
 
     def generate(self) -> str:
+        """Write the whole ``convert`` function; returns the module source."""
         src = self.src
         src.namespace["_BOOLS"] = (False, True)
         src.line("def convert(buf):")
@@ -160,6 +170,7 @@ class CdrToDict(CdrToAvro):
         return src.text()
 
     def compile_decoder(self, namespace: dict[str, Any]) -> Callable[[bytes], dict[str, Any]]:
+        """Generate and compile ``convert``, with ``namespace`` (error classes, type name) in its globals."""
         self.generate()
         self.src.namespace.update(namespace)
         return self.src.compile("convert", f"<cdr->dict {self.root.typename}>")

@@ -57,12 +57,14 @@ class SchemaRegistry(StartStop):
 
     # --- lifecycle -------------------------------------------------------------------------
     def start(self) -> None:
+        """Create the registry and HTTP clients (nothing is sent yet); a second call does nothing."""
         with self._lock:
             if self._client is None:
                 self._client = SchemaRegistryClient({"url": self.url, "timeout": self.timeout})
                 self._http = httpx.Client(base_url=self.url, timeout=self.timeout)
 
     def stop(self) -> None:
+        """Close the registry and HTTP clients; a later call starts them again."""
         with self._lock:
             client, http = self._client, self._http
             self._client = self._http = None

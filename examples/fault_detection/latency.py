@@ -38,10 +38,12 @@ WHEEL_DROP, BUMP = 4, 1
 
 
 def now_ms() -> int:
+    """The wall clock in milliseconds since the epoch."""
     return time.time_ns() // 1_000_000
 
 
 def datum(sensor: str, ts: int, failing: bool) -> dict[str, Any]:
+    """One record of ``sensor`` stamped ``ts`` (ms) that says failure (``failing``) or healthy."""
     header = {"stamp": {"sec": ts // 1000, "nanosec": (ts % 1000) * 1_000_000}, "frame_id": "base_link"}
     if sensor == "ir":
         value = 3800 if failing else 20
@@ -54,6 +56,8 @@ def datum(sensor: str, ts: int, failing: bool) -> dict[str, Any]:
 
 @dataclass
 class Arrival:
+    """A light-ring command read back from Kafka: the state it sets, its stamp and when it arrived (ms)."""
+
     state: str
     stamp_ms: int
     arrived_ms: int
@@ -61,6 +65,8 @@ class Arrival:
 
 @dataclass(frozen=True)
 class Measurement:
+    """The latencies of one command in milliseconds: total, the part the window imposes, the app's part."""
+
     state: str
     total_ms: int
     window_ms: int
@@ -84,11 +90,13 @@ class Robot:
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def flip(self, failing: bool) -> None:
+        """Make the next records say failure (``failing``) or healthy, and restart ``changed_at``."""
         with self.lock:
             self.changed_at = None
             self.failing = failing
 
     def loop(self) -> None:
+        """Produce one record per sensor every ``period_s`` until ``stop`` is set, then flush."""
         while not self.stop.wait(self.period_s):
             with self.lock:
                 ts, failing = now_ms(), self.failing
@@ -104,6 +112,7 @@ class Robot:
 
 
 def watch_commands(bootstrap: str, topic: str, arrivals: list[Arrival], stop: threading.Event) -> None:
+    """Append an ``Arrival`` for each command on ``topic`` (from its start) until ``stop`` is set."""
     from confluent_kafka import Consumer, TopicPartition
 
     consumer = Consumer({"bootstrap.servers": bootstrap, "group.id": f"latency-{uuid.uuid4()}"})
@@ -141,6 +150,7 @@ def wait_until_consuming(bootstrap: str, group: str, topic: str, timeout_s: floa
 
 
 def wait_for(arrivals: list[Arrival], count: int, timeout_s: float) -> Arrival:
+    """The ``count``-th arrival, once there; raises ``TimeoutError`` after ``timeout_s`` seconds."""
     deadline = time.monotonic() + timeout_s
     while len(arrivals) < count:
         if time.monotonic() > deadline:
@@ -230,6 +240,8 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
 
 
 def summary(rows: Sequence[Measurement]) -> str:
+    """The p50, p90 and maximum of the total, window and app latencies, one line each."""
+
     def pct(values: list[int], q: float) -> float:
         ordered = sorted(values)
         return float(ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))])
@@ -245,6 +257,7 @@ def summary(rows: Sequence[Measurement]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Measure the fault-detection app's latency over ``--runs`` fault/heal cycles and print a summary."""
     parser = argparse.ArgumentParser(
         prog="python -m fleetlink.examples.fault_detection.latency", description=__doc__
     )

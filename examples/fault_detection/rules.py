@@ -72,6 +72,8 @@ class Sensor(enum.StrEnum):
 
 
 class RobotState(enum.StrEnum):
+    """A robot's state as the rules judge it: running, or failed (red light ring)."""
+
     RUNNING = "running"
     FAILED = "failed"
 
@@ -181,6 +183,7 @@ class RobotMemory:
     last_window_end_ms: int
 
     def to_json(self) -> dict[str, Any]:
+        """The memory as JSON-ready data for the state store."""
         return {"state": self.state.value, "last_window_end_ms": self.last_window_end_ms}
 
     @classmethod
@@ -215,6 +218,7 @@ class LightCommand:
 
     @property
     def colour(self) -> tuple[int, int, int]:
+        """The light ring's (red, green, blue): red for failed, green for running."""
         return _COLOURS[self.state]
 
     @property
@@ -235,6 +239,8 @@ class LightCommand:
 
 @dataclass(frozen=True)
 class Transition:
+    """The outcome of one window's verdict: the robot's new memory and the command, if its state changed."""
+
     memory: RobotMemory
     command: LightCommand | None
 

@@ -85,6 +85,7 @@ class FaultDetectionSettings(Section):
     commit_interval: PositiveSeconds = 1.0
 
     def rule_config(self) -> RuleConfig:
+        """The rule parameters of these settings (IR threshold, failure hazards, minimum events)."""
         return RuleConfig(
             ir_threshold=self.ir_threshold,
             failure_hazards=self.failure_hazards,

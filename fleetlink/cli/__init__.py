@@ -37,6 +37,7 @@ Handler = Callable[[argparse.Namespace], int]
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``fleetlink`` argument parser with the global options and every module's subcommands."""
     parser = argparse.ArgumentParser(
         prog="fleetlink",
         description="Connect fleets of ROS 2 robots (rmw_zenoh) to Apache Kafka.",
@@ -62,6 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``fleetlink`` command line; returns the exit code.
+
+    2 when no subcommand was given, 1 for a ``FleetlinkError`` (printed), 130 on Ctrl-C and 141
+    when the reader of standard output went away; else the subcommand's own code.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Handler | None = getattr(args, "handler", None)

@@ -30,6 +30,7 @@ from fleetlink.common.command_keys import write_command_key
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink certs`` (``init``, ``issue``, ``show``, ``command-key``) to the subcommands."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "certs",
         help="make the CA and certificates for TLS between edge and cloud Zenoh routers",

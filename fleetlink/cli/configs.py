@@ -36,10 +36,12 @@ SET_HELP = (
 
 
 def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    """Add the repeatable ``--set KEY=VALUE`` option to ``parser``."""
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
 
 
 def guess_kind(data: Any) -> str | None:
+    """The kind of config (``edge``, ``uplink``, ``repeater``) whose top-level keys ``data`` has, or None."""
     if not isinstance(data, dict):
         return None
     keys = set(data)
@@ -50,6 +52,7 @@ def guess_kind(data: Any) -> str | None:
 
 
 def model_for(kind: str) -> type[BaseModel]:
+    """The config model of ``kind``; raises ``ConfigError`` when this install lacks that component."""
     module, name, _ = KINDS[kind]
     try:
         model: type[BaseModel] = getattr(importlib.import_module(module), name)

@@ -14,6 +14,7 @@ from typing import Any
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink console hash-password`` to the subcommands."""
     console = sub.add_parser("console", help="the web console's users (password hashes)")
     actions = console.add_subparsers(dest="console_command", metavar="ACTION", required=True)
     hashing = actions.add_parser(

@@ -48,6 +48,7 @@ def attribute_docs(cls: type) -> dict[str, str]:
 
 
 def type_text(annotation: Any) -> str:  # noqa: PLR0911 - one return per kind of annotation
+    """A field's type as the reference table shows it (``list of str``, ``map of str → section`` ...)."""
     origin = typing.get_origin(annotation)
     args = typing.get_args(annotation)
     if origin is typing.Annotated:
@@ -130,6 +131,7 @@ def _default(field: Any) -> str:
 
 
 def rows(model: type[BaseModel], prefix: str = "") -> Iterator[tuple[str, str, str, str]]:
+    """The reference rows (key, type, default, meaning) of ``model``'s fields, nested sections included."""
     docs = attribute_docs(model)
     for name, field in model.model_fields.items():
         key = field.alias or name
@@ -145,6 +147,7 @@ def rows(model: type[BaseModel], prefix: str = "") -> Iterator[tuple[str, str, s
 
 
 def render() -> str:
+    """The whole configuration reference, as Markdown, for every kind of config."""
     out = [
         "# Configuration reference",
         "",

@@ -31,6 +31,7 @@ log = logging.getLogger(__name__)
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink edge run`` and its options to the subcommands."""
     edge = sub.add_parser("edge", help="the edge agent (one per robot network)")
     edge_sub = edge.add_subparsers(dest="edge_command", metavar="COMMAND")
     edge.set_defaults(handler=lambda _args: _usage(edge))
@@ -90,6 +91,11 @@ edge's data plane some 4 µs a sample more (bench/bench_fleet.py)."""
 
 
 def run_command(args: argparse.Namespace) -> int:
+    """Run the edge agent and its admin API until SIGTERM or SIGINT; returns the exit code.
+
+    Writes the agent's counters to ``--stats-file`` every ``--stats-interval`` seconds and once
+    more after stopping.
+    """
     os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)  # before the first session opens
     from fleetlink.edge.admin import EdgeAdmin, load_token
     from fleetlink.edge.agent import EdgeAgent

@@ -39,6 +39,7 @@ class KafkaCliError(FleetlinkError):
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink kafka echo`` and ``fleetlink kafka send`` to the subcommands."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "kafka",
         help="read and write Avro records on Kafka topics, decoded and encoded through the registry",

@@ -21,7 +21,10 @@ SERVICE_VERBOSITY = 1
 
 
 class JsonFormatter(logging.Formatter):
+    """Formats each log record as one JSON object: time, level, logger, message and any traceback."""
+
     def format(self, record: logging.LogRecord) -> str:
+        """The record as one line of JSON (non-ASCII text kept as is)."""
         entry: dict[str, Any] = {
             "ts": self.formatTime(record, "%Y-%m-%dT%H:%M:%S") + f".{int(record.msecs):03d}",
             "level": record.levelname.lower(),
@@ -39,6 +42,10 @@ def level_for(verbosity: int) -> int:
 
 
 def configure_logging(verbosity: int, log_format: str = "text") -> None:
+    """Send log lines to standard error at the level of ``verbosity``, as ``text`` or ``json``.
+
+    Replaces the handler an earlier call installed, and routes Python warnings to the log at DEBUG.
+    """
     handler = logging.StreamHandler(sys.stderr)
     if log_format == "json":
         handler.setFormatter(JsonFormatter())

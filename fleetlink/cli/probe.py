@@ -13,6 +13,7 @@ from typing import Any
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink probe URL`` (exit 0 on a 2xx answer) to the subcommands."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "probe",
         help="exit 0 if an HTTP URL answers 2xx (for healthchecks: /health)",

@@ -12,6 +12,7 @@ from fleetlink.repeater.config import RepeaterConfig
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink repeater run`` to the subcommands."""
     add_service_command(
         sub,
         "repeater",

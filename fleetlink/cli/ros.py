@@ -23,6 +23,7 @@ from fleetlink.common.zenoh_options import add_zenoh_arguments, options_from_arg
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink ros`` (graph, echo, pub, call, action, sim, replay) to the subcommands."""
     from fleetlink.cli.ros_sim import replay_command, sim_command
     from fleetlink.cli.ros_topic import register_echo, register_pub
 
@@ -130,6 +131,7 @@ def _robot_types(specs: list[str]) -> list[Any]:
 
 
 def graph_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Print the ROS graph seen over Zenoh (text or JSON), once or every ``--watch`` seconds; returns 0."""
     from fleetlink.roswire.node import RosNode
     from fleetlink.roswire.report import RateMeter, graph_report, render_text
     from fleetlink.roswire.robot_watcher import RobotWatcher

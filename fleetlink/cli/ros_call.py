@@ -68,6 +68,7 @@ def _dump(data: Any) -> str:
 
 
 def call_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Call a ROS service once, printing request and response; returns 1 when no server or response came."""
     from fleetlink.roswire.service import RosServiceClient, ServiceError
     from fleetlink.schemas.messages import from_data, to_data
 
@@ -91,6 +92,10 @@ def call_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
 
 
 def send_goal_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Send one action goal, print its feedback (with ``--feedback``) and result.
+
+    Returns 0 when the goal succeeded, 1 when it was rejected, failed or not answered in time.
+    """
     from fleetlink.roswire.action import RosActionClient
     from fleetlink.roswire.action_goals import GoalStatus
     from fleetlink.roswire.service import ServiceError

@@ -17,6 +17,7 @@ MSG_PATH_ENV = "FLEETLINK_MSG_PATH"
 
 
 def add_types_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--distro`` and the repeatable ``--msg-path`` to ``parser``."""
     parser.add_argument(
         "--distro",
         choices=DISTROS,
@@ -35,6 +36,7 @@ def add_types_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def msg_paths(args: argparse.Namespace) -> list[Path]:
+    """The ``--msg-path`` folders, then those of the environment; ``ConfigError`` for a non-folder."""
     paths = list(args.msg_path)
     env = os.environ.get(MSG_PATH_ENV, "")
     paths += [Path(p) for p in env.split(os.pathsep) if p]

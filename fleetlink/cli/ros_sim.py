@@ -20,6 +20,10 @@ from fleetlink.common.zenoh_options import options_from_args
 
 
 def sim_command(args: argparse.Namespace, out: TextIO = sys.stdout, inp: TextIO = sys.stdin) -> int:
+    """Simulate a TurtleBot 4 fleet, printing light-ring changes, for ``--duration`` or until stopped.
+
+    With ``--stdin`` it takes commands (fault, heal, add, remove, led, list, quit) line by line.
+    """
     from fleetlink.roswire.session import ros_session_config
     from fleetlink.roswire.sim.fleet import Fleet
     from fleetlink.roswire.sim.messages import IR_VECTOR
@@ -134,6 +138,7 @@ class _FleetConsole:
 
 
 def replay_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Publish a rosbag2 recording under ``/<--robot>`` at its recorded pace (or faster); print totals."""
     from fleetlink.roswire.replay import BagReplayer
     from fleetlink.roswire.session import ros_session_config
 

@@ -40,6 +40,7 @@ QOS_HELP = (
 
 
 def register_echo(sub: Any) -> None:
+    """Add ``fleetlink ros echo`` to the ``ros`` subcommands."""
     echo = sub.add_parser("echo", help="print the messages of a topic (like ros2 topic echo)")
     echo.add_argument("topic", help="e.g. /tb4_01/kidnap_status")
     echo.add_argument("type", nargs="?", help="message type (default: the publishers')")
@@ -57,6 +58,7 @@ def register_echo(sub: Any) -> None:
 
 
 def register_pub(sub: Any) -> None:
+    """Add ``fleetlink ros pub`` to the ``ros`` subcommands."""
     pub = sub.add_parser("pub", help="publish a message on a topic (like ros2 topic pub)")
     pub.add_argument("topic", help="e.g. /tb4_01/cmd_lightring")
     pub.add_argument("type", help="message type, e.g. std_msgs/msg/String")
@@ -106,12 +108,14 @@ def truncated(data: Any, limit: int) -> Any:
 
 
 def render_message(data: Any, *, as_json: bool) -> str:
+    """A message's data as one JSON line, or as a YAML document ending in ``---``."""
     if as_json:
         return json.dumps(data, separators=(",", ":"), ensure_ascii=False)
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=False, allow_unicode=True) + "---"
 
 
 def parse_values(text: str) -> Any:
+    """The message values given as YAML text (empty text as ``{}``); ``ConfigError`` when not YAML."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -120,6 +124,7 @@ def parse_values(text: str) -> Any:
 
 
 def known_type(ts: Typestore, name: str) -> str:
+    """``name`` as a normalized type name of ``ts``; ``ConfigError`` when the type is unknown."""
     from fleetlink.schemas.typestore import normalize_typename
 
     typename = normalize_typename(name)
@@ -132,6 +137,7 @@ def known_type(ts: Typestore, name: str) -> str:
 
 
 def qos_option(text: str | None) -> QoS | None:
+    """The QoS profile given with ``--qos`` (None when not given); ``ConfigError`` when it does not parse."""
     from fleetlink.roswire.errors import QosParseError
     from fleetlink.roswire.qos import parse_profile
 
@@ -147,6 +153,10 @@ def qos_option(text: str | None) -> QoS | None:
 
 
 def echo_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Print a topic's messages, subscribing with the publishers' type and QoS unless given.
+
+    Returns 1 when no publisher or message came within ``--timeout``, else 0.
+    """
     from fleetlink.roswire.discovery import GraphWatcher
     from fleetlink.roswire.node import RosNode
     from fleetlink.roswire.session import ros_session_config
@@ -230,6 +240,10 @@ def _print_samples(
 
 
 def pub_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Publish a message on a topic at ``--rate``, once, N times or until stopped.
+
+    Returns 1 when the subscriptions waited for did not appear within ``--timeout``, else 0.
+    """
     from fleetlink.roswire.discovery import GraphWatcher
     from fleetlink.roswire.node import RosNode
     from fleetlink.roswire.qos import DEFAULT

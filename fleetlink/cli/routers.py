@@ -19,6 +19,7 @@ from fleetlink.common.errors import ConfigError
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink zenoh render`` and ``fleetlink zenoh router`` to the subcommands."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "zenoh",
         help="Zenoh router configs: render a template of deploy/zenoh, run a router",
@@ -78,6 +79,7 @@ def register(sub: Any) -> None:
 
 
 def render_command(args: argparse.Namespace) -> int:
+    """Fill in a router template and write it to ``--output`` (or standard output); returns 0."""
     from fleetlink.common.zenoh_configs import concrete_json5
 
     try:
@@ -128,6 +130,7 @@ def render_command_line(args: argparse.Namespace) -> str:
 
 
 def router_command(args: argparse.Namespace) -> int:
+    """Run a Zenoh router from a concrete config until SIGTERM or Ctrl-C; returns 0."""
     from fleetlink.cli.service import wait_for_stop
     from fleetlink.common.zenoh_options import ZenohOptions, load_zenoh_file
     from fleetlink.roswire.session import open_session

@@ -16,6 +16,7 @@ if TYPE_CHECKING:
 
 
 def register(subparsers: Any) -> None:
+    """Add ``fleetlink schemas`` (``avro``, ``hash``, ``export``) to the subcommands."""
     parser = subparsers.add_parser(
         "schemas",
         help="ROS 2 types -> Avro schemas and RIHS01 type hashes",

@@ -28,6 +28,7 @@ from fleetlink.edge.spool.check import acknowledge_offline, check_spool
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink spool check`` and ``fleetlink spool acknowledge`` to the subcommands."""
     spool = sub.add_parser("spool", help="inspect the edge spool offline; acknowledge damage")
     spool_sub = spool.add_subparsers(dest="spool_command", metavar="COMMAND")
     spool.set_defaults(handler=lambda _args: _usage(spool))
@@ -56,6 +57,8 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 
 
 def check_command(args: argparse.Namespace) -> int:
+    """Print a spool directory's state as JSON; returns 0 when nothing awaits an operator, 1 on damage,
+    2 when ``dir`` is not a spool."""
     result = check_spool(args.dir)
     print(json.dumps(result, indent=2, sort_keys=True))
     if "error" in result:
@@ -64,6 +67,10 @@ def check_command(args: argparse.Namespace) -> int:
 
 
 def acknowledge_command(args: argparse.Namespace) -> int:
+    """Acknowledge a spool's damage findings, offline or through a running edge's admin API.
+
+    Prints the acknowledged findings as JSON; returns 1 when the admin API or the spool cannot do it.
+    """
     if args.admin:
         token = load_token()
         headers = {"Authorization": f"Bearer {token.get_secret_value()}"} if token is not None else {}

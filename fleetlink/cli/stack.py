@@ -19,6 +19,7 @@ DEFAULT_DIR = Path("var/stack")
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink stack`` (``up``, ``down``, ``status``, ``fetch``) to the subcommands."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "stack",
         help="run a local Apache Kafka + Apicurio schema registry (for tests and the demo)",

@@ -45,6 +45,7 @@ def writable_dir_problem(path: Path) -> str | None:
 
 
 def zenoh_problems(section: ZenohSection, at: tuple[PathPart, ...] = ("zenoh",)) -> list[Problem]:
+    """Problems of a ``zenoh:`` section: a config file Zenoh would refuse, or options it rejects."""
     if section.config_file is not None:
         problem = zenoh_file_problem(section.config_file)
         if problem is not None:
@@ -70,6 +71,7 @@ def message_path_problems(
 
 
 def file_problems(files: Sequence[tuple[tuple[PathPart, ...], Path | None]], hint: str = "") -> list[Problem]:
+    """A problem for each named file that is not a readable file (``hint`` is appended)."""
     return [
         (at, f"{path} is not a readable file{hint}")
         for at, path in files
@@ -81,6 +83,7 @@ KEY_HINT = " (make the key pair with `fleetlink certs command-key DIR`)"
 
 
 def edge_problems(config: EdgeConfig) -> list[Problem]:
+    """The edge's start-up problems: Zenoh, message packages, unknown mapping types, the spool folder."""
     from fleetlink.edge.runtime.types import schema_distro
 
     problems = zenoh_problems(config.zenoh)
@@ -111,6 +114,7 @@ def edge_problems(config: EdgeConfig) -> list[Problem]:
 
 
 def uplink_problems(config: UplinkConfig) -> list[Problem]:
+    """The uplink's start-up problems: Zenoh and the files it names (Kafka secrets, token, signing key)."""
     problems = zenoh_problems(config.zenoh)
     kafka = config.kafka
     files: list[tuple[tuple[PathPart, ...], Path | None]] = []
@@ -131,6 +135,7 @@ def uplink_problems(config: UplinkConfig) -> list[Problem]:
 
 
 def repeater_problems(config: RepeaterConfig) -> list[Problem]:
+    """The repeater's start-up problems: Zenoh, message packages, its state folder, command keys."""
     problems = zenoh_problems(config.zenoh)
     problems += message_path_problems(config.ros.distro, config.ros.message_paths)[0]
     state = writable_dir_problem(Path(config.repeater.state_dir))

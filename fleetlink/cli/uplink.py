@@ -16,6 +16,7 @@ from fleetlink.uplink.config import UplinkConfig
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink uplink run`` and ``fleetlink uplink release-robot`` to the subcommands."""
     add_service_command(
         sub,
         "uplink",

@@ -25,6 +25,7 @@ __all__ = ["guess_kind", "register", "validate_file"]
 
 
 def register(sub: Any) -> None:
+    """Add ``fleetlink validate FILE`` to the subcommands."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "validate",
         help="check a fleetlink config file (edge, uplink, repeater) as start-up would, without connecting",
@@ -47,6 +48,10 @@ def register(sub: Any) -> None:
 def validate_file(
     path: Path, kind: str | None = None, sets: Sequence[str] = (), *, host_checks: bool = True
 ) -> tuple[str, BaseModel]:
+    """Load and check the config at ``path`` as start-up would; returns its kind and model.
+
+    Raises ``ConfigError`` listing every problem by its YAML path.
+    """
     return load_service_config(path, sets, kind=kind, host_checks=host_checks)
 
 

@@ -123,6 +123,7 @@ class CertificateAuthority:
 
     @property
     def common_name(self) -> str:
+        """The CA certificate's subject common name (empty when it has none)."""
         return _common_name(self.certificate)
 
 
@@ -135,6 +136,7 @@ class Identity:
 
     @property
     def common_name(self) -> str:
+        """The certificate's subject common name, e.g. ``edge-<site>`` (empty when it has none)."""
         return _common_name(self.certificate)
 
 

@@ -46,6 +46,10 @@ def _read(path: Path, what: str) -> bytes:
 
 
 def load_signing_key(path: Path) -> Ed25519PrivateKey:
+    """Read the uplink's Ed25519 signing key from an unencrypted PEM file.
+
+    Raises ``CertError`` naming the file when it cannot be read or holds another kind of key.
+    """
     try:
         key = serialization.load_pem_private_key(_read(path, "command signing key"), password=None)
     except ValueError:
@@ -56,6 +60,10 @@ def load_signing_key(path: Path) -> Ed25519PrivateKey:
 
 
 def load_public_key(path: Path) -> Ed25519PublicKey:
+    """Read the Ed25519 public key repeaters verify commands with from a PEM file.
+
+    Raises ``CertError`` naming the file when it cannot be read or holds another kind of key.
+    """
     try:
         key = serialization.load_pem_public_key(_read(path, "command public key"))
     except ValueError:

@@ -124,6 +124,11 @@ def read_yaml(path: Path) -> tuple[Any, dict[tuple[PathPart, ...], int]]:
 
 
 def validate_data(model: type[ModelT], data: Any, *, source: str, places: Places | None = None) -> ModelT:
+    """Validate parsed data (None as an empty mapping) as ``model``.
+
+    Raises one ``ConfigError`` from ``source`` listing every problem as ``path (line N): message``
+    (lines and overrides come from ``places``).
+    """
     if data is None:
         data = {}
     try:

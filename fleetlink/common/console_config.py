@@ -11,6 +11,8 @@ from fleetlink.common.durations import Seconds
 
 
 class ConsoleSection(Section):
+    """Where the fleet web console listens, how operators sign in, and how often it polls the sites."""
+
     listen: str = Field(
         examples=["127.0.0.1:8490"],
         description="host:port the fleet web console listens on (HTTP; put TLS in front when exposed)",

@@ -10,9 +10,11 @@ class StartStop:
     """``with obj:`` calls ``obj.start()`` on entry (and gives ``obj``) and ``obj.stop()`` on exit."""
 
     def start(self) -> object:
+        """Start the object's work; subclasses implement it (the result is not used by ``with``)."""
         raise NotImplementedError
 
     def stop(self) -> None:
+        """Stop what ``start()`` started; subclasses implement it."""
         raise NotImplementedError
 
     def __enter__(self) -> Self:

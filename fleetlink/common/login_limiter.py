@@ -24,6 +24,8 @@ class _Client:
 
 
 class LoginLimiter:
+    """Locks a client out after ``free`` failed logins in a row, doubling the wait with each failure after."""
+
     def __init__(
         self,
         *,
@@ -58,6 +60,7 @@ class LoginLimiter:
             return entry.locked_until - now
 
     def failure(self, client: str) -> None:
+        """Count a wrong credential from ``client`` and lock it out once it has failed ``free`` times."""
         now = self._clock()
         with self._lock:
             self.failed += 1
@@ -73,6 +76,7 @@ class LoginLimiter:
                 entry.locked_until = now + min(self._max_lockout, self._lockout * 2 ** min(beyond - 1, 30))
 
     def success(self, client: str) -> None:
+        """Forget ``client``'s failures and lockout after a right credential."""
         with self._lock:
             self._clients.pop(client, None)
 

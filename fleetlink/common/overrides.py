@@ -36,10 +36,12 @@ class Override:
     source: str
 
     def fail(self, why: str) -> ConfigError:
+        """A ``ConfigError`` naming this override's source and text, saying ``why`` it cannot apply."""
         return ConfigError(f"{self.source} {self.text!r}: {why}")
 
 
 def parse_override(text: str, source: str = "--set") -> Override:
+    """Parse one ``KEY=VALUE`` (the value as YAML) from ``source``; raises ``ConfigError`` when malformed."""
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:

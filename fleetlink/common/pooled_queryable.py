@@ -27,15 +27,18 @@ class PooledQueryable:
 
     @property
     def running(self) -> bool:
+        """Whether the queryable is declared (between ``start()`` and ``stop()``)."""
         return self._queryable is not None
 
     def start(self, session: zenoh.Session, key: str) -> None:
+        """Start the pool and declare the queryable on ``key`` in ``session`` (no-op when running)."""
         if self._queryable is not None:
             return
         self._pool = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix=self._name)
         self._queryable = session.declare_queryable(key, self._on_query)
 
     def stop(self) -> None:
+        """Undeclare the queryable, then wait for the answers under way and shut the pool down."""
         if self._queryable is not None:
             self._queryable.undeclare()
             self._queryable = None

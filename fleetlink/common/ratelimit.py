@@ -15,6 +15,8 @@ from collections.abc import Callable
 
 
 class LogLimiter:
+    """Logs each key at most once per ``interval_s`` and counts the repeats in between; thread-safe."""
+
     def __init__(
         self, logger: logging.Logger, interval_s: float = 30.0, clock: Callable[[], float] = time.monotonic
     ) -> None:

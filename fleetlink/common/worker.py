@@ -19,6 +19,7 @@ class Worker:
         self._thread: threading.Thread | None = None
 
     def start(self) -> Self:
+        """Start the thread running ``_run`` unless it runs already; returns ``self``."""
         if self._thread is None:
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name=self._thread_name, daemon=True)
@@ -26,6 +27,7 @@ class Worker:
         return self
 
     def stop(self) -> None:
+        """Set ``_stop`` and wait up to ``join_s`` seconds for the thread to end."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(self._join_s)

@@ -26,6 +26,8 @@ Mode = Literal["peer", "client", "router"]
 
 @dataclass(frozen=True)
 class ZenohOptions:
+    """How to open a Zenoh session: mode, endpoints, a JSON5 file and ``KEY: JSON5`` overrides."""
+
     mode: Mode | None = None
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
@@ -106,6 +108,7 @@ def load_zenoh_file(path: Path) -> zenoh.Config:
 
 
 def add_zenoh_arguments(parser: argparse.ArgumentParser, *, ros: bool = True) -> None:
+    """Add the Zenoh session options to ``parser``, and ``--domain-id`` unless ``ros`` is False."""
     group = parser.add_argument_group("zenoh session")
     group.add_argument("-m", "--mode", choices=["peer", "client", "router"], help="zenoh session mode")
     group.add_argument(
@@ -143,6 +146,7 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, *, ros: bool = True) ->
 
 
 def default_domain_id() -> int:
+    """The ROS domain id in ``$ROS_DOMAIN_ID`` (0 when unset); raises ``ConfigError`` when invalid."""
     raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
     if not raw:
         return 0
@@ -156,6 +160,7 @@ def default_domain_id() -> int:
 
 
 def options_from_args(args: argparse.Namespace) -> ZenohOptions:
+    """The ``ZenohOptions`` given by parsed Zenoh arguments; raises ``ConfigError`` for a bad ``--cfg``."""
     overrides = []
     for item in args.cfg:
         key, sep, value = item.partition(":")
@@ -181,6 +186,7 @@ class ZenohSection(Section):
     overrides: dict[str, Any] = {}
 
     def options(self) -> ZenohOptions:
+        """The section as ``ZenohOptions`` (override values encoded as JSON)."""
         return ZenohOptions(
             mode=self.mode,
             connect=tuple(self.connect),

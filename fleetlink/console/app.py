@@ -262,6 +262,11 @@ def create_console_app(
     clock: Callable[[], float] | None = None,
     session_ttl_s: float = SESSION_TTL_S,
 ) -> FastAPI:
+    """The console's FastAPI app on ``sites``: pages, JSON API and static files, to mount under ``/console/``.
+
+    Who may sign in comes from ``token`` and ``users`` (neither: the console is open); ``ops`` adds
+    the audit, dead letters, commands and history; ``clock`` replaces ``ops.clock``.
+    """
     app = FastAPI(
         title="fleetlink console", version=__version__, docs_url=None, redoc_url=None, openapi_url=None
     )
@@ -554,6 +559,7 @@ NO_COMMANDS_HERE = (
 
 
 def form_detail(form: MappingForm) -> dict[str, Any]:
+    """The fields of a mapping form that have a value, for the audit record's ``detail``."""
     return {k: v for k, v in form.model_dump(by_alias=True).items() if v}
 
 

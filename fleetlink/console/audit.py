@@ -38,6 +38,8 @@ def audit_entry(
     status: int = 200,
     detail: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
+    """One audit record: who did ``action``, on which process, site and target, when, and the answer's
+    ``status`` (``ok`` for 2xx)."""
     return {
         "at": at,
         "user": identity.user,
@@ -53,11 +55,15 @@ def audit_entry(
 
 
 class Audit(Protocol):
+    """Where a console's audit records go (``MemoryAudit``, ``KafkaAudit``)."""
+
     def record(self, entry: dict[str, Any]) -> str | None:
         """Keep ``entry``; returns why it could not be written where it should, if it could not."""
         ...
 
-    def recent(self, limit: int = 100) -> list[dict[str, Any]]: ...
+    def recent(self, limit: int = 100) -> list[dict[str, Any]]:
+        """The newest ``limit`` records, newest first."""
+        ...
 
     @property
     def where(self) -> str:
@@ -66,21 +72,26 @@ class Audit(Protocol):
 
 
 class MemoryAudit:
+    """Keeps the last ``keep`` audit records in memory and logs each on ``fleetlink.audit`` (thread-safe)."""
+
     def __init__(self, *, keep: int = 500) -> None:
         self._recent: deque[dict[str, Any]] = deque(maxlen=keep)
         self._lock = threading.Lock()
 
     @property
     def where(self) -> str:
+        """Where records go, for the audit page: this process's log."""
         return "this process's log (logger fleetlink.audit)"
 
     def record(self, entry: dict[str, Any]) -> str | None:
+        """Keep ``entry`` among the recent records and log it; always ``None``: this cannot fail."""
         with self._lock:
             self._recent.append(entry)
         log.info("audit %s", json.dumps(entry, sort_keys=True, default=str))
         return None
 
     def recent(self, limit: int = 100) -> list[dict[str, Any]]:
+        """The newest ``limit`` records, newest first."""
         with self._lock:
             return list(self._recent)[-limit:][::-1]
 
@@ -99,9 +110,12 @@ class KafkaAudit(MemoryAudit):
 
     @property
     def where(self) -> str:
+        """Where records go, for the audit page: the Kafka topic and this process's log."""
         return f"Kafka topic {self.topic} and this process's log"
 
     def record(self, entry: dict[str, Any]) -> str | None:
+        """Keep and log ``entry``, write it to Kafka and wait for the acknowledgement (up to ``timeout_s``);
+        returns why Kafka does not have it, or ``None``."""
         super().record(entry)
         errors: list[str] = []
         done = threading.Event()
@@ -127,4 +141,5 @@ class KafkaAudit(MemoryAudit):
         return f"audit record not written: {errors[0]}" if errors else None
 
     def close(self) -> None:
+        """Flush the records still on their way to Kafka (waits up to ``timeout_s``)."""
         self._producer.flush(self.timeout_s)

@@ -57,6 +57,7 @@ def session_valid(token: SecretStr, cookie: str, *, now: float) -> bool:
 
 
 def token_matches(token: SecretStr, given: str) -> bool:
+    """Whether ``given`` (surrounding blanks removed) is the token, compared in constant time."""
     return hmac.compare_digest(given.strip().encode(), token.get_secret_value().encode())
 
 
@@ -70,6 +71,8 @@ def bearer(header: str | None) -> str | None:
 
 @dataclass(frozen=True, slots=True)
 class Access:
+    """What :func:`check` decided: whether the request may read, and whether a session cookie proved it."""
+
     allowed: bool
     by_cookie: bool = False
 
@@ -119,11 +122,14 @@ TOKEN_USER = "token"  # noqa: S105 - a user name, not a secret
 
 @dataclass(frozen=True, slots=True)
 class Identity:
+    """Who a request is: the user, their role and whether a session cookie proved it."""
+
     user: str
     role: Role
     by_cookie: bool = False
 
     def may(self, needed: Role) -> bool:
+        """Whether this identity's role is ``needed`` or above."""
         return role_at_least(self.role, needed)
 
 
@@ -167,6 +173,7 @@ class Authenticator:
 
     @property
     def open(self) -> bool:
+        """Whether anyone may use the console: no token and no users configured."""
         return self.token is None and not self.users
 
     def identify(
@@ -200,6 +207,8 @@ class Authenticator:
         return Identity(user.name, user.role) if verify_password(user.password_hash, secret) else None
 
     def cookie(self, identity: Identity, *, now: float) -> str:
+        """A session cookie for ``identity`` that expires ``ttl_s`` after ``now``: :func:`cookie_value`'s
+        for the token's holder, ``u~<name>~<expires>~<mac>`` for a named user."""
         if identity.user == TOKEN_USER and self.token is not None:
             return cookie_value(self.token, now=now, ttl_s=self.ttl_s)
         user = self.users[identity.user]

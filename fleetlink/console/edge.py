@@ -53,6 +53,9 @@ PATH = "/console"
 
 
 class EdgeConsole:
+    """The console of one edge: pages and JSON under ``/console/`` of the admin app, the keys
+    ``fleetlink/<site>/console/**`` for the fleet console, and the sampler of the site's history."""
+
     def __init__(
         self,
         service: AdminService,
@@ -87,6 +90,7 @@ class EdgeConsole:
         self.answered = 0
 
     def status(self) -> dict[str, Any]:
+        """The edge's spool, WAN and per-topic counters for the health panel and the graph."""
         raw = self._raw() if self._raw is not None else None
         return site_status(self._snapshot(), raw, now_ms=int(self._clock() * 1000))
 
@@ -119,6 +123,7 @@ class EdgeConsole:
 
     # -- the console keys ------------------------------------------------------------------------
     def start(self, session: zenoh.Session) -> EdgeConsole:
+        """Answer the console keys on ``session`` and start sampling the history; returns the console."""
         self._session = session
         self.site.session = session
         self._queryable.start(session, f"fleetlink/{self.service.site}/console/**")
@@ -126,6 +131,7 @@ class EdgeConsole:
         return self
 
     def stop(self) -> None:
+        """Stop sampling the history and answering the console keys."""
         self.sampler.stop()
         self._queryable.stop()
 

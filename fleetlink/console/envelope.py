@@ -14,6 +14,8 @@ from typing import Any
 
 @dataclass(frozen=True, slots=True)
 class Envelope:
+    """One admin answer: its status, the site and edge that gave it, and its body or error and problems."""
+
     status: int
     site: str = ""
     edge_id: str = ""
@@ -23,9 +25,11 @@ class Envelope:
 
     @property
     def ok(self) -> bool:
+        """Whether the status is 2xx."""
         return 200 <= self.status < 300
 
     def as_dict(self) -> dict[str, Any]:
+        """The envelope as the admin space writes it: ``body`` when ok, else ``error`` and ``problems``."""
         if self.ok:
             return {"status": self.status, "site": self.site, "edge_id": self.edge_id, "body": self.body}
         return {
@@ -68,4 +72,5 @@ def parse(payload: bytes, *, key: str = "") -> Envelope:
 
 
 def failure(status: int, message: str, *, site: str = "") -> Envelope:
+    """An error envelope made by the console itself (a bad name, no edge answering)."""
     return Envelope(status=status, site=site, error=message)

@@ -30,6 +30,7 @@ OWN_NAMESPACE = "fleetlink"
 
 
 def is_own(topic: str) -> bool:
+    """Whether ``topic`` is one of fleetlink's own (``/fleetlink`` or below it)."""
     return topic == f"/{OWN_NAMESPACE}" or topic.startswith(f"/{OWN_NAMESPACE}/")
 
 

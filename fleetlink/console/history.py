@@ -20,6 +20,9 @@ Key = tuple[str, ...]
 
 
 class History:
+    """Points of named series over the last ``window_s``, about one per ``step_s``, at most ``max_series``
+    series (thread-safe)."""
+
     def __init__(self, *, window_s: float = 3600.0, step_s: float = 10.0, max_series: int = 5000) -> None:
         self.window_s = window_s
         self.step_s = step_s
@@ -58,6 +61,7 @@ class History:
         return out
 
     def forget(self, keep: set[Key]) -> None:
+        """Drop every series whose key is not in ``keep``."""
         with self._lock:
             for key in [k for k in self._series if k not in keep]:
                 del self._series[key]

@@ -185,14 +185,18 @@ def dead_letter_view(record: TailRecord) -> dict[str, Any]:
 
 
 class KafkaDeadLetters:
+    """The dead-letter browser on a ``KafkaTail`` of the dead-letter topic."""
+
     def __init__(self, tail: KafkaTail) -> None:
         self.tail = tail
 
     def recent(self, site: str | None, limit: int) -> list[dict[str, Any]]:
+        """The newest ``limit`` dead letters kept, newest first, of ``site`` (``None``: every site)."""
         found = [r for r in self.tail.records() if site is None or r.header("fleetlink.site") == site]
         return [dead_letter_view(r) for r in found[:limit]]
 
     def raw(self, partition: int, offset: int) -> bytes | None:
+        """The value of the dead letter at ``partition`` and ``offset`` (``None``: not among those kept)."""
         found = self.tail.find(partition, offset)
         return None if found is None else found.value
 
@@ -207,6 +211,8 @@ class StatusBook:
         self._lock = threading.Lock()
 
     def on_record(self, record: TailRecord) -> None:
+        """Add one status record to its command's list; the command least recently heard of beyond
+        ``keep`` is forgotten."""
         datum = self._decode(record.value)
         command_id = str(datum.get("command_id", ""))
         entry = {
@@ -223,11 +229,15 @@ class StatusBook:
                 self._by_id.popitem(last=False)
 
     def of(self, command_ids: Sequence[str]) -> dict[str, list[dict[str, Any]]]:
+        """The status entries of each command id, oldest first (none for an unknown id)."""
         with self._lock:
             return {c: list(self._by_id.get(c, ())) for c in command_ids}
 
 
 class KafkaCommands:
+    """Sends the console's commands as records on the command mappings' Kafka topics; their statuses
+    come from a ``StatusBook``."""
+
     def __init__(
         self,
         producer_config: Mapping[str, Any],
@@ -252,12 +262,19 @@ class KafkaCommands:
         self._lock = threading.Lock()
 
     def mappings(self) -> list[dict[str, Any]]:
+        """The command mappings an operator may use: name, from, to, type, robot, broadcast."""
         return [
             {k: m.get(k) for k in ("name", "from", "to", "type", "robot", "broadcast")}
             for m in self._mappings.values()
         ]
 
     def send(self, mapping: str, robot: str, value: Any, *, user: str) -> dict[str, Any]:
+        """Produce one command for ``robot`` through ``mapping`` and wait for Kafka's acknowledgement;
+        returns its id, topic, partition and offset.
+
+        Raises ``CommandRefusedError`` for an unknown mapping or robot, a value that does not fit,
+        no schema, or a record Kafka refused or did not acknowledge within ``timeout_s``.
+        """
         found = self._mappings.get(mapping)
         if found is None:
             raise CommandRefusedError(f"no command mapping named {mapping!r}")
@@ -309,6 +326,7 @@ class KafkaCommands:
         }
 
     def statuses(self, command_ids: list[str]) -> dict[str, list[dict[str, Any]]]:
+        """The status records of these commands, oldest first."""
         return self._statuses.of(command_ids)
 
     def close(self) -> None:

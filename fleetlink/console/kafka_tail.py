@@ -24,6 +24,8 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True, slots=True)
 class TailRecord:
+    """One Kafka record as a tail keeps it (``timestamp_ms``: the record's timestamp)."""
+
     partition: int
     offset: int
     timestamp_ms: int
@@ -32,6 +34,7 @@ class TailRecord:
     headers: tuple[tuple[str, bytes], ...]
 
     def header(self, name: str) -> str:
+        """The value of header ``name`` as text (the first of that name; empty when absent)."""
         for key, value in self.headers:
             if key == name:
                 return value.decode("utf-8", "replace")
@@ -39,6 +42,11 @@ class TailRecord:
 
 
 class KafkaTail(Worker):
+    """Follows one topic on a thread and keeps its newest ``keep`` records, each also given to ``on_record``.
+
+    ``error`` says why the topic cannot be read (``None`` while it can).
+    """
+
     def __init__(
         self,
         consumer_config: Mapping[str, Any],
@@ -69,6 +77,7 @@ class KafkaTail(Worker):
             return list(self._records)[::-1]
 
     def find(self, partition: int, offset: int) -> TailRecord | None:
+        """The kept record at ``partition`` and ``offset`` (``None``: not among those kept)."""
         with self._lock:
             return next((r for r in self._records if (r.partition, r.offset) == (partition, offset)), None)
 

@@ -68,6 +68,8 @@ def link_of(value: Any) -> str | None:
 
 
 class LatestValues:
+    """Reads the latest value of ROS topics when asked, by subscribing briefly on the edge's Zenoh session."""
+
     def __init__(
         self,
         session: Callable[[], zenoh.Session | None],

@@ -24,6 +24,8 @@ _READS = ("robots", "topics", "mappings", "robot_types", "health")
 
 
 class LocalSite:
+    """The edge's own site as a ``Sites`` source, answered in process through the admin space's dispatch."""
+
     def __init__(
         self,
         service: AdminService,
@@ -42,22 +44,27 @@ class LocalSite:
 
     @property
     def process(self) -> Process:
+        """The process serving the console: ``edge``."""
         return "edge"
 
     @property
     def site(self) -> str:
+        """The site this edge serves."""
         return self.service.site
 
     def sites(self) -> list[dict[str, Any]]:
+        """This edge's site, summarised from its health."""
         return [site_summary(self.site, self.ask(self.site, "health"))]
 
     def read(self, site: str) -> dict[str, Envelope]:
+        """The site's admin collections, plus this edge's ``status`` counters."""
         out = {name: self.ask(site, name) for name in _READS}
         if site == self.site:
             out["status"] = Envelope(status=200, site=site, edge_id=self.edge_id, body=self._status())
         return out
 
     def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:
+        """One admin request, executed in process (404 for another site or an unknown resource)."""
         if site != self.site:
             return failure(404, f"this edge serves site {self.site!r}, not {site!r}", site=site)
         key = f"fleetlink/{site}/admin/{path}"
@@ -68,14 +75,18 @@ class LocalSite:
         return from_parts(status, part, site=site, edge_id=self.edge_id)
 
     def latest(self, site: str, robot: str) -> Envelope | None:
+        """The latest values of ``robot``'s mapped topics (``None``: this edge cannot read them)."""
         if site != self.site:
             return failure(404, f"this edge serves site {self.site!r}, not {site!r}", site=site)
         return None if self._latest is None else self._latest(robot)
 
     def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        """Every uplink's delivery figures for ``site`` (``None``: this edge's site), over Zenoh;
+        ``None`` until the console has a session."""
         if self.session is None:
             return None
         return delivery_answers(self.session, self.site if site is None else site, self.timeout_s)
 
     def commands(self) -> dict[str, Any]:
+        """Always unavailable: command status is kept by the uplink."""
         return {"available": False, "reason": NOT_HERE}

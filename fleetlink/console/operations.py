@@ -16,6 +16,8 @@ from typing import Any, Protocol
 
 
 class DeadLetters(Protocol):
+    """Where the dead-letter browser reads (``KafkaDeadLetters`` on the uplink)."""
+
     def recent(self, site: str | None, limit: int) -> list[dict[str, Any]]:
         """Newest first: ``{partition, offset, timestamp_ms, key, site, edge, topic, stage, reason,
         size, value_hex}`` (``value_hex`` cut to the first 4 KiB)."""
@@ -27,6 +29,8 @@ class DeadLetters(Protocol):
 
 
 class Commands(Protocol):
+    """What sends commands and reads their statuses (``KafkaCommands`` on the uplink)."""
+
     def mappings(self) -> list[dict[str, Any]]:
         """``{name, from, to, type, fields}`` per command mapping (``fields``: a value template)."""
         ...

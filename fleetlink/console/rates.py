@@ -15,6 +15,8 @@ from collections.abc import Hashable
 
 
 class RateBoard:
+    """Per-second rates of counters sampled over a sliding window (thread-safe)."""
+
     def __init__(self, *, window_s: float = 5.0, min_span_s: float = 0.5) -> None:
         self.window_s = window_s
         self.min_span_s = min_span_s
@@ -22,6 +24,8 @@ class RateBoard:
         self._lock = threading.Lock()
 
     def rate(self, key: Hashable, value: float, now: float) -> float | None:
+        """Add a sample of counter ``key``; its increase per second over the window (``None`` until two
+        samples at least ``min_span_s`` apart exist)."""
         with self._lock:
             samples = self._samples.setdefault(key, deque())
             if samples and (value < samples[-1][1] or now < samples[-1][0]):

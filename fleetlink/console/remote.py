@@ -65,6 +65,9 @@ def _site_of(key: str) -> str | None:
 
 
 class ZenohSites:
+    """Every site of the fleet as a ``Sites`` source, queried over the Zenoh admin space with the
+    console's token."""
+
     def __init__(
         self,
         session: zenoh.Session,
@@ -80,6 +83,7 @@ class ZenohSites:
 
     @property
     def process(self) -> Process:
+        """The process serving the console: ``uplink``."""
         return "uplink"
 
     def _get(self, selector: str, payload: Any = None) -> Any:
@@ -99,6 +103,7 @@ class ZenohSites:
         return out
 
     def sites(self) -> list[dict[str, Any]]:
+        """A summary of each site whose edge answered the health query, sorted by site."""
         found: dict[str, dict[str, Any]] = {}
         for key, env in self._replies(self._get("fleetlink/*/admin/health")):
             site = _site_of(key) or env.site
@@ -107,6 +112,8 @@ class ZenohSites:
         return [found[s] for s in sorted(found)]
 
     def read(self, site: str) -> dict[str, Envelope]:
+        """The site's admin collections and console counters as its edge answered them (400 for a bad
+        site name, 504 when no edge answered)."""
         if site_problem(site) is not None:
             return {"health": failure(400, f"not a site name: {site!r}", site=site)}
         admin = self._get(f"fleetlink/{site}/admin/*")
@@ -125,6 +132,8 @@ class ZenohSites:
         return out
 
     def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:
+        """One admin request on the resource's key (``?op=`` when given): the answer on that key, else the
+        first one (400 for a bad resource, 504 when no edge answered)."""
         if site_problem(site) is not None or _admin_path_problem(path) is not None:
             return failure(400, f"not an admin resource: {site!r} {path!r}", site=site)
         key = f"fleetlink/{site}/admin/{path}"
@@ -138,9 +147,12 @@ class ZenohSites:
         return failure(504, f"no edge of site {site!r} answered within {self.timeout_s:g} s", site=site)
 
     def delivery(self, site: str | None) -> list[dict[str, Any]] | None:
+        """Every uplink's delivery figures for ``site`` (``None``: every site)."""
         return delivery_answers(self.session, site, self.timeout_s)
 
     def latest(self, site: str, robot: str) -> Envelope | None:
+        """The latest values of ``robot``'s mapped topics, read by its site's edge (400 for a bad name,
+        504 when no edge answered)."""
         if site_problem(site) is not None or key_chunk_problem(robot) is not None:
             return failure(400, f"not a site and robot: {site!r} {robot!r}", site=site)
         key = latest_key(site, robot)
@@ -150,6 +162,7 @@ class ZenohSites:
         return failure(504, f"no edge of site {site!r} answered within {self.timeout_s:g} s", site=site)
 
     def commands(self) -> dict[str, Any]:
+        """The command router's status (unavailable when this process routes none)."""
         if self._commands is None:
             return {"available": False, "reason": "not available on this process"}
         return self._commands()

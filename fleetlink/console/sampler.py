@@ -59,6 +59,9 @@ def site_points(view: dict[str, Any]) -> dict[Key, dict[str, float | None]]:
 
 
 class HistorySampler(Worker):
+    """A thread that reads every site each ``interval_s`` (the history's step by default) and adds its
+    points to ``history``."""
+
     def __init__(
         self,
         sites: Sites,

@@ -16,6 +16,8 @@ Process = Literal["edge", "uplink"]
 
 
 class Sites(Protocol):
+    """The sites a console shows, and how it reads and changes them (``LocalSite``, ``ZenohSites``)."""
+
     @property
     def process(self) -> Process:
         """The process serving the console."""

@@ -26,6 +26,8 @@ def _dict(value: Any) -> Mapping[str, Any]:
 
 
 def site_status(snapshot: EdgeSnapshot, raw: Mapping[str, Any] | None, *, now_ms: int) -> dict[str, Any]:
+    """The edge's counters for the console: each buffer's depth, fill and oldest age, each WAN stream's
+    totals and sender health, and each ROS topic's sample counters (from ``raw``)."""
     raw_streams = _dict((raw or {}).get("streams"))
     streams = []
     for buffer in snapshot.buffers:

@@ -87,6 +87,9 @@ def command_view(router: CommandRouter | None) -> dict[str, Any]:
 
 
 class UplinkConsole:
+    """The fleet console the uplink serves on ``console.listen``: every site over Zenoh, and the
+    audit topic, dead letters and commands through Kafka when it has the uplink's config."""
+
     def __init__(
         self,
         settings: ConsoleSection,
@@ -114,6 +117,8 @@ class UplinkConsole:
         self._commands: KafkaCommands | None = None
 
     def start(self) -> UplinkConsole:
+        """Load the token and users, check the exposure, start the history sampler, the Kafka
+        operations and the HTTP server; returns the console (unchanged when it runs already)."""
         if self.http is not None:
             return self
         s = self.settings
@@ -185,6 +190,7 @@ class UplinkConsole:
         return ops
 
     def stop(self) -> None:
+        """Stop the history sampler, the HTTP server, the Kafka tails and producers, the registry client."""
         if self.sampler is not None:
             self.sampler.stop()
             self.sampler = None
@@ -205,6 +211,8 @@ class UplinkConsole:
 
     @property
     def url(self) -> str:
+        """The console server's base URL (pages under ``/console/``); raises ``ConsoleError`` when it
+        is not running."""
         if self.http is None:
             raise ConsoleError("the fleet console is not running")
         return self.http.url

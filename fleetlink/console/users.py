@@ -39,6 +39,7 @@ _SCRYPT = {"n": 2**14, "r": 8, "p": 1}
 
 
 def role_at_least(role: str, needed: Role) -> bool:
+    """Whether ``role`` is a known role at or above ``needed`` (viewer < operator < admin)."""
     return role in ROLES and ROLES.index(role) >= ROLES.index(needed)
 
 
@@ -59,6 +60,7 @@ def hash_password(password: str, *, salt: bytes | None = None) -> str:
 
 
 def hash_problem(stored: str) -> str | None:
+    """Why a stored password hash is unusable (``None``: a well-formed scrypt hash, sane parameters)."""
     parts = stored.split("$")
     if len(parts) != 6 or parts[0] != "scrypt" or not all(x.isdigit() for x in parts[1:4]):
         return "is not a password hash of 'fleetlink console hash-password' (scrypt$n$r$p$salt$hash)"
@@ -86,6 +88,8 @@ def verify_password(stored: str, given: str) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class User:
+    """A named console user: their name, role and the scrypt hash of their password."""
+
     name: str
     role: Role
     password_hash: str

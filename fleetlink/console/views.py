@@ -70,6 +70,7 @@ def mapping_rates(
 
 
 def topic_rates(board: RateBoard, site: str, status: Any, now: float) -> dict[str, float | None]:
+    """Samples received per second on each ROS topic of the edge's ``status`` counters."""
     topics = status.get("topics") if isinstance(status, dict) else None
     if not isinstance(topics, dict):
         return {}

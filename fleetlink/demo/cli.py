@@ -10,6 +10,7 @@ from fleetlink.common.extras import MissingExtraError
 
 
 def register(sub: Any) -> None:
+    """Add the ``demo`` command and its options to the ``fleetlink`` subcommands ``sub``."""
     parser: argparse.ArgumentParser = sub.add_parser(
         "demo",
         help="run the warehouse demo: robots → Kafka → fault detection → light-ring commands",

@@ -38,6 +38,7 @@ class DemoPlaces:
 
 
 def edge_config(p: DemoPlaces) -> dict[str, Any]:
+    """The edge's config: TurtleBot 4 IR, hazard and kidnap mappings, a blocking spool, the site router."""
     return {
         "site": SITE,
         "edge_id": "edge-1",
@@ -76,6 +77,7 @@ def edge_config(p: DemoPlaces) -> dict[str, Any]:
 
 
 def uplink_config(p: DemoPlaces) -> dict[str, Any]:
+    """The uplink's config: Kafka, the registry, the signed light-ring command, metrics and console."""
     return {
         "kafka": {"bootstrap_servers": p.bootstrap, "linger": "2ms"},
         "registry": {"url": p.registry_url},
@@ -96,6 +98,7 @@ def uplink_config(p: DemoPlaces) -> dict[str, Any]:
 
 
 def repeater_config(p: DemoPlaces) -> dict[str, Any]:
+    """The repeater's config: the site, its state folder, the command public key and the site router."""
     return {
         "repeater": {
             "site": SITE,

@@ -49,6 +49,8 @@ class DemoError(FleetlinkError):
 
 @dataclass
 class DemoOptions:
+    """How to run the demo: its folder, robots and sensor rate, the app's window, an existing Kafka."""
+
     workdir: Path = Path("var/demo")
     robots: int = 3
     rate_hz: float = 10.0
@@ -63,6 +65,8 @@ class DemoOptions:
 
 
 class Demo:
+    """One run of the demo: starts every part, plays the scenario while telling it, stops it all."""
+
     def __init__(self, options: DemoOptions) -> None:
         self.o = options
         self.story = Story(started_at=time.monotonic())
@@ -85,11 +89,16 @@ class Demo:
             print(f"{self.story.at(time.monotonic())} {text}", file=self.o.out, flush=True)
 
     def stop(self) -> None:
+        """Ask the run to stop: a step under way gives up, and ``--keep-running`` ends."""
         self._stop.set()
 
     # -- the whole run ---------------------------------------------------------------------
 
     def run(self) -> dict[str, Any]:
+        """Start everything, play the scenario, stop it all; returns the summary (also in ``summary.json``).
+
+        Raises ``DemoError`` when a step is not reached in time or the run is interrupted.
+        """
         with self._exit:
             places = self._start_infrastructure()
             self._start_services(places)
@@ -417,6 +426,7 @@ def _read(path: Path) -> str:
 
 @contextlib.contextmanager
 def interrupted_on_sigint(demo: Demo) -> Iterator[None]:
+    """Within the block, SIGINT and SIGTERM stop ``demo`` instead of the process."""
     import signal
 
     previous = {s: signal.signal(s, lambda *_: demo.stop()) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -31,9 +31,11 @@ class Story:
     latencies: dict[str, float] = field(default_factory=dict)
 
     def at(self, now: float) -> str:
+        """The time since the start as a line prefix, e.g. ``[  12.3s]``."""
         return f"[{now - self.started_at:6.1f}s]"
 
     def on_command(self, robot: str, colour: str) -> None:
+        """Record a light-ring command seen in Kafka for ``robot``."""
         self.commands[robot].append(colour)
 
     def on_led(self, robot: str, colour: str, now: float) -> bool:
@@ -49,10 +51,13 @@ class Story:
         return True
 
     def led_now(self, robot: str) -> str | None:
+        """``robot``'s current light-ring colour, or None before any was seen."""
         history = self.leds.get(robot)
         return history[-1][1] if history else None
 
     def summary(self, faulted: str, healthy: list[str], joined: str | None) -> dict[str, Any]:
+        """The closing summary: whether the loop closed (``faulted`` got red then green, the others no
+        command, ``joined`` registered), the commands seen and the light-ring latencies."""
         loop_closed = (
             self.commands.get(faulted) == ["red", "green"]
             and all(not self.commands.get(r) for r in healthy)

@@ -59,6 +59,8 @@ def cache_root() -> Path:
 
 @dataclass(frozen=True)
 class Artifacts:
+    """What the local stack runs: the Kafka broker's classpath and the Apicurio Registry jar."""
+
     kafka_classpath: str
     apicurio_jar: Path
 
@@ -101,6 +103,7 @@ class Progress:
         self._told_at = clock()
 
     def line(self, text: str) -> None:
+        """Take one line of Maven's output, counting the file it reports downloaded (if any)."""
         size = downloaded_bytes(text)
         if size is None:
             return
@@ -110,10 +113,12 @@ class Progress:
             self.tell()
 
     def tell(self) -> None:
+        """Print the files and megabytes fetched so far."""
         self._told_at = self.clock()
         self.out(f"  {self.what}: {self.files} files, {self.bytes / 1e6:.1f} MB so far")
 
     def done(self) -> None:
+        """Print the totals downloaded, or that Maven's local repository already had everything."""
         if self.files:
             self.out(f"  {self.what}: {self.files} files, {self.bytes / 1e6:.1f} MB downloaded")
         else:
@@ -161,6 +166,7 @@ def cache_lock(root: Path) -> Iterator[None]:
 
 
 def fetch_kafka(root: Path) -> Path:
+    """Fetch the Kafka broker jars with Maven unless cached; returns the folder holding them."""
     lib = root / f"kafka-{KAFKA_VERSION}" / "lib"
     done = lib / ".complete"
     if done.exists():
@@ -252,6 +258,7 @@ def fetch_s3proxy(root: Path | None = None, version: str = S3PROXY_VERSION) -> P
 
 
 def fetch_all(root: Path | None = None, apicurio_version: str = APICURIO_VERSION) -> Artifacts:
+    """Fetch (unless cached) the Kafka broker jars and Apicurio Registry ``apicurio_version``."""
     root = root or cache_root()
     lib = fetch_kafka(root)
     classpath = os.pathsep.join(str(p) for p in sorted(lib.glob("*.jar")))

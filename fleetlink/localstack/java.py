@@ -47,6 +47,7 @@ def find_java(minimum: int = KAFKA_MIN_JAVA, purpose: str = "Kafka") -> str:
 
 
 def java_major_version(java: str) -> int:
+    """The major version ``java -version`` reports (8 for ``1.8.0``); ``StackError`` when unclear."""
     proc = subprocess.run([java, "-version"], capture_output=True, text=True, check=False)
     text = proc.stderr + proc.stdout
     match = re.search(r'version "(\d+)(?:\.(\d+))?', text)

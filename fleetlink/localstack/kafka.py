@@ -31,6 +31,8 @@ JVM_OPTS = ["-Xms256m", "-Xmx1g", "-XX:+UseG1GC", "-Djava.awt.headless=true"]
 
 @dataclass(frozen=True)
 class KafkaSettings:
+    """Where the single-node broker listens and keeps its data, and its optional SASL listener."""
+
     port: int
     controller_port: int
     data_dir: Path
@@ -43,10 +45,12 @@ class KafkaSettings:
 
     @property
     def bootstrap(self) -> str:
+        """``host:port`` clients bootstrap from: the advertised port (a relay) when set, else the broker's."""
         return f"{self.host}:{self.advertised_port or self.port}"
 
 
 def server_properties(s: KafkaSettings) -> str:
+    """The broker's ``server.properties`` text for ``s``: one KRaft node, replication factor 1."""
     advertised = s.advertised_port or s.port
     props = {
         "process.roles": "broker,controller",
@@ -112,6 +116,7 @@ class KafkaBroker:
 
     @property
     def bootstrap(self) -> str:
+        """``host:port`` clients bootstrap from (see ``KafkaSettings.bootstrap``)."""
         return self.settings.bootstrap
 
     def _ready(self) -> bool:
@@ -157,6 +162,11 @@ class KafkaBroker:
             raise StackError(f"formatting Kafka storage in {data} failed:\n{proc.stdout}{proc.stderr}")
 
     def start(self, timeout: float = 90.0) -> float:
+        """Check the ports are free, format storage on first use, and run the broker until it answers.
+
+        Returns the seconds it took; raises ``StackError`` (with the log's last lines) when it does not
+        come up within ``timeout`` seconds.
+        """
         ensure_port_free(self.settings.port, "the Kafka broker", self.settings.host)
         if self.settings.sasl_port is not None:
             ensure_port_free(self.settings.sasl_port, "the Kafka broker's SASL listener", self.settings.host)
@@ -165,7 +175,9 @@ class KafkaBroker:
         return self.process.start(timeout)
 
     def stop(self) -> None:
+        """Stop the broker: SIGTERM, then SIGKILL if it has not exited within 20 s."""
         self.process.stop()
 
     def log_tail(self) -> str:
+        """The last lines of the broker's log, for error messages."""
         return log_tail(self.process.log_path)

@@ -26,6 +26,8 @@ DEFAULT_BUCKET = "fleetlink-objects"
 
 @dataclass(frozen=True)
 class ObjectStoreSettings:
+    """Where s3proxy listens and keeps its objects, its bucket and credentials (a random secret)."""
+
     port: int
     data_dir: Path
     host: str = "127.0.0.1"
@@ -35,6 +37,7 @@ class ObjectStoreSettings:
 
     @property
     def endpoint(self) -> str:
+        """The store's base URL, ``http://host:port``."""
         return f"http://{self.host}:{self.port}"
 
 
@@ -51,6 +54,7 @@ class ObjectStoreServer(StartStop):
 
     @property
     def endpoint(self) -> str:
+        """The store's base URL, ``http://host:port``."""
         return self.settings.endpoint
 
     def section(self, **overrides: object) -> ObjectStoreSection:
@@ -105,6 +109,10 @@ class ObjectStoreServer(StartStop):
         return True  # any answer (403 to an unsigned request) means it serves
 
     def start(self, timeout: float = 60.0) -> float:
+        """Run s3proxy (fetching it and finding Java as needed), wait until it answers and create the bucket.
+
+        Returns the seconds the process took to answer; raises ``StackError`` when it does not.
+        """
         s = self.settings
         ensure_port_free(s.port, "the object store", s.host)
         s.data_dir.mkdir(parents=True, exist_ok=True)
@@ -123,6 +131,7 @@ class ObjectStoreServer(StartStop):
         return took
 
     def stop(self) -> None:
+        """Stop s3proxy if it was started (its objects stay in ``data_dir``)."""
         if self.process is not None:
             self.process.stop()
 
@@ -132,6 +141,7 @@ class ObjectStoreServer(StartStop):
             self.process.kill()
 
     def log_tail(self) -> str:
+        """The last lines of s3proxy's log, for error messages."""
         return log_tail(self.settings.data_dir / "s3proxy.log")
 
 

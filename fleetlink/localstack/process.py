@@ -27,6 +27,7 @@ def exit_on_sigterm() -> None:
 
 
 def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port on ``host`` that was free a moment ago (the OS picked it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))
         port: int = s.getsockname()[1]
@@ -34,12 +35,14 @@ def free_port(host: str = "127.0.0.1") -> int:
 
 
 def port_in_use(port: int, host: str = "127.0.0.1") -> bool:
+    """Whether something accepts TCP connections on ``host:port`` (checked within 0.2 s)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.settimeout(0.2)
         return s.connect_ex((host, port)) == 0
 
 
 def ensure_port_free(port: int, what: str, host: str = "127.0.0.1") -> None:
+    """Raise ``StackError`` naming ``what`` when ``host:port`` is already in use."""
     if port_in_use(port, host):
         raise StackError(
             f"port {host}:{port} for {what} is already in use; stop whatever listens there "
@@ -48,6 +51,7 @@ def ensure_port_free(port: int, what: str, host: str = "127.0.0.1") -> None:
 
 
 def log_tail(path: Path, lines: int = 30) -> str:
+    """The last ``lines`` lines of the log at ``path`` (``(no log)`` when it cannot be read)."""
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
@@ -70,6 +74,7 @@ class ServerProcess:
 
     @property
     def pid(self) -> int | None:
+        """The process's PID: the one started here, else the one in the PID file (None when neither)."""
         return self._proc.pid if self._proc else read_pid(self.pid_path)
 
     def start(self, timeout: float) -> float:
@@ -105,6 +110,7 @@ class ServerProcess:
         )
 
     def stop(self, timeout: float = 20.0) -> None:
+        """SIGTERM the process group, SIGKILL it after ``timeout`` seconds, and remove the PID file."""
         pid = self.pid
         if pid is None:
             return
@@ -127,12 +133,14 @@ class ServerProcess:
                 self._proc = None
 
     def signal(self, sig: signal.Signals) -> None:
+        """Send ``sig`` to the process group (nothing when there is no PID)."""
         pid = self.pid
         if pid is not None:
             os.killpg(pid, sig)
 
 
 def read_pid(path: Path) -> int | None:
+    """The PID written in ``path``, or None when it is missing or unreadable."""
     try:
         return int(path.read_text().strip())
     except (OSError, ValueError):
@@ -140,6 +148,7 @@ def read_pid(path: Path) -> int | None:
 
 
 def alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (a zombie child of this process counts as gone)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

@@ -18,6 +18,8 @@ from fleetlink.schemas.registry_urls import APICURIO_CCOMPAT_PATH, APICURIO_NATI
 
 @dataclass(frozen=True)
 class RegistrySettings:
+    """Where Apicurio Registry listens (HTTP and management ports) and keeps its schema database."""
+
     port: int
     data_dir: Path
     host: str = "127.0.0.1"
@@ -35,6 +37,8 @@ class RegistrySettings:
 
 
 class SchemaRegistry:
+    """Apicurio Registry as a process, its schemas in an H2 file under the data folder."""
+
     def __init__(self, settings: RegistrySettings, jar: Path, java: str) -> None:
         self.settings = settings
         data = settings.data_dir
@@ -67,6 +71,7 @@ class SchemaRegistry:
 
     @property
     def url(self) -> str:
+        """The Confluent-compatible URL clients take (``schema.registry.url``)."""
         return self.settings.url
 
     def _ready(self) -> bool:
@@ -77,14 +82,20 @@ class SchemaRegistry:
         return resp.status_code == 200
 
     def start(self, timeout: float = 120.0) -> float:
+        """Check the port is free and run the registry until it answers; returns the seconds it took.
+
+        Raises ``StackError`` (with the log's last lines) when it does not answer within ``timeout``.
+        """
         ensure_port_free(self.settings.port, "the schema registry", self.settings.host)
         self.settings.data_dir.mkdir(parents=True, exist_ok=True)
         return self.process.start(timeout)
 
     def stop(self) -> None:
+        """Stop the registry: SIGTERM, then SIGKILL if it has not exited within 20 s."""
         self.process.stop()
 
     def log_tail(self) -> str:
+        """The last lines of the registry's log, for error messages."""
         return log_tail(self.process.log_path)
 
 

@@ -28,6 +28,8 @@ Mode = Literal["pass", "blackhole", "delay", "refuse"]
 
 @dataclass
 class RelayCounters:
+    """What crossed the relay: bytes each way, connections accepted and connections aborted with RST."""
+
     upstream_bytes: int = 0  # client → target
     downstream_bytes: int = 0  # target → client
     connections: int = 0
@@ -35,10 +37,13 @@ class RelayCounters:
 
     @property
     def total_bytes(self) -> int:
+        """Bytes forwarded in both directions."""
         return self.upstream_bytes + self.downstream_bytes
 
 
 class TcpRelay:
+    """A TCP relay from ``host:port`` to ``host:target_port`` whose faults tests switch at runtime."""
+
     def __init__(self, target_port: int, *, listen_port: int = 0, host: str = "127.0.0.1") -> None:
         self.host = host
         self.target_port = target_port
@@ -55,13 +60,19 @@ class TcpRelay:
 
     @property
     def port(self) -> int:
+        """The port the relay listens on (the one picked at start when ``listen_port`` was 0)."""
         return self._listen_port
 
     @property
     def endpoint(self) -> str:
+        """The relay as a Zenoh endpoint, ``tcp/host:port``."""
         return f"tcp/{self.host}:{self.port}"
 
     def start(self) -> TcpRelay:
+        """Start the relay's loop thread and wait until it listens; returns ``self``.
+
+        Raises ``RuntimeError`` when it does not listen within 10 s.
+        """
         self._thread = threading.Thread(target=self._run, name=f"relay:{self.target_port}", daemon=True)
         self._thread.start()
         if not self._ready.wait(10):
@@ -69,6 +80,7 @@ class TcpRelay:
         return self
 
     def stop(self) -> None:
+        """Stop listening, abort every open connection and end the loop thread (no-op when stopped)."""
         loop = self._loop
         if loop is None:
             return
@@ -87,6 +99,7 @@ class TcpRelay:
         self.stop()
 
     def set_mode(self, mode: Mode, delay_s: float = 0.0) -> None:
+        """Switch to ``mode`` (``delay_s``: the delay per chunk in ``delay`` mode); ``refuse`` also resets."""
         with self._lock:
             self.mode = mode
             self.delay_s = delay_s

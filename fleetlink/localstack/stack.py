@@ -33,10 +33,12 @@ class StackInfo:
     registry_seconds: float
 
     def save(self, directory: Path) -> None:
+        """Write the info to ``<directory>/stack.json``."""
         (directory / STATE_FILE).write_text(json.dumps(asdict(self), indent=2))
 
     @staticmethod
     def load(directory: Path) -> StackInfo | None:
+        """The info in ``<directory>/stack.json``, or None when it is missing or unreadable."""
         try:
             return StackInfo(**json.loads((directory / STATE_FILE).read_text()))
         except (OSError, ValueError, TypeError):
@@ -63,6 +65,11 @@ class LocalStack(StartStop):
         self.info: StackInfo | None = None
 
     def start(self, kafka_timeout: float = 90.0, registry_timeout: float = 120.0) -> StackInfo:
+        """Fetch what is missing, start Kafka and the registry in parallel and record them in ``stack.json``.
+
+        Picks free ports for those not given, and Apicurio Registry's Java 17 line when no Java 21 is
+        found. Raises ``StackError`` (after stopping both) when either does not come up in time.
+        """
         kafka_java = find_java(KAFKA_MIN_JAVA, "Apache Kafka 4")
         try:
             registry_java = find_java(REGISTRY_MIN_JAVA, "Apicurio Registry")
@@ -116,6 +123,7 @@ class LocalStack(StartStop):
         return self.info
 
     def stop(self) -> None:
+        """Stop the registry and Kafka if they were started, and remove ``stack.json``."""
         for server in (self.registry, self.kafka):
             if server is not None:
                 server.stop()

@@ -28,9 +28,11 @@ class ZenohRouter:
 
     @property
     def endpoint(self) -> str:
+        """The router's listen endpoint, ``tcp/127.0.0.1:<port>``."""
         return f"tcp/127.0.0.1:{self.port}"
 
     def config(self) -> zenoh.Config:
+        """The router's session config: router mode, its endpoints, no multicast scouting, timestamps on."""
         conf = zenoh.Config()
         conf.insert_json5("mode", '"router"')
         conf.insert_json5("listen/endpoints", json.dumps([self.endpoint]))
@@ -42,11 +44,13 @@ class ZenohRouter:
         return conf
 
     def start(self) -> ZenohRouter:
+        """Open the router session unless it is open already; returns ``self``."""
         if self.session is None:
             self.session = zenoh.open(self.config())
         return self
 
     def stop(self) -> None:
+        """Close the router session if it is open."""
         if self.session is not None:
             self.session.close()
             self.session = None

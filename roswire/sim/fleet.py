@@ -59,6 +59,8 @@ LedListener = Callable[[str, LedState], object]
 
 @dataclass
 class SimRobot:
+    """One simulated robot: model, node, publishers and services; ``lock`` guards the model and publishing."""
+
     name: str
     model: RobotModel
     node: RosNode
@@ -71,6 +73,8 @@ class SimRobot:
 
 
 class Fleet:
+    """Simulated TurtleBot 4 robots, each with its own session, ticking at ``rate`` Hz on one thread."""
+
     def __init__(
         self,
         config: zenoh.Config,
@@ -110,6 +114,7 @@ class Fleet:
     # --- lifecycle --------------------------------------------------------------------------
 
     def start(self) -> Fleet:
+        """Start the initial robots and the thread that ticks them; returns self."""
         if self._thread is not None:
             return self
         self._stop.clear()
@@ -120,6 +125,7 @@ class Fleet:
         return self
 
     def stop(self) -> None:
+        """Stop the ticking thread and remove every robot."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
@@ -138,6 +144,7 @@ class Fleet:
     # --- robots -----------------------------------------------------------------------------
 
     def names(self) -> list[str]:
+        """The names of the running robots, sorted."""
         with self._lock:
             return sorted(self._robots)
 
@@ -148,6 +155,10 @@ class Fleet:
         return f"{self.prefix}{index:02d}"
 
     def add_robot(self, name: str | None = None) -> str:
+        """Start a robot called ``name`` (default: the first free ``<prefix>NN``); returns its name.
+
+        Raises ``RoswireError`` when a robot of that name already runs.
+        """
         with self._lock:
             name = name or self._next_name()
             if name in self._robots:
@@ -196,6 +207,7 @@ class Fleet:
         ).start()
 
     def remove_robot(self, name: str) -> None:
+        """Stop a robot and its node; raises ``RoswireError`` when no robot has that name."""
         with self._lock:
             robot = self._robots.pop(name, None)
         if robot is None:
@@ -220,6 +232,7 @@ class Fleet:
             robot.model.inject_fault()
 
     def heal(self, name: str) -> None:
+        """Put a picked-up robot back on the floor (undoes :meth:`inject_fault`)."""
         robot = self._get(name)
         with robot.lock:
             robot.model.heal()
@@ -231,9 +244,11 @@ class Fleet:
             return robot.model.led
 
     def model(self, name: str) -> RobotModel:
+        """The live model of a robot (unlocked: take the robot's lock to change it)."""
         return self._get(name).model
 
     def services(self, name: str) -> RobotServices | None:
+        """The services and actions a robot serves (None before they are started)."""
         return self._get(name).services
 
     # --- running ----------------------------------------------------------------------------

@@ -29,12 +29,15 @@ _HAZARD_FRAMES = {1: "bump_front_center", 2: "cliff_front_left", 4: "wheel_drop_
 
 
 class MessageFactory:
+    """Builds one robot's Create 3 messages (rosbags objects) from model readings."""
+
     def __init__(self, ts: Typestore, robot: str) -> None:
         self.ts = ts
         self.robot = robot
         self.t = ts.types
 
     def header(self, stamp: float, frame: str) -> Any:
+        """A ``std_msgs/msg/Header`` stamped ``stamp`` (Unix seconds) in frame ``frame``."""
         sec = math.floor(stamp)
         nanosec = min(round((stamp - sec) * 1e9), 999_999_999)
         return self.t["std_msgs/msg/Header"](
@@ -62,6 +65,7 @@ class MessageFactory:
         )
 
     def ir_intensity(self, r: Readings) -> Any:
+        """The ``IrIntensityVector`` of the readings: one reading per IR sensor."""
         readings = [
             self.t["irobot_create_msgs/msg/IrIntensity"](header=self.header(r.stamp, name), value=value)
             for name, value in zip(IR_SENSORS, r.ir, strict=True)
@@ -69,6 +73,7 @@ class MessageFactory:
         return self.t[IR_VECTOR](header=self.header(r.stamp, "base_link"), readings=readings)
 
     def hazard_detection(self, r: Readings) -> Any:
+        """The ``HazardDetectionVector`` of the readings: one detection per hazard (none on the floor)."""
         detections = [
             self.t["irobot_create_msgs/msg/HazardDetection"](
                 header=self.header(r.stamp, _HAZARD_FRAMES.get(h, "base_link")), type=h
@@ -78,6 +83,7 @@ class MessageFactory:
         return self.t[HAZARDS](header=self.header(r.stamp, "base_link"), detections=detections)
 
     def kidnap_status(self, r: Readings) -> Any:
+        """The ``KidnapStatus`` of the readings (kidnapped while picked up)."""
         return self.t[KIDNAP](header=self.header(r.stamp, "base_link"), is_kidnapped=r.kidnapped)
 
     def _vec(self, x: float, y: float, z: float) -> Any:
@@ -87,6 +93,7 @@ class MessageFactory:
         return self.t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
 
     def odom(self, r: Readings) -> Any:
+        """The ``nav_msgs/msg/Odometry`` of the readings: pose and velocities, zero covariances."""
         t = self.t
         pose = t["geometry_msgs/msg/Pose"](
             position=t["geometry_msgs/msg/Point"](x=r.x, y=r.y, z=0.0), orientation=self._quat(r.yaw)
@@ -103,6 +110,7 @@ class MessageFactory:
         )
 
     def imu(self, r: Readings) -> Any:
+        """The ``sensor_msgs/msg/Imu`` of the readings: heading, turn rate and acceleration."""
         cov = np.zeros(9, dtype=np.float64)
         return self.t[IMU](
             header=self.header(r.stamp, "imu_link"),
@@ -115,6 +123,7 @@ class MessageFactory:
         )
 
     def battery_state(self, r: Readings) -> Any:
+        """The ``sensor_msgs/msg/BatteryState`` of the readings (a discharging Li-ion pack)."""
         cls: Any = self.t[BATTERY]
         return cls(
             header=self.header(r.stamp, "base_link"),
@@ -144,4 +153,5 @@ class MessageFactory:
 
 
 def lightring_colours(msg: Any) -> tuple[RGB, ...]:
+    """The (red, green, blue) of each LED in a ``LightringLeds`` message."""
     return tuple((int(c.red), int(c.green), int(c.blue)) for c in msg.leds)

@@ -57,6 +57,8 @@ def colour_name(rgb: RGB) -> str:
 
 @dataclass(frozen=True)
 class LedState:
+    """The colours the light ring shows, whether a command overrides the system's, and since when."""
+
     colours: tuple[RGB, ...]
     override_system: bool
     at: float
@@ -74,6 +76,8 @@ SYSTEM_LEDS = LedState(((0, 255, 0),) * LED_COUNT, override_system=False, at=0.0
 
 @dataclass(frozen=True)
 class Readings:
+    """What the robot's sensors report at ``stamp``: IR, hazards, kidnap, pose, motion, battery."""
+
     stamp: float
     ir: tuple[int, ...]
     hazards: tuple[int, ...]
@@ -90,6 +94,8 @@ class Readings:
 
 @dataclass
 class RobotModel:
+    """The state of one simulated robot: pose, faults, dock, motors, battery and light ring."""
+
     name: str
     start: float
     seed: int = 0
@@ -125,13 +131,16 @@ class RobotModel:
         self.x = self.y = 0.0
 
     def undock(self) -> None:
+        """The robot leaves its dock and may drive again."""
         self.docked = False
 
     def reset_pose(self, x: float, y: float, yaw: float) -> None:
+        """Put the robot at ``x``, ``y`` (metres) facing ``yaw`` (radians)."""
         self.x, self.y, self.yaw = x, y, yaw
 
     @property
     def can_drive(self) -> bool:
+        """Whether the robot moves: on the floor, off its dock, no e-stop, motors enabled."""
         return not (self.picked_up or self.docked or self.e_stop or not self.motors_enabled)
 
     def set_lightring(self, colours: tuple[RGB, ...], override_system: bool, now: float) -> LedState:
@@ -142,6 +151,11 @@ class RobotModel:
         return self.led
 
     def step(self, now: float) -> Readings:
+        """Advance the robot to ``now`` (Unix seconds) and return its readings.
+
+        It drives a circle, or straight ahead while a DriveDistance goal has distance left, unless it
+        cannot drive; the battery drains with time whatever it does.
+        """
         dt = 0.0 if self._last is None else max(0.0, now - self._last)
         self._last = now
         rng = self._rng

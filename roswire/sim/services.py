@@ -66,6 +66,8 @@ EventListener = Callable[[str, str], object]
 
 @dataclass(frozen=True)
 class Timing:
+    """How long the dock and undock actions take, in seconds."""
+
     dock_seconds: float = 2.0
     undock_seconds: float = 1.0
 
@@ -100,6 +102,7 @@ class RobotServices:
         self._factory = MessageFactory(ts, name)
 
     def start(self) -> RobotServices:
+        """Create the camera publisher and start the services and action servers; returns self."""
         handlers: dict[str, Callable[[Any], Any]] = {
             "e_stop": self._e_stop,
             "reset_pose": self._reset_pose,
@@ -128,6 +131,7 @@ class RobotServices:
         return self
 
     def stop(self) -> None:
+        """Stop the services and action servers (the node stops the camera publisher)."""
         for server in self._servers:
             server.stop()
         self._servers = []

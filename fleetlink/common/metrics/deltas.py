@@ -20,6 +20,7 @@ class CounterDeltas:
         self._last: dict[Hashable, int] = {}
 
     def delta(self, key: Hashable, total: int) -> int:
+        """The increase of ``key``'s counter since the previous call (all of ``total`` after a reset)."""
         last = self._last.get(key, 0)
         self._last[key] = total
         return total if total < last else total - last
@@ -46,6 +47,7 @@ class RecentIncrease:
         self._points: deque[tuple[float, int]] = deque([(created_s, start_total)])
 
     def update(self, now_s: float, total: int) -> int:
+        """Record ``total`` at ``now_s`` and return how much it grew within the last window."""
         if total < self._points[-1][1]:  # reset: start over from zero
             self._points = deque([(self._points[-1][0], 0)])
         self._points.append((now_s, total))

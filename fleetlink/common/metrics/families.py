@@ -36,6 +36,8 @@ LATENCY_BUCKETS: tuple[float, ...] = (
 
 @dataclass(frozen=True, slots=True)
 class Family:
+    """One exported metric: its name, kind, label names, help text and the process that exports it."""
+
     name: str
     kind: Kind
     labels: tuple[str, ...]

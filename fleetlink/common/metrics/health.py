@@ -23,6 +23,8 @@ _RANK: dict[str, int] = {"ok": 0, "degraded": 1, "failed": 2}
 
 @dataclass(frozen=True, slots=True)
 class Problem:
+    """One thing that keeps a process from being ok: what is affected, why, and how badly."""
+
     component: str
     """What is affected: ``mapping``, ``spool``, ``wan``, ``kafka``, ``registry``, ``process``."""
     subject: str
@@ -34,6 +36,7 @@ class Problem:
     severity: Literal["degraded", "failed"] = "degraded"
 
     def as_dict(self) -> dict[str, str]:
+        """The problem as JSON-ready data for ``/health``."""
         return {
             "component": self.component,
             "subject": self.subject,
@@ -45,6 +48,8 @@ class Problem:
 
 @dataclass(frozen=True, slots=True)
 class Health:
+    """A process's health state, the problems behind it and facts to show beside it."""
+
     state: State
     problems: tuple[Problem, ...] = ()
     extra: dict[str, Any] = field(default_factory=dict)
@@ -74,6 +79,7 @@ class Health:
         return out
 
     def as_dict(self) -> dict[str, Any]:
+        """The JSON body of ``/health``: state, degraded mappings, problems and the extra facts."""
         return {
             "state": self.state,
             "degraded_mappings": self.degraded_mappings(),

@@ -33,6 +33,7 @@ class PrometheusMetrics(FamilyMetrics):
         self._set(family("fleetlink_build_info"), (component, __version__), 1)
 
     def exports(self, name: str) -> bool:
+        """Whether this component exports the family ``name`` (``_total`` suffix optional)."""
         return family(name).name in self._metrics
 
     def _metric(self, fam: Family, labels: tuple[str, ...]) -> Metric | None:

@@ -70,10 +70,12 @@ class MetricsRecorder(FamilyMetrics):
             )
 
     def observations(self, name: str) -> list[float]:
+        """Every value observed so far in histogram ``name``, in order, over all labels."""
         with self._lock:
             return list(self._observed.get(family(name).name, ()))
 
     def series(self) -> dict[tuple[str, tuple[str, ...]], float]:
+        """A copy of every counter and gauge value, keyed by family name and label values."""
         with self._lock:
             return dict(self._values)
 

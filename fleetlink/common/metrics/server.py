@@ -91,6 +91,10 @@ class HttpServer:
 
     @property
     def port(self) -> int:
+        """The port the socket is bound to (the free one picked for port 0).
+
+        Raises ``ServeError`` before ``start()``.
+        """
         if self._socket is None:
             raise ServeError("not started", listen=self.listen)
         port: int = self._socket.getsockname()[1]
@@ -98,11 +102,17 @@ class HttpServer:
 
     @property
     def url(self) -> str:
+        """The server's base URL, ``http://host:port`` (IPv6 hosts in brackets)."""
         host, _ = split_listen(self.listen)
         shown = f"[{host}]" if ":" in host else host
         return f"http://{shown}:{self.port}"
 
     def start(self) -> HttpServer:
+        """Bind the socket, start uvicorn on its thread and wait until it serves; returns ``self``.
+
+        Does nothing when already started. Raises ``ServeError`` when the address cannot be bound or
+        the server does not start within ``start_timeout_s``.
+        """
         if self._server is not None:
             return self
         host, port = split_listen(self.listen)
@@ -130,6 +140,7 @@ class HttpServer:
         return self
 
     def stop(self) -> None:
+        """Ask uvicorn to exit, wait up to 5 s for its thread and close the socket (no-op when stopped)."""
         server, thread, sock = self._server, self._thread, self._socket
         self._server = self._thread = None
         if server is not None:

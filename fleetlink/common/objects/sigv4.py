@@ -23,6 +23,8 @@ _UNRESERVED = "-._~"
 
 @dataclass(frozen=True, slots=True)
 class Credentials:
+    """An S3 access key pair and the region and service requests are signed for."""
+
     access_key_id: str
     secret_access_key: str
     region: str = "us-east-1"
@@ -52,6 +54,7 @@ class Request:
 
 
 def canonical_query(query: Mapping[str, str]) -> str:
+    """The query string of the canonical request: keys and values encoded, pairs sorted."""
     pairs = sorted(
         (uri_encode(k, keep_slash=False), uri_encode(v, keep_slash=False)) for k, v in query.items()
     )
@@ -77,15 +80,18 @@ def canonical_request(request: Request) -> tuple[str, str]:
 
 
 def scope(when: datetime, creds: Credentials) -> str:
+    """The credential scope: ``<yyyymmdd>/<region>/<service>/aws4_request``."""
     return f"{amz_date(when)[:8]}/{creds.region}/{creds.service}/aws4_request"
 
 
 def string_to_sign(when: datetime, creds: Credentials, canonical: str) -> str:
+    """The string to sign: algorithm, time, scope and the SHA-256 of ``canonical``."""
     digest = hashlib.sha256(canonical.encode("utf-8")).hexdigest()
     return "\n".join((ALGORITHM, amz_date(when), scope(when, creds), digest))
 
 
 def signing_key(when: datetime, creds: Credentials) -> bytes:
+    """The signing key: an HMAC-SHA256 chain from the secret over date, region, service, ``aws4_request``."""
     key = ("AWS4" + creds.secret_access_key).encode("utf-8")
     for part in (amz_date(when)[:8], creds.region, creds.service, "aws4_request"):
         key = hmac.new(key, part.encode("utf-8"), hashlib.sha256).digest()

@@ -21,6 +21,8 @@ _XML_FIELD = re.compile(r"<(Code|Message)>([^<]*)</\1>")
 
 @dataclass(frozen=True, slots=True)
 class ObjectInfo:
+    """A stored object's key, size in bytes, content type and ETag (empty when the store sent none)."""
+
     key: str
     size: int
     content_type: str
@@ -48,6 +50,7 @@ class ObjectStore:
         self._client = httpx.Client(timeout=section.request_timeout, follow_redirects=False)
 
     def close(self) -> None:
+        """Close the HTTP client and its connections."""
         self._client.close()
 
     def __enter__(self) -> ObjectStore:
@@ -58,6 +61,7 @@ class ObjectStore:
 
     # -- names -----------------------------------------------------------------------------------
     def path_of(self, key: str) -> str:
+        """The request path of ``key`` in the bucket (the bucket itself for an empty key)."""
         return f"/{self.bucket}/{key}" if key else f"/{self.bucket}"
 
     def url_of(self, key: str) -> str:
