@@ -120,6 +120,8 @@ class Result:
     """Robots each site's edge registered."""
     misrouted: int = 0
     """Robots whose records in Kafka name another site than the one they publish at (or several)."""
+    worst_second: tuple[float, float] | None = None
+    """The second of the window (from its start) whose records had the highest p99 latency."""
 
     def line(self) -> str:
         s = self.shape
@@ -145,6 +147,9 @@ class Result:
                 f"latency p50 {statistics.median(lat):.1f} ms, p99 {percentile(lat, 0.99):.1f} ms, "
                 f"max {max(lat):.1f} ms"
             )
+            if self.worst_second:
+                at, p99 = self.worst_second
+                parts.append(f"worst second +{at:.0f} s (p99 {p99:.0f} ms)")
         rss = [x.edge_rss_mb for x in self.samples]
         if rss:
             third = max(1, len(rss) // 3)
@@ -446,6 +451,7 @@ def run_shape(
     result.window_records = len(window)
     result.window_s = t1 - t0
     result.latencies_ms = [recv * 1000 - stamp for recv, stamp in window]
+    result.worst_second = worst_second(window, lo_ms)
     cpu = {k: cpu1[k] - cpu0[k] for k in cpu1}
     result.cpu_s = {
         "edge": sum(v for k, v in cpu.items() if k.startswith("edge ")),
@@ -474,6 +480,17 @@ def run_shape(
         result.missing += sum(int(s.get("missing", 0)) for s in subs.values())
         result.registered.append(len(stats.get("robots", {})))
     return result
+
+
+def worst_second(window: list[tuple[float, int]], start_ms: float) -> tuple[float, float] | None:
+    """``(seconds from the window's start, p99 ms)`` of the second whose records fared worst."""
+    seconds: dict[int, list[float]] = {}
+    for recv, stamp in window:
+        seconds.setdefault(int((stamp - start_ms) // 1000), []).append(recv * 1000 - stamp)
+    if not seconds:
+        return None
+    at, lat = max(seconds.items(), key=lambda item: percentile(item[1], 0.99))
+    return float(at), percentile(lat, 0.99)
 
 
 def read_stats(path: Path) -> dict[str, Any]:

@@ -72,23 +72,9 @@ class DeliveryBoard:
 
 def acked_topics(records: Iterable[Record], dead_lettered: set[int]) -> Counter[str]:
     """Records per Kafka topic of a batch answered ``ok``, less the dead-lettered ones (by seq)."""
-    return acked_pairs(((r.kafka_topic, r.seq) for r in records), dead_lettered)
-
-
-def acked_pairs(records: Iterable[tuple[str, int]], dead_lettered: set[int]) -> Counter[str]:
-    """``acked_topics`` of records given as ``(kafka_topic, seq)`` (a natively scanned batch)."""
-    return Counter(topic for topic, seq in records if seq not in dead_lettered)
-
-
-def scanned_pairs(
-    tails: list[str], tail_ids: Iterable[int], seqs: Iterable[int]
-) -> Iterable[tuple[str, int]]:
-    """``(kafka_topic, seq)`` of every record of a scanned batch, from its tails' topics, each
-    record's tail index and each record's seq (``ScannedBatch.tails/tail_ids/seqs``)."""
-    return ((tails[t], seq) for t, seq in zip(tail_ids, seqs, strict=True))
+    return Counter(r.kafka_topic for r in records if r.seq not in dead_lettered)
 
 
 def acked_scanned(scanned: ScannedBatch, dead_lettered: set[int]) -> Counter[str]:
-    """``acked_topics`` of a natively scanned batch."""
-    topics = [tail[0] for tail in scanned.tails()]
-    return acked_pairs(scanned_pairs(topics, scanned.tail_ids(), scanned.seqs()), dead_lettered)
+    """``acked_topics`` of a natively scanned batch (counted natively)."""
+    return Counter(scanned.acked_counts(list(dead_lettered)))

@@ -1,15 +1,16 @@
 """The uplink's per-record path in native code: a batch into Kafka with its decisions per tail.
 
-A batch's records share a handful of *tails* (topic, key, headers: one per robot and mapping).
-``ScannedBatch.scan`` parses the record groups once and reports them; everything the uplink
-decides — the sender's identity, the topic policy, the schema ids — is decided per tail here,
-in Python, on a view of the batch with one record per tail (``view``); then ``NativeProducer``
-hands every record of an approved tail to librdkafka (the same library confluent-kafka loaded,
-with the same settings: idempotent, ``acks=all``) without the GIL and counts its delivery
-reports. Records of other tails (diverted by the policy, a schema the registry refused or could
-not give, raw dead letters of an internal topic) and records whose delivery failed go through
-the Python path (``ingest.BatchJob``), which makes the same records, dead letters and retries it
-always did. One ack answers the whole batch once every part is settled.
+``ScannedBatch.scan`` parses a batch's record groups once. Everything the uplink decides — the
+sender's identity, the topic policy, the schema ids — depends on a record's Kafka topic, its
+schema fingerprint and its sender headers, never on its key: it is decided here, in Python, per
+distinct topic, on a view of the batch with one record per (topic, sender headers) (``view``).
+A batch from 200 robots on five topics is five decisions, not a thousand. ``NativeProducer``
+then hands every record of an approved topic to librdkafka (the same library confluent-kafka
+loaded, with the same settings: idempotent, ``acks=all``) without the GIL and counts its
+delivery reports. Records of other topics (diverted by the policy, a schema the registry
+refused or could not give, raw dead letters of an internal topic) and records whose delivery
+failed go through the Python path (``ingest.BatchJob``), which makes the same records, dead
+letters and retries it always did. One ack answers the whole batch once every part is settled.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from fleetlink.uplink.ingest import BatchJob, IngestStats, Sink, count_outcome
 from fleetlink.uplink.policy import Decision
 from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
 from fleetlink.wire import Ack, Batch, Record, RecordFailure, WireError, decode_payload
+from fleetlink.wire.robot_events import IDENTITY_HEADERS
 
 log = logging.getLogger(__name__)
 
@@ -68,14 +70,15 @@ class NativeIngest:
     def produce(
         self,
         scanned: ScannedBatch,
-        tails: list[int],
+        topics: list[int],
         heads: dict[tuple[int, bytes], bytes],
         on_done: Callable[[Failures], None],
     ) -> list[int]:
-        """Produce the records of ``tails``; ``on_done(failures)`` once they are delivered (at
-        once when there is none). Returns the indices of the records left to the caller."""
+        """Produce the records of ``topics`` (ids of ``scanned.topics()``) whose schema has a
+        Confluent header in ``heads``; ``on_done(failures)`` once they are delivered (at once
+        when there is none). Returns the indices of the records left to the caller."""
         with self._lock:  # the batch id is registered before its first report can arrive
-            batch_id, produced, others = self.producer.produce(scanned, tails, heads)
+            batch_id, produced, others = self.producer.produce(scanned, topics, heads)
             if produced:
                 self._jobs[batch_id] = on_done
         if not produced:
@@ -109,10 +112,12 @@ def _text(value: object) -> str:
 
 
 def view(head: Batch, scanned: ScannedBatch) -> Batch:
-    """The batch as the admission checks read it: one record per tail (its topic, key, headers)."""
+    """The batch as the admission checks read it: one record per distinct (topic, sender
+    headers), carrying the seq of its first record and only those headers."""
+    topics = scanned.topics()
     records = tuple(
-        Record(topic, key, b"", tuple(headers), seq=head.first_seq)
-        for topic, key, headers, _count, _raw, _fps in scanned.tails()
+        Record(topics[topic][0], None, b"", tuple(headers), seq=seq)
+        for topic, headers, seq in scanned.senders(list(IDENTITY_HEADERS))
     )
     return dataclasses.replace(head, records=records)
 
@@ -154,17 +159,16 @@ class NativeJob:
         self._on_delivery = on_delivery
         self._parts = _Parts(waiting=2)  # the native part and the Python part
         self._lock = threading.Lock()
-        self._tails = scanned.tails()
-        self._produced_tails: list[int] = []
+        self._produced_topics: list[int] = []
         self._produced_at = 0.0
 
     def run(self) -> None:
         with self._stats.lock:
             self._stats.batches += 1
             self._stats.records += len(self._scanned)
-        tails: list[int] = []
+        topics: list[int] = []
         heads: dict[tuple[int, bytes], bytes] = {}
-        for index, (topic, _key, _headers, _count, _raw, fps) in enumerate(self._tails):
+        for index, (topic, _count, _raw, fps) in enumerate(self._scanned.topics()):
             if topic in self._routes:
                 continue  # diverted or refused by the policy: the Python path knows how
             try:
@@ -173,10 +177,10 @@ class NativeJob:
                     heads[index, fp] = confluent_frame(schema_id, b"")
             except (SchemaUnavailableError, SchemaRefusedError, WireError):
                 continue  # the Python path retries or dead-letters these records, record by record
-            tails.append(index)
-        self._produced_tails = tails
+            topics.append(index)
+        self._produced_topics = topics
         self._produced_at = time.monotonic()
-        others = self._native.produce(self._scanned, tails, heads, self._native_done)
+        others = self._native.produce(self._scanned, topics, heads, self._native_done)
         self._python_part(others, self._part_done)
 
     def _python_part(self, indices: list[int], on_done: Callable[[Ack], None]) -> None:
@@ -212,11 +216,12 @@ class NativeJob:
         if on_delivery is None:
             return
         latency = time.monotonic() - self._produced_at
-        failed = {index for index, *_ in failures}
-        produced = set(self._produced_tails)
-        for index, tail in enumerate(self._scanned.tail_ids()):
-            if tail in produced:
-                on_delivery(self._tails[tail][0], index not in failed, latency)
+        failed = [index for index, *_ in failures]
+        for topic, delivered, undelivered in self._scanned.delivery_counts(self._produced_topics, failed):
+            for _ in range(delivered):
+                on_delivery(topic, True, latency)
+            for _ in range(undelivered):
+                on_delivery(topic, False, latency)
 
     def _part_done(self, ack: Ack) -> None:
         with self._lock:
@@ -236,12 +241,11 @@ class NativeJob:
             )
 
     def _ack(self, failures: tuple[RecordFailure, ...], status: str, detail: str) -> Ack:
-        seqs = self._scanned.seqs()
         return Ack(
             edge_id=self._head.edge_id,
             stream=self._head.stream,
             first_seq=self._head.first_seq,
-            last_seq=seqs[-1] if seqs else self._head.first_seq,
+            last_seq=self._scanned.last_seq() if len(self._scanned) else self._head.first_seq,
             status="error" if status == "error" else "ok",
             failures=failures,
             detail=detail[:1000],

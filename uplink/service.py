@@ -346,7 +346,7 @@ class Uplink:
         )
         # ---------------------------------------------------------------------------------------
         missing = ids.unknown(batch.site, batch.elided) if batch.elided else ()
-        last_seq = scanned.seqs()[-1] if scanned is not None else batch.last_seq
+        last_seq = scanned.last_seq() if scanned is not None else batch.last_seq
         if missing:  # before anything is produced: the edge sends the batch again, with them
             self.metrics.on_ingested(batch.site, "need_schemas", 0)
             log.info(

@@ -28,13 +28,11 @@ const FLAG_SOURCE_SEQ: u8 = 0x04;
 const SEQ_HEADER: &[u8] = b"fleetlink.seq\0";
 
 struct Tail {
+    topic_id: u32,
     topic: String,
     topic_c: CString,
     key: Vec<u8>,
     headers: Vec<(CString, Vec<u8>)>,
-    records: u32,
-    raw: u32,
-    fingerprints: Vec<[u8; 8]>,
 }
 
 struct RecordRef {
@@ -98,7 +96,15 @@ fn parse_tail(data: &[u8], pos: usize, end: usize) -> Result<Tail, String> {
         return Err(format!("{} trailing bytes after the record", end - r.pos));
     }
     let topic_c = CString::new(topic.clone()).map_err(|_| "the topic holds a NUL byte".to_string())?;
-    Ok(Tail { topic, topic_c, key, headers, records: 0, raw: 0, fingerprints: vec![] })
+    Ok(Tail { topic_id: 0, topic, topic_c, key, headers })
+}
+
+/// What a batch holds for one Kafka topic: the unit the uplink decides on (policy, schema ids).
+struct TopicSum {
+    name: String,
+    records: u32,
+    raw: u32,
+    fingerprints: Vec<[u8; 8]>,
 }
 
 /// A batch body parsed once: its records by reference, its tails by value.
@@ -107,6 +113,7 @@ pub struct ScannedBatch {
     body: Vec<u8>,
     records: Vec<RecordRef>,
     tails: Vec<Tail>,
+    topics: Vec<TopicSum>,
 }
 
 #[pymethods]
@@ -122,40 +129,101 @@ impl ScannedBatch {
         self.records.len()
     }
 
-    /// Per distinct tail: `(topic, key, headers, records, raw records, fingerprints)`.
-    #[allow(clippy::type_complexity)]
-    fn tails<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> Vec<(String, Bound<'py, PyBytes>, Vec<(String, Bound<'py, PyBytes>)>, u32, u32, Vec<Bound<'py, PyBytes>>)> {
-        self.tails
-            .iter()
-            .map(|t| {
-                let headers = t
-                    .headers
-                    .iter()
-                    .map(|(n, v)| (n.to_string_lossy().into_owned(), PyBytes::new(py, v)))
-                    .collect();
-                let fps = t.fingerprints.iter().map(|fp| PyBytes::new(py, fp)).collect();
-                (t.topic.clone(), PyBytes::new(py, &t.key), headers, t.records, t.raw, fps)
-            })
-            .collect()
-    }
-
     /// `(seq, payload)` of record `index`: its bytes as the edge encoded them.
     fn record<'py>(&self, py: Python<'py>, index: usize) -> PyResult<(u64, Bound<'py, PyBytes>)> {
         let r = self.records.get(index).ok_or_else(|| PyValueError::new_err("no such record"))?;
         Ok((r.seq, PyBytes::new(py, &self.body[r.span.0..r.span.1])))
     }
 
-    /// The seq of every record, in order.
-    fn seqs(&self) -> Vec<u64> {
-        self.records.iter().map(|r| r.seq).collect()
+    /// Per distinct Kafka topic: `(topic, records, raw records, fingerprints)`; a topic's index
+    /// in this list is its id in `senders` and `NativeProducer.produce`.
+    fn topics<'py>(&self, py: Python<'py>) -> Vec<(String, u32, u32, Vec<Bound<'py, PyBytes>>)> {
+        self.topics
+            .iter()
+            .map(|t| {
+                let fps = t.fingerprints.iter().map(|fp| PyBytes::new(py, fp)).collect();
+                (t.name.clone(), t.records, t.raw, fps)
+            })
+            .collect()
     }
 
-    /// The tail (an index into `tails()`) of every record, in order.
-    fn tail_ids(&self) -> Vec<u32> {
-        self.records.iter().map(|r| r.tail).collect()
+    /// Per distinct (topic, values of the headers `names`): `(topic id, those headers, seq of
+    /// the first record)`. An honest edge gives one entry per topic however many robots and
+    /// keys its records have: what the sender check reads, without a Python object per tail.
+    #[allow(clippy::type_complexity)]
+    fn senders<'py>(
+        &self,
+        py: Python<'py>,
+        names: Vec<String>,
+    ) -> Vec<(u32, Vec<(String, Bound<'py, PyBytes>)>, u64)> {
+        let mut first_seq: HashMap<u32, u64> = HashMap::new();
+        for r in &self.records {
+            first_seq.entry(r.tail).or_insert(r.seq);
+        }
+        let mut seen: HashMap<(u32, Vec<(&[u8], &[u8])>), usize> = HashMap::new();
+        let mut out: Vec<(u32, Vec<(String, Bound<'py, PyBytes>)>, u64)> = Vec::new();
+        for (index, tail) in self.tails.iter().enumerate() {
+            let picked: Vec<(&[u8], &[u8])> = tail
+                .headers
+                .iter()
+                .filter(|(n, _)| names.iter().any(|want| want.as_bytes() == n.as_bytes()))
+                .map(|(n, v)| (n.as_bytes(), v.as_slice()))
+                .collect();
+            let seq = first_seq.get(&(index as u32)).copied().unwrap_or(0);
+            match seen.get(&(tail.topic_id, picked.clone())) {
+                Some(&at) => {
+                    if seq < out[at].2 {
+                        out[at].2 = seq;
+                    }
+                }
+                None => {
+                    let headers = picked
+                        .iter()
+                        .map(|(n, v)| (String::from_utf8_lossy(n).into_owned(), PyBytes::new(py, v)))
+                        .collect();
+                    seen.insert((tail.topic_id, picked), out.len());
+                    out.push((tail.topic_id, headers, seq));
+                }
+            }
+        }
+        out
+    }
+
+    /// The seq of the last record.
+    fn last_seq(&self) -> u64 {
+        self.records.last().map(|r| r.seq).unwrap_or(0)
+    }
+
+    /// Records per topic whose seq is not in `dead` (what Kafka acknowledged of an answered batch).
+    fn acked_counts(&self, dead: Vec<u64>) -> HashMap<String, u64> {
+        let dead: std::collections::HashSet<u64> = dead.into_iter().collect();
+        let mut counts = vec![0u64; self.topics.len()];
+        for r in &self.records {
+            if !dead.contains(&r.seq) {
+                counts[self.tails[r.tail as usize].topic_id as usize] += 1;
+            }
+        }
+        self.topics.iter().zip(counts).filter(|(_, n)| *n > 0).map(|(t, n)| (t.name.clone(), n)).collect()
+    }
+
+    /// Per topic among `topics` (ids): `(topic, delivered, failed)`, failed being the records
+    /// whose index is in `failed` (delivery reports of a natively produced part).
+    fn delivery_counts(&self, topics: Vec<u32>, failed: Vec<u32>) -> Vec<(String, u64, u64)> {
+        let failed: std::collections::HashSet<u32> = failed.into_iter().collect();
+        let mut counts: HashMap<u32, (u64, u64)> = topics.iter().map(|t| (*t, (0, 0))).collect();
+        for (i, r) in self.records.iter().enumerate() {
+            if let Some(c) = counts.get_mut(&self.tails[r.tail as usize].topic_id) {
+                if failed.contains(&(i as u32)) {
+                    c.1 += 1;
+                } else {
+                    c.0 += 1;
+                }
+            }
+        }
+        let mut out: Vec<(String, u64, u64)> =
+            counts.into_iter().map(|(t, (ok, bad))| (self.topics[t as usize].name.clone(), ok, bad)).collect();
+        out.sort();
+        out
     }
 }
 
@@ -163,6 +231,8 @@ fn scan(body: Vec<u8>, start: usize) -> Result<ScannedBatch, String> {
     let mut records = Vec::new();
     let mut tails: Vec<Tail> = Vec::new();
     let mut tail_ids: HashMap<Vec<u8>, u32> = HashMap::new();
+    let mut topics: Vec<TopicSum> = Vec::new();
+    let mut topic_ids: HashMap<String, u32> = HashMap::new();
     {
         let data = &body[..];
         let mut r = Reader { data, pos: start.min(data.len()), end: data.len() };
@@ -204,24 +274,38 @@ fn scan(body: Vec<u8>, start: usize) -> Result<ScannedBatch, String> {
                 let tail_id = match tail_ids.get(tail_bytes) {
                     Some(id) => *id,
                     None => {
-                        let tail = parse_tail(data, p.pos, p.end)?;
+                        let mut tail = parse_tail(data, p.pos, p.end)?;
+                        tail.topic_id = match topic_ids.get(&tail.topic) {
+                            Some(id) => *id,
+                            None => {
+                                topics.push(TopicSum {
+                                    name: tail.topic.clone(),
+                                    records: 0,
+                                    raw: 0,
+                                    fingerprints: vec![],
+                                });
+                                topic_ids.insert(tail.topic.clone(), (topics.len() - 1) as u32);
+                                (topics.len() - 1) as u32
+                            }
+                        };
                         tails.push(tail);
                         let id = (tails.len() - 1) as u32;
                         tail_ids.insert(tail_bytes.to_vec(), id);
                         id
                     }
                 };
-                let tail = &mut tails[tail_id as usize];
+                let tail = &tails[tail_id as usize];
                 if flags & FLAG_NULL_KEY != 0 && !tail.key.is_empty() {
                     return Err("record flagged with a null key carries key bytes".into());
                 }
-                tail.records += 1;
+                let topic = &mut topics[tail.topic_id as usize];
+                topic.records += 1;
                 if flags & FLAG_RAW_VALUE != 0 {
-                    tail.raw += 1;
+                    topic.raw += 1;
                 } else if vlen >= 10 && data[vstart] == 0xC3 && data[vstart + 1] == 0x01 {
                     let fp: [u8; 8] = data[vstart + 2..vstart + 10].try_into().unwrap();
-                    if !tail.fingerprints.contains(&fp) {
-                        tail.fingerprints.push(fp);
+                    if !topic.fingerprints.contains(&fp) {
+                        topic.fingerprints.push(fp);
                     }
                 }
                 records.push(RecordRef {
@@ -244,7 +328,7 @@ fn scan(body: Vec<u8>, start: usize) -> Result<ScannedBatch, String> {
             return Err(format!("{} unexpected trailing bytes after the batch", r.end - r.pos));
         }
     }
-    Ok(ScannedBatch { body, records, tails })
+    Ok(ScannedBatch { body, records, tails, topics })
 }
 
 struct BatchState {
@@ -345,15 +429,16 @@ impl NativeProducer {
         Ok(NativeProducer { api, rk, shared, stop, poller: Mutex::new(Some(poller)), next_batch: Mutex::new(1) })
     }
 
-    /// Produce the records of `batch` whose tail is in `tails` (indices) and whose value is raw
-    /// or has a Confluent header in `heads` (`(tail, fingerprint) -> 5 bytes`). Returns
+    /// Produce the records of `batch` whose topic is in `topics` (ids, see `ScannedBatch.topics`)
+    /// and whose value is raw or has a Confluent header in `heads` (`(topic, fingerprint) -> 5
+    /// bytes`). Returns
     /// `(batch_id, produced, others)`: `others` the indices of the records left to Python.
     /// Waits (the GIL released) while librdkafka's queue is full.
     fn produce(
         &self,
         py: Python<'_>,
         batch: &Bound<'_, ScannedBatch>,
-        tails: Vec<u32>,
+        topics: Vec<u32>,
         heads: HashMap<(u32, Vec<u8>), Vec<u8>>,
     ) -> PyResult<(u32, usize, Vec<u32>)> {
         let batch = batch.get();
@@ -363,7 +448,7 @@ impl NativeProducer {
             *next = next.wrapping_add(1).max(1);
             id
         };
-        let ok: std::collections::HashSet<u32> = tails.into_iter().collect();
+        let ok: std::collections::HashSet<u32> = topics.into_iter().collect();
         let mut heads5: HashMap<(u32, [u8; 8]), [u8; 5]> = HashMap::new();
         for ((t, fp), h) in heads {
             if fp.len() == 8 && h.len() == 5 {
@@ -373,10 +458,11 @@ impl NativeProducer {
         let mut mine = Vec::new();
         let mut others = Vec::new();
         for (i, r) in batch.records.iter().enumerate() {
-            let go = ok.contains(&r.tail)
+            let topic = batch.tails[r.tail as usize].topic_id;
+            let go = ok.contains(&topic)
                 && (r.flags & FLAG_RAW_VALUE != 0 || {
                     let v = &batch.body[r.value.0..r.value.1];
-                    v.len() >= 10 && v[0] == 0xC3 && v[1] == 0x01 && heads5.contains_key(&(r.tail, v[2..10].try_into().unwrap()))
+                    v.len() >= 10 && v[0] == 0xC3 && v[1] == 0x01 && heads5.contains_key(&(topic, v[2..10].try_into().unwrap()))
                 });
             if go {
                 mine.push(i as u32);
@@ -403,7 +489,7 @@ impl NativeProducer {
                     value.extend_from_slice(v);
                 } else {
                     let fp: [u8; 8] = v[2..10].try_into().unwrap();
-                    value.extend_from_slice(&heads5[&(r.tail, fp)]);
+                    value.extend_from_slice(&heads5[&(tail.topic_id, fp)]);
                     value.extend_from_slice(&v[10..]);
                 }
                 args.clear();

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fleetlink.uplink.delivery_board import DeliveryBoard, acked_pairs, acked_topics, scanned_pairs
+from fleetlink.uplink.delivery_board import DeliveryBoard, acked_topics
 from fleetlink.wire import Record
 
 pytestmark = pytest.mark.unit
@@ -39,11 +39,3 @@ def test_bounded_sites_and_topics() -> None:
     board.on_batch("b", "ok", {"t1": 1})
     assert board.sites() == ["a"]
     assert board.figures("a") == {"batches": {"ok": 1}, "records": 1, "dead_lettered": 0, "topics": {"t1": 1}}
-
-
-def test_a_scanned_batch_counts_its_records_per_tail() -> None:
-    pairs = list(scanned_pairs(["x", "y"], [0, 1, 0, 0], [5, 6, 7, 8]))
-    assert pairs == [("x", 5), ("y", 6), ("x", 7), ("x", 8)]
-    assert acked_pairs(pairs, {7}) == {"x": 2, "y": 1}
-    with pytest.raises(ValueError, match="shorter"):
-        list(scanned_pairs(["x"], [0, 0], [1]))
