@@ -139,6 +139,8 @@ class WanSender:
         self._healthy = True
         self._last_send = float("-inf")
         self._due: float | None = None
+        self._asleep_until: float | None = None
+        """Until when the sender's thread sleeps (None: it is awake, or about to decide)."""
         """When the waiting records may leave as a partial batch, if some brought their linger."""
         self._known: set[bytes] = set()
         """Fingerprints whose schema an uplink acknowledged (left out of later batches)."""
@@ -201,6 +203,8 @@ class WanSender:
         current = self._due
         if current is None or due < current:
             self._due = due
+        else:
+            due = current
         if self._mutex.acquire(blocking=False):  # else the sender's thread is at it
             try:
                 while (
@@ -222,7 +226,12 @@ class WanSender:
                 log.debug("sender %s: pump stops: %s", self.stream, exc)
             finally:
                 self._mutex.release()
-        self.wake()
+        # The sender's thread sleeps until a deadline it set: if that comes before the records
+        # just appended are due, it will see them in time; waking it for every append (hundreds
+        # of times a second at fleet rates) would cost a thread switch each for nothing.
+        asleep_until = self._asleep_until
+        if asleep_until is None or due < asleep_until or self._unsent() >= self.options.batch_max_records:
+            self.wake()
 
     def __enter__(self) -> WanSender:
         return self.start()
@@ -271,17 +280,18 @@ class WanSender:
                     if batch is not None:
                         self._send(batch)
                         continue
-            timeout = idle if wait_until is None else max(0.0, wait_until - now)
-            if self._stopping.is_set():
-                timeout = min(timeout, max(0.0, self._stop_deadline - now))
+                timeout = idle if wait_until is None else max(0.0, wait_until - now)
+                if self._stopping.is_set():
+                    timeout = min(timeout, max(0.0, self._stop_deadline - now))
+                self._asleep_until = now + timeout
             self._wait(timeout)
+            self._asleep_until = None
 
     def _window(self) -> int:
         return self.options.max_in_flight if self._healthy else 1
 
     def _unsent(self) -> int:
-        stats = self.buffer.stats()
-        return max(0, stats.depth - stats.in_flight)
+        return self.buffer.unsent()
 
     def _next_batch(self, now: float) -> tuple[SpoolBatch | None, float | None]:
         unsent = self._unsent()

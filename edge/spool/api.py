@@ -178,6 +178,10 @@ class RecordBuffer(Protocol):
         limits is split."""
         ...
 
+    def unsent(self) -> int:
+        """Records held and not in flight: what the sender may still send (cheap: no stats)."""
+        ...
+
     def read_unacked(
         self, max_records: int, max_bytes: int, *, skip_in_flight: bool = True
     ) -> SpoolBatch | None:

@@ -189,6 +189,12 @@ class MemoryBuffer:
     def note_marks(self, marks: Sequence[tuple[bytes, int]]) -> None:
         """Nothing survives a restart here: marks are not kept."""
 
+    def unsent(self) -> int:
+        """Records held and not in flight (what ``read_unacked`` may still hand out)."""
+        with self._lock:
+            in_flight = sum(g.records for groups in self._in_flight.values() for g in groups)
+            return max(0, self._records - in_flight)
+
     def stats(self) -> SpoolStats:
         with self._lock:
             heads = [g[0].timestamp_ms for g in (*self._in_flight.values(), *self._retry.values())]

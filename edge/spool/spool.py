@@ -689,6 +689,11 @@ class Spool:
             except (OSError, SpoolError):
                 log.exception("spool %s: background fsync failed", self.directory)
 
+    def unsent(self) -> int:
+        """Records held and not in flight (what ``read_unacked`` may still hand out)."""
+        with self._lock:
+            return max(0, self._depth - self._tracker.in_flight_records())
+
     def stats(self) -> SpoolStats:
         with self._lock:
             stamps = [t for t in (self._tracker.oldest_ts(), self._cursor_ts()) if t is not None]
