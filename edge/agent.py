@@ -232,6 +232,7 @@ class EdgeAgent:
                 edge_id=config.edge_id,
                 options=options,
                 on_limit=limit.learn,
+                origin=exactly_once_origin(config, buffer),
             )
             for delivery, buffer in buffers.items()
         }
@@ -515,6 +516,14 @@ class EdgeAgent:
                 "write_errors": self._book.write_errors,
             }
         return out
+
+
+def exactly_once_origin(config: EdgeConfig, buffer: RecordBuffer) -> int:
+    """The origin the sender of ``buffer`` puts in its batches: the spool's own with ``spool.delivery:
+    exactly_once``, else 0 (at-least-once; the memory buffer always)."""
+    if config.spool.delivery == "exactly_once" and isinstance(buffer, Spool):
+        return buffer.origin
+    return 0
 
 
 GC_THRESHOLD = (50_000, 20, 100)

@@ -184,6 +184,9 @@ class RegistrationSection(Section):
 
 class SpoolSection(Section):
     dir: Path
+    delivery: Literal["at_least_once", "exactly_once"] = "at_least_once"
+    """How the spool's records reach Kafka: ``exactly_once`` has the uplink write each record once
+    (Kafka transactions, read them with ``isolation.level=read_committed``; docs/exactly-once.md)."""
     max_bytes: ByteSize = ByteSize(1 << 30)
     segment_bytes: ByteSize = ByteSize(16 << 20)
     policy: FullPolicy = "block"

@@ -38,6 +38,20 @@ class TopicsSection(Section):
     """The cloud-side dead-letter topic: records the uplink refused (site, topic and reason in headers)."""
     audit: KafkaTopic = "fleetlink.audit"
     """Who changed what and sent which command from the fleet console (JSON, keyed by user)."""
+    marks: KafkaTopic = "fleetlink.marks"
+    """The high-water mark of each exactly-once stream, written in its transactions (compacted)."""
+
+
+class ExactlyOnceSection(Section):
+    """How the uplink writes the batches of edges whose spool is ``delivery: exactly_once``."""
+
+    transactional_id_prefix: KeyChunk = "fleetlink"
+    """Each exactly-once stream's producer has the transactional id ``<prefix>.<site>.<edge>.<stream>``:
+    uplinks of one fleet must share the prefix (it is how one fences another)."""
+    transaction_timeout: Seconds = Field(default=60.0, gt=0, le=900)
+    """How long Kafka keeps a transaction open before aborting it (``transaction.timeout.ms``)."""
+    idle_close: Seconds = Field(default=300.0, gt=0)
+    """A stream's producer is closed after this long without a batch (the next one takes it over)."""
 
 
 class IngestSection(Section):
@@ -136,6 +150,8 @@ class UplinkConfig(Section):
     """The Kafka topics each site may write (docs/security.md)."""
     ownership: OwnershipSection = OwnershipSection()
     """When a robot may move to another site (docs/security.md)."""
+    exactly_once: ExactlyOnceSection = ExactlyOnceSection()
+    """Transactions for the edges that ask for exactly-once delivery (docs/exactly-once.md)."""
     command_signing: CommandSigningSection | None = None
     """The key commands and calls are signed with; required with command, service and action mappings."""
     services: list[ServiceMapping] = []

@@ -16,10 +16,12 @@ class UnsafeKafkaSettingError(ConfigError, UplinkError):
 class ProduceError(UplinkError):
     """Kafka refused or failed to acknowledge a record."""
 
-    def __init__(self, message: str, *, code: str, retriable: bool) -> None:
+    def __init__(self, message: str, *, code: str, retriable: bool, fatal: bool = False) -> None:
         super().__init__(message)
         self.code = code
         self.retriable = retriable
+        self.fatal = fatal
+        """The producer cannot go on (fenced by another with its transactional id, or failed for good)."""
 
 
 class KafkaCredentialsError(ConfigError, UplinkError):

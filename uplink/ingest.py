@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Literal, Protocol
@@ -105,8 +105,12 @@ class BatchJob:
         on_delivery: Callable[[str, bool, float], None] | None = None,
         diversion: Diversion | None = None,
         counted: bool = True,
+        dead: Mapping[int, str] | None = None,
     ) -> None:
         self._batch = batch
+        self._dead_seqs = dead or {}
+        """Seqs to send to the dead-letter topic without producing them (why, by seq): records
+        Kafka refused for good in an exactly-once transaction that had to be aborted."""
         self._counted = counted
         """False for a part of a batch (``native_ingest``): the whole batch is counted there."""
         self._diversion = diversion
@@ -138,11 +142,10 @@ class BatchJob:
         report = self._report
         heads: dict[tuple[str, bytes], bytes] = {}
         unavailable: dict[tuple[str, bytes], str] = {}  # the registry failed once: not again per record
-        diverted = self._diversion.routes if self._diversion is not None else None
+        elsewhere = self._elsewhere if self._dead_seqs or self._diversion is not None else None
         for index, record in enumerate(records):
             topic, value = record.kafka_topic, record.value
-            if diverted and topic in diverted:
-                self._divert(record)
+            if elsewhere is not None and elsewhere(record):
                 continue
             if not record.raw_value:
                 head = heads.get((topic, value[2:10])) if value[:2] == SINGLE_OBJECT_MAGIC else None
@@ -179,9 +182,18 @@ class BatchJob:
 
     # -- per record ------------------------------------------------------------------------
 
-    def _divert(self, record: Record) -> None:
-        if self._diversion is not None:
-            self._diversion.handle(record, self._settle)
+    def _elsewhere(self, record: Record) -> bool:
+        """Whether ``record`` goes anywhere but its topic (and sends it there): the dead-letter
+        topic unproduced (``dead``), or where the policy diverts its topic."""
+        reason = self._dead_seqs.get(record.seq)
+        if reason is not None:
+            self._dead_letter(record, stage="produce", reason=reason)
+            return True
+        diversion = self._diversion
+        if diversion is not None and record.kafka_topic in diversion.routes:
+            diversion.handle(record, self._settle)
+            return True
+        return False
 
     def _kafka_value(self, record: Record) -> bytes:
         fingerprint, body = split_single_object(record.value)

@@ -41,7 +41,12 @@ RawCallback = Callable[[KafkaError | None, Message], None]
 
 
 def _produce_error(err: KafkaError) -> ProduceError:
-    return ProduceError(f"{err.name()}: {err.str()}", code=err.name(), retriable=bool(err.retriable()))
+    return ProduceError(
+        f"{err.name()}: {err.str()}",
+        code=err.name(),
+        retriable=bool(err.retriable()),
+        fatal=bool(err.fatal()),
+    )
 
 
 def _exception_error(exc: KafkaException) -> ProduceError:
@@ -52,11 +57,25 @@ def _exception_error(exc: KafkaException) -> ProduceError:
 
 
 class KafkaSink:
-    """A started ``KafkaSink`` owns one idempotent producer and one thread polling it."""
+    """A started ``KafkaSink`` owns one idempotent producer and one thread polling it.
 
-    def __init__(self, settings: KafkaSection, *, queue_wait_s: float = 30.0) -> None:
+    With ``transactional_id`` the producer is transactional (``uplink.exactly_once``): ``start``
+    also registers the id with the broker, which fences any other producer holding it, and
+    records go out between ``begin`` and ``commit`` (or ``abort``).
+    """
+
+    def __init__(
+        self,
+        settings: KafkaSection,
+        *,
+        queue_wait_s: float = 30.0,
+        transactional_id: str | None = None,
+        transaction_timeout_s: float = 60.0,
+    ) -> None:
         self._settings = settings
         self._queue_wait_s = queue_wait_s
+        self._transactional_id = transactional_id
+        self._transaction_timeout_s = transaction_timeout_s
         self._producer: Producer | None = None
         self._poller: threading.Thread | None = None
         self._stopping = threading.Event()
@@ -67,9 +86,21 @@ class KafkaSink:
 
     def start(self) -> KafkaSink:
         conf: dict[str, Any] = dict(self._settings.producer_config())
+        if self._transactional_id is not None:
+            timeout_ms = round(self._transaction_timeout_s * 1000)
+            conf["transactional.id"] = self._transactional_id
+            conf["transaction.timeout.ms"] = timeout_ms
+            # librdkafka: a record may not outlive the transaction that holds it
+            conf["delivery.timeout.ms"] = min(int(conf.get("delivery.timeout.ms", timeout_ms)), timeout_ms)
+        log.info("starting Kafka producer %s", redacted(conf))
         conf["error_cb"] = self._on_client_error
-        log.info("starting Kafka producer %s", redacted(self._settings.producer_config()))
-        self._producer = Producer(conf)
+        try:
+            self._producer = Producer(conf)
+            if self._transactional_id is not None:
+                self._producer.init_transactions(self._transaction_timeout_s)
+        except KafkaException as exc:
+            self._producer = None
+            raise _exception_error(exc) from None
         self._stopping.clear()
         self._poller = threading.Thread(target=self._poll_loop, name="kafka-poll", daemon=True)
         self._poller.start()
@@ -206,7 +237,35 @@ class KafkaSink:
                 raise _exception_error(exc) from None
 
     def in_flight(self) -> int:
+        """Records handed to librdkafka and not yet delivered."""
         return len(self._producer) if self._producer is not None else 0
+
+    # -- transactions (a sink made with ``transactional_id``) ------------------------------
+
+    def begin(self) -> None:
+        """Open a transaction: what is produced until ``commit`` is written all or nothing."""
+        self._transactional().begin_transaction()
+
+    def commit(self, timeout_s: float) -> None:
+        """Deliver what the transaction holds and commit it; raises ``ProduceError`` (``fatal``
+        set when the producer was fenced or failed for good: it must be made anew)."""
+        try:
+            self._transactional().commit_transaction(timeout_s)
+        except KafkaException as exc:
+            raise _exception_error(exc) from None
+
+    def abort(self, timeout_s: float) -> None:
+        """Abort the open transaction: read_committed consumers never see its records."""
+        try:
+            self._transactional().abort_transaction(timeout_s)
+        except KafkaException as exc:
+            raise _exception_error(exc) from None
+
+    def _transactional(self) -> Producer:
+        producer = self._producer
+        if producer is None or self._transactional_id is None:
+            raise ProduceError("no transactional producer", code="_NOT_STARTED", retriable=True)
+        return producer
 
     # -- internals -------------------------------------------------------------------------
 
@@ -215,7 +274,13 @@ class KafkaSink:
             producer = self._producer
             if producer is None:
                 return
-            producer.poll(0.05)
+            try:
+                producer.poll(0.05)
+            except KafkaException as exc:  # a fatal error (fenced): keep serving the failed reports
+                error = _exception_error(exc)
+                if self._fatal is None and error.fatal:
+                    self._fatal = error
+                self._limiter.log(logging.WARNING, "poll", "Kafka producer: %s", error)
 
     def _on_client_error(self, err: KafkaError) -> None:
         if err.fatal():

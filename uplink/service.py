@@ -13,7 +13,7 @@ import gc
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from types import TracebackType
@@ -43,13 +43,15 @@ from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.delivery_board import DeliveryBoard, acked_scanned, acked_topics
 from fleetlink.uplink.delivery_status import DeliveryStatus
 from fleetlink.uplink.diversion import Diversion
-from fleetlink.uplink.identity import source_of
-from fleetlink.uplink.ingest import BatchJob, IngestStats
+from fleetlink.uplink.exactly_once import ExactlyOnceWriter, MarksReader
+from fleetlink.uplink.exactly_once.writer import ExactlyOnceStats
+from fleetlink.uplink.identity import Source, source_of
+from fleetlink.uplink.ingest import BatchJob, IngestStats, count_outcome
 from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
 from fleetlink.uplink.native_ingest import NativeIngest, NativeJob, view
 from fleetlink.uplink.ordered import KeyedSerialExecutor
-from fleetlink.uplink.policy import InternalTopics, TopicPolicy
+from fleetlink.uplink.policy import Decision, InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
 from fleetlink.uplink.refusals import Refusals
 from fleetlink.uplink.registration_records import RegistrationWriter
@@ -120,6 +122,9 @@ class Uplink:
         self._dlq_max = max(1_000, config.kafka.message_max_bytes - 64 * 1024)
         self._max_record_bytes = config.kafka.max_record_bytes()
         """Told to the edges in every acknowledgement: they keep larger records off the WAN."""
+        self._eo_lock = threading.Lock()
+        self._eo_writer: ExactlyOnceWriter | None = None
+        self._marks: MarksReader | None = None
         self.refusals = Refusals(
             self.metrics, refused_topic=config.topics.refused, max_value_bytes=self._dlq_max
         )
@@ -201,6 +206,12 @@ class Uplink:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=False)
             self._pool = None
+        if self._eo_writer is not None:
+            self._eo_writer.stop()
+            self._eo_writer = None
+        if self._marks is not None:
+            self._marks.stop()
+            self._marks = None
         self._stop_producers()
         if self._session is not None:
             self._session.close()
@@ -371,6 +382,10 @@ class Uplink:
             )
             return
 
+        if batch.origin:  # the edge asks for exactly-once delivery
+            self._write_exactly_once(query, data, verdict.source, verdict.routes, arrived)
+            return
+
         def done(ack: Ack) -> None:
             self._answered(batch, scanned, ack, arrived)
             self._finish(query, ack)
@@ -404,6 +419,93 @@ class Uplink:
             on_delivery=on_delivery,
         ).run()
 
+    def _write_exactly_once(
+        self,
+        query: zenoh.Query,
+        data: bytes,
+        source: Source,
+        routes: Mapping[str, Decision],
+        arrived: float,
+    ) -> None:
+        """An exactly-once batch, on the edge's worker: its transaction is committed (or not)
+        before the edge's next batch is looked at."""
+        sink, ids, registrations = self._sink, self._ids, self._registrations
+        if sink is None or ids is None or registrations is None:
+            self._finish(query, error="uplink stopping")
+            return
+        batch = decode_batch(data)  # read once already: it decodes
+        timeout_s = self.config.exactly_once.transaction_timeout
+        metered = not isinstance(self.metrics, NullMetrics)
+
+        def run(part: Batch, txn: KafkaSink, dead: dict[int, str]) -> Ack:
+            answers: list[Ack] = []
+            answered = threading.Event()
+
+            def on_done(ack: Ack) -> None:
+                answers.append(ack)
+                answered.set()
+
+            diversion = (
+                Diversion(source, routes, sink=txn, refusals=self.refusals, registrations=registrations)
+                if routes
+                else None
+            )
+            BatchJob(
+                part,
+                sink=txn,
+                schema_ids=ids,
+                dead_letter_topic=self.config.topics.dead_letter,
+                on_done=on_done,
+                stats=self.stats,
+                dead_letter_max_bytes=self._dlq_max,
+                on_delivery=self.metrics.on_delivered if metered else None,
+                diversion=diversion,
+                counted=False,
+                dead=dead,
+            ).run()
+            if not answered.wait(timeout_s):
+                detail = f"not all delivered within {timeout_s:g} s"
+                return Ack(batch.edge_id, batch.stream, part.first_seq, part.last_seq, "error", (), detail)
+            return answers[0]
+
+        with self.stats.lock:
+            self.stats.batches += 1
+            self.stats.records += len(batch.records)
+        try:
+            ack = self._exactly_once().write(batch, run)
+        except Exception as exc:  # answer the edge whatever failed: it sends the batch again
+            log.exception(
+                "exactly-once batch %s/%s %d..: not written", batch.edge_id, batch.stream, batch.first_seq
+            )
+            ack = Ack(
+                batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, "error", (), repr(exc)[:200]
+            )
+        count_outcome(self.stats, ack.status)
+        self._answered(batch, None, ack, arrived)
+        self._finish(query, ack)
+
+    def _exactly_once(self) -> ExactlyOnceWriter:
+        """The writer of exactly-once batches, made (and the marks topic read) on first use."""
+        with self._eo_lock:
+            if self._eo_writer is None:
+                cfg = self.config
+                self._marks = MarksReader(cfg.kafka, cfg.topics.marks, f"fleetlink-marks-{cfg.id}").start()
+                self._eo_writer = ExactlyOnceWriter(
+                    cfg.kafka,
+                    marks=self._marks,
+                    marks_topic=cfg.topics.marks,
+                    prefix=cfg.exactly_once.transactional_id_prefix,
+                    transaction_timeout_s=cfg.exactly_once.transaction_timeout,
+                    idle_close_s=cfg.exactly_once.idle_close,
+                )
+            return self._eo_writer
+
+    @property
+    def exactly_once_stats(self) -> ExactlyOnceStats | None:
+        """What the exactly-once path did (None: no exactly-once batch came yet)."""
+        writer = self._eo_writer
+        return writer.stats if writer is not None else None
+
     def _finish(self, query: zenoh.Query, ack: Ack | None = None, *, error: str = "") -> None:
         """Answer a batch taken by ``_on_query`` (its ack, or ``error``) and free its slot."""
         self._slots.release()
@@ -433,5 +535,6 @@ def _policy(cfg: UplinkConfig) -> TopicPolicy:
         owned.update((action.from_, action.feedback_to, action.result_to))
         if action.cancel_from is not None:
             owned.add(action.cancel_from)
+    owned.update((topics.audit, topics.marks))
     internal = InternalTopics(topics.registrations, topics.dead_letter, frozenset(owned))
     return TopicPolicy(cfg.policy.patterns(), cfg.policy.default.topics, internal)

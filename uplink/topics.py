@@ -14,7 +14,8 @@ log = logging.getLogger(__name__)
 
 
 def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float = 15.0) -> None:
-    """Create the registrations (compacted), dead-letter, refused and command topics if missing.
+    """Create the registrations and marks (compacted), dead-letter, refused and command topics if
+    missing.
 
     A broker that cannot be reached now is not fatal: the uplink starts, records wait in the
     edges' spools, and the next start creates the topics.
@@ -32,6 +33,12 @@ def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float =
         NewTopic(topics.command_status, num_partitions=1, replication_factor=-1),
         NewTopic(topics.refused, num_partitions=1, replication_factor=-1),
         NewTopic(topics.audit, num_partitions=1, replication_factor=-1),
+        NewTopic(
+            topics.marks,
+            num_partitions=1,
+            replication_factor=-1,
+            config={"cleanup.policy": "compact", "segment.ms": "600000"},
+        ),
     ]
     try:
         existing = set(admin.list_topics(timeout=timeout_s).topics)

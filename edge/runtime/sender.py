@@ -122,8 +122,11 @@ class WanSender:
         clock: Callable[[], float] = time.monotonic,
         rng: random.Random | None = None,
         on_limit: Callable[[int], object] | None = None,
+        origin: int = 0,
     ) -> None:
         self.buffer = buffer
+        self.origin = origin
+        """Non-zero: every batch asks for exactly-once delivery under this origin (the spool's)."""
         self._on_limit = on_limit
         """Hears the uplink's record limit from every answer (``edge.runtime.limits.RecordLimit``)."""
         self.transport = transport
@@ -345,6 +348,7 @@ class WanSender:
                 site=self.site,
                 edge_id=self.edge_id,
                 stream=self.stream,
+                origin=self.origin,
                 groups=[(g.first_seq, g.group) for g in batch.groups],
                 schemas=schemas,
                 elided=elided,

@@ -11,6 +11,9 @@ Entries: ``kind u8 | 3 zero bytes | value u64 | crc u32`` (CRC-32 of the first 1
 - ``EXTENT`` value = the last seq the newest ``SEGMENT`` holds as far as it was fsynced
   (written after each fsync of the active segment and when it is sealed).
 - ``GONE`` value = the first seq of a segment deleted on purpose (acknowledged or evicted).
+- ``ORIGIN`` value = the spool's origin: a random non-zero 64-bit id made when the spool is new
+  and kept for its life. An exactly-once uplink writes each seq of one origin once; a spool made
+  anew (its seqs start again) gets a new origin, so its records are not taken for duplicates.
 
 ``SEGMENT``/``EXTENT``/``GONE`` are the segment table: what the segment files hold, so a
 segment that disappears, or holds less than it did, is found and its records counted exactly.
@@ -38,8 +41,8 @@ log = logging.getLogger(__name__)
 
 _BODY = struct.Struct("<B3xQ")
 ENTRY_SIZE = _BODY.size + 4
-ACK, RESERVE, CLEAN, SEGMENT, EXTENT, GONE = 1, 2, 3, 4, 5, 6
-KINDS = frozenset({ACK, RESERVE, CLEAN, SEGMENT, EXTENT, GONE})
+ACK, RESERVE, CLEAN, SEGMENT, EXTENT, GONE, ORIGIN = 1, 2, 3, 4, 5, 6, 7
+KINDS = frozenset({ACK, RESERVE, CLEAN, SEGMENT, EXTENT, GONE, ORIGIN})
 COMPACT_BYTES = 64 * 1024
 SPACE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
 LEDGER_NAME = "ledger"
@@ -69,6 +72,8 @@ class LedgerState:
     """The ledger keeps a segment table (written by this version: a ``SEGMENT`` entry seen)."""
     missing: tuple[str, ...] = ()
     """Ledger files that were absent or empty while the other one had entries."""
+    origin: int = 0
+    """The spool's origin (0: the ledger has none yet: a new spool, or one written before)."""
 
 
 def parse_ledger(data: bytes) -> LedgerState:
@@ -99,6 +104,8 @@ def parse_ledger(data: bytes) -> LedgerState:
         elif kind == GONE:
             state.segments.pop(value, None)
             state.gone.add(value)
+        elif kind == ORIGIN and value:
+            state.origin = value
     return state
 
 
@@ -125,7 +132,13 @@ def merge_states(first: LedgerState, second: LedgerState) -> LedgerState:
         segments=dict(sorted(segments.items())),
         gone=gone,
         tracked=first.tracked or second.tracked,
+        origin=first.origin or second.origin,
     )
+
+
+def new_origin() -> int:
+    """A random non-zero 64-bit spool origin."""
+    return int.from_bytes(os.urandom(8), "little") or 1
 
 
 def fsync_dir(path: Path) -> None:
@@ -235,6 +248,8 @@ class Ledger:
         self._reserved = 1
         self._segments: dict[int, int | None] = {}
         self._newest: int | None = None
+        self.origin = 0
+        """The spool's origin (``ORIGIN``), set by ``open``."""
         self.failures = 0
 
     def read(self) -> LedgerState:
@@ -247,6 +262,7 @@ class Ledger:
         """Start from ``state`` with the segment table ``segments`` (what recovery kept):
         both files are rewritten with it. Raises ``OSError`` when that fails."""
         self._ack_mark, self._reserved = state.ack_mark, state.reserved
+        self.origin = state.origin or new_origin()
         self._segments = dict(segments)
         self._newest = max(self._segments, default=None)
         data = self._state_bytes()
@@ -259,7 +275,11 @@ class Ledger:
         return dict(self._segments)
 
     def _state_bytes(self) -> bytes:
-        parts = [encode_entry(ACK, self._ack_mark), encode_entry(RESERVE, self._reserved)]
+        parts = [
+            encode_entry(ORIGIN, self.origin),
+            encode_entry(ACK, self._ack_mark),
+            encode_entry(RESERVE, self._reserved),
+        ]
         for first, extent in sorted(self._segments.items()):
             parts.append(encode_entry(SEGMENT, first))
             if extent is not None:

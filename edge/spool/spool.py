@@ -128,6 +128,11 @@ class Spool:
     def stream(self) -> str:
         return self._stream
 
+    @property
+    def origin(self) -> int:
+        """The spool's origin: a random id kept in its ledger for its life (0 until opened)."""
+        return self._ledger.origin
+
     # -- lifecycle -------------------------------------------------------------------------------
     def open(self) -> Spool:
         """Lock the directory, recover what is there, start the fsync thread."""

@@ -4,8 +4,8 @@ Pure: bytes in, bytes out. Both sides import this one package, so the format has
 
 Batch (edge -> uplink, one Zenoh payload; little-endian throughout)::
 
-    "FLB" | version u8 (=4) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
-    body:  site str16 | edge_id str16 | stream str16 | first_seq u64
+    "FLB" | version u8 (=5) | codec u8 (0 none, 1 zlib, 2 zstd) | body length u32 | body (compressed)
+    body:  site str16 | edge_id str16 | stream str16 | origin u64 | first_seq u64
            | n_schemas u16 | { fingerprint 8 bytes | schema JSON str32, or u32 0xFFFFFFFF } * n_schemas
            | n_groups u32 | { first_seq u64 | group_len u32 | group } * n_groups
     group: count u32 | n_fingerprints u16 | { fingerprint 8 bytes } * n
@@ -24,9 +24,14 @@ Record payload (what the edge spool stores, so a batch is built without re-encod
 With bit 2 the record has one more header, ``fleetlink.seq`` = the decimal source seq (the ROS
 publication sequence number), after the others. It keeps the rest of the payload (the *tail*:
 topic, key, headers) the same for every record of one robot and mapping, so the edge encodes it
-once and the uplink parses it once per batch. The edge writes version 4 and the uplink reads
+once and the uplink parses it once per batch. The edge writes version 5 and the uplink reads
 only that (another version is refused with "unsupported batch version N"; the edge keeps such a
 batch in its spool).
+
+``origin`` is 0 for an at-least-once stream. A non-zero origin asks for exactly-once delivery: it
+names the spool the seqs come from (a random 64-bit id made with the spool), and the uplink
+writes each record of (site, edge, stream, origin) once, whatever seq it has already written
+(docs/exactly-once.md).
 
 A value is Avro single-object encoded (``C3 01`` + 8-byte CRC-64-AVRO fingerprint, little-endian,
 + Avro body) unless the raw flag is set (dead letters are produced exactly as given). A batch

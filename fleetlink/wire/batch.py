@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import zlib
 from collections.abc import Collection, Mapping, Sequence
@@ -30,7 +31,7 @@ _CODECS: dict[str, int] = {"none": 0, "zlib": 1, "zstd": 2}
 _CODEC_NAMES = {v: k for k, v in _CODECS.items()}
 
 BATCH_MAGIC = b"FLB"
-BATCH_VERSION = 4
+BATCH_VERSION = 5
 """The only version written and read (fleetlink 0.1.0 is the first release; others are refused)."""
 _ELIDED = 0xFFFFFFFF
 """A schema entry's length that says "text left out" (``Batch.elided``)."""
@@ -59,6 +60,10 @@ class Batch:
     records: tuple[Record, ...]
     schemas: Mapping[bytes, str] = field(default_factory=dict)
     elided: frozenset[bytes] = frozenset()
+    origin: int = 0
+    """Non-zero: the stream is delivered exactly once, and this is its origin, the random id of
+    the spool its seqs come from (a new spool starts its seqs again under a new origin). Zero:
+    at-least-once."""
 
     @property
     def last_seq(self) -> int:
@@ -85,19 +90,23 @@ def encode_batch_groups(
     elided: Collection[bytes] = (),
     codec: Codec = "zlib",
     level: int | None = None,
+    origin: int = 0,
 ) -> bytes:
     """A batch from record groups ``(first_seq, group)`` as the spool keeps them (no per-record
-    work); ``elided``: fingerprints used without their text (see ``Batch``)."""
+    work); ``elided``: fingerprints used without their text; ``origin``: see ``Batch``."""
     if not groups:
         raise WireError("a batch needs at least one record")
     if codec not in _CODECS:
         raise WireError(f"unknown codec {codec!r}")
     if len(schemas) + len(elided) > 0xFFFF:
         raise WireError(f"{len(schemas) + len(elided)} schemas do not fit a 16-bit count")
+    if not 0 <= origin < 1 << 64:
+        raise WireError(f"origin {origin} does not fit a u64")
     parts = [
         str16(site),
         str16(edge_id),
         str16(stream),
+        U64.pack(origin),
         U64.pack(groups[0][0]),
         U16.pack(len(schemas) + len(elided)),
     ]
@@ -135,6 +144,7 @@ def encode_batch_payloads(
     elided: Collection[bytes] = (),
     codec: Codec = "zlib",
     level: int | None = None,
+    origin: int = 0,
 ) -> bytes:
     """A batch from record payloads ``(seq, payload)``: runs of consecutive seqs become groups."""
     groups: list[tuple[int, bytes]] = []
@@ -161,6 +171,7 @@ def encode_batch_payloads(
         elided=elided,
         codec=codec,
         level=level,
+        origin=origin,
     )
 
 
@@ -177,6 +188,7 @@ def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = Non
         elided=batch.elided,
         codec=codec,
         level=level,
+        origin=batch.origin,
     )
 
 
@@ -265,6 +277,7 @@ def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch
         raise WireError(f"batch body has {len(body)} bytes, header says {size}")
     r = Reader(body)
     site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
+    (origin,) = r.unpack(U64, "origin")
     (first_seq,) = r.unpack(U64, "first_seq")
     schemas, elided = _read_schemas(r)
     head = Batch(
@@ -275,6 +288,7 @@ def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch
         records=(),
         schemas=schemas,
         elided=elided,
+        origin=origin,
     )
     return BatchBody(head, body, r.pos)
 
@@ -283,8 +297,7 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     """Parse and check a batch; raises ``WireError`` naming what is wrong and where."""
     parsed = decode_batch_head(data, max_bytes=max_bytes)
     head, body = parsed.head, parsed.body
-    site, edge_id, stream, first_seq = head.site, head.edge_id, head.stream, head.first_seq
-    schemas, elided = head.schemas, head.elided
+    first_seq = head.first_seq
     r = Reader(body, parsed.groups_at)
     (n_groups,) = r.unpack(U32, "group count")
     if n_groups == 0:
@@ -298,12 +311,4 @@ def decode_batch(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch:
     r.done("the batch")
     if records[0].seq != first_seq:
         raise WireError(f"first_seq {first_seq} is not the first record's seq {records[0].seq}")
-    return Batch(
-        site=site,
-        edge_id=edge_id,
-        stream=stream,
-        first_seq=first_seq,
-        records=tuple(records),
-        schemas=schemas,
-        elided=elided,
-    )
+    return dataclasses.replace(head, records=tuple(records))
