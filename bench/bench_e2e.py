@@ -135,7 +135,15 @@ def read_topic(
 class Pipeline:
     """Uplink (cloud router) + edge agent (site router) as processes."""
 
-    def __init__(self, work: Path, bootstrap: str, registry: str, topic: str, stack: ExitStack) -> None:
+    def __init__(
+        self,
+        work: Path,
+        bootstrap: str,
+        registry: str,
+        topic: str,
+        stack: ExitStack,
+        delivery: str = "at_least_once",
+    ) -> None:
         self.cloud_port, self.site_port = free_port(), free_port()
         uplink: dict[str, Any] = {
             "kafka": {
@@ -162,7 +170,12 @@ class Pipeline:
                     "mappings": [{"name": "imu", "from": "/{robot}/imu", "to": topic, "type": IMU}],
                 }
             },
-            "spool": {"dir": str(work / "spool"), "max_bytes": "1GiB", "fsync": "interval"},
+            "spool": {
+                "dir": str(work / "spool"),
+                "max_bytes": "1GiB",
+                "fsync": "interval",
+                "delivery": delivery,
+            },
             "wan": {
                 "batch_max_records": 2000,
                 "linger": os.environ.get("BENCH_LINGER", "10ms"),
@@ -282,13 +295,20 @@ class Throughput:
 
 
 def run_throughput(
-    work: Path, bootstrap: str, registry: str, robots: int, per_robot: int, broker_pid: int | None
+    work: Path,
+    bootstrap: str,
+    registry: str,
+    robots: int,
+    per_robot: int,
+    broker_pid: int | None,
+    delivery: str = "at_least_once",
 ) -> Throughput:
-    """The robots publish ``per_robot`` messages each at once; first publish -> last record read."""
+    """The robots publish ``per_robot`` messages each at once; first publish -> last record read
+    (read committed: with ``exactly_once`` a record counts once its transaction committed)."""
     topic = create_topic(bootstrap, "bench.imu")
     work.mkdir()
     with ExitStack() as stack:
-        pipe = Pipeline(work, bootstrap, registry, topic, stack)
+        pipe = Pipeline(work, bootstrap, registry, topic, stack, delivery)
         cpu0 = pipe.cpu()
         broker0 = tree_cpu(broker_pid) if broker_pid else 0.0
         pub, began = run_robots(pipe.site_port, robots, per_robot, 0)
@@ -354,12 +374,12 @@ def main() -> None:
     )
     ap.add_argument(
         "--only",
-        choices=("throughput", "latency", "direct"),
+        choices=("throughput", "exactly_once", "latency", "direct"),
         action="append",
-        help="run only these parts (repeatable; default: all three)",
+        help="run only these parts (repeatable; default: all four)",
     )
     args = ap.parse_args()
-    parts = set(args.only or ("throughput", "latency", "direct"))
+    parts = set(args.only or ("throughput", "exactly_once", "latency", "direct"))
 
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-bench-") as tmp:
         work = Path(tmp)
@@ -377,6 +397,7 @@ def main() -> None:
 
         rates: list[float] = []
         directs: list[float] = []
+        exact: list[float] = []
         if parts & {"throughput", "direct"}:
             print(
                 f"\n1. throughput, {total} records, at-least-once (durable spool, acked WAN batches, "
@@ -401,6 +422,21 @@ def main() -> None:
                     + ", ".join(f"{k} {v:.1f}" for k, v in t.cpu.items())
                     + ")"
                 )
+            if "exactly_once" in parts:
+                e = run_throughput(
+                    work / f"eo{i + args.warmup_rounds}",
+                    bootstrap,
+                    registry,
+                    args.robots,
+                    per_robot,
+                    broker_pid,
+                    "exactly_once",
+                )
+                exact.append(e.rate)
+                line += f" | exactly once {e.got}/{total} = {e.rate:,.0f} records/s (CPU s: " + ", ".join(
+                    f"{k} {v:.1f}" for k, v in e.cpu.items()
+                )
+                line += ")"
             if "direct" in parts:
                 directs.append(direct_path(bootstrap, registry, payloads, total))
                 line += f" | direct {directs[-1]:,.0f} records/s"
@@ -410,8 +446,16 @@ def main() -> None:
             if i < 0:
                 rates.clear()
                 directs.clear()
+                exact.clear()
         if rates:
             print(f"   fleetlink end to end, median: {statistics.median(rates):,.0f} records/s")
+        if exact:
+            print(f"   exactly once end to end, median: {statistics.median(exact):,.0f} records/s")
+            if rates:
+                print(
+                    "   exactly once / at least once (medians): "
+                    f"{statistics.median(exact) / statistics.median(rates):.2f}"
+                )
         if directs:
             print(f"   direct path, median: {statistics.median(directs):,.0f} records/s")
         if rates and directs:

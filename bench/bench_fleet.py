@@ -452,6 +452,8 @@ def run_shape(
     result.window_s = t1 - t0
     result.latencies_ms = [recv * 1000 - stamp for recv, stamp in window]
     result.worst_second = worst_second(window, lo_ms)
+    if os.environ.get("BENCH_DEBUG"):
+        print("latency p50/p99 ms per 5 s:", timeline(window, lo_ms), flush=True)
     cpu = {k: cpu1[k] - cpu0[k] for k in cpu1}
     result.cpu_s = {
         "edge": sum(v for k, v in cpu.items() if k.startswith("edge ")),
@@ -480,6 +482,17 @@ def run_shape(
         result.missing += sum(int(s.get("missing", 0)) for s in subs.values())
         result.registered.append(len(stats.get("robots", {})))
     return result
+
+
+def timeline(window: list[tuple[float, int]], start_ms: float, step_s: int = 5) -> str:
+    """Latency p50/p99 (ms) of the records published in each ``step_s`` of the window."""
+    steps: dict[int, list[float]] = {}
+    for recv, stamp in window:
+        steps.setdefault(int((stamp - start_ms) // (1000 * step_s)), []).append(recv * 1000 - stamp)
+    return ", ".join(
+        f"+{k * step_s}s {statistics.median(v):.0f}/{percentile(v, 0.99):.0f}"
+        for k, v in sorted(steps.items())
+    )
 
 
 def worst_second(window: list[tuple[float, int]], start_ms: float) -> tuple[float, float] | None:

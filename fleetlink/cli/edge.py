@@ -84,15 +84,12 @@ def console_extensions(token: SecretStr | None, edge_id: str) -> list[ExtensionF
     return [console_extension(token, edge_id)]
 
 
-ZENOH_RUNTIME = (
-    "(rx: (handover: app), tx: (handover: app), net: (handover: app), acc: (handover: app),"
-    " app: (worker_threads: 1))"
-)
-"""The edge's default Zenoh runtime (``ZENOH_RUNTIME`` wins): every Zenoh task of the process on one
-worker thread. At 10,000 samples/s from a thousand publishers, a socket's readiness seen by one
-runtime's thread and handled by another's cost a thread switch a sample: two receive workers
-cost the data plane some 4 µs a sample more than one, and separate runtimes some 4 µs more than
-one shared (bench/bench_fleet.py, 200x5x10: 33 -> 29 µs of edge CPU a record)."""
+ZENOH_RUNTIME = "(rx: (worker_threads: 1))"
+"""The edge's default Zenoh runtime (``ZENOH_RUNTIME`` wins): one receive worker. At 10,000 samples/s
+from a thousand publishers, two workers handing each sample's wake-up between them cost the
+edge's data plane some 4 µs a sample more (bench/bench_fleet.py). Handing every runtime over to
+one thread saved as much again in a client-mode edge, but a router-mode edge (the robots'
+router in the edge's process) then dropped most of a burst: not done."""
 
 
 def run_command(args: argparse.Namespace) -> int:

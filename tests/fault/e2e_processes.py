@@ -51,6 +51,8 @@ class WanProfile:
     name: str
     batch_max_records: int | None
     max_in_flight: int | None
+    delivery: str = "at_least_once"
+    """The edge's ``spool.delivery``."""
 
     @property
     def batch(self) -> int:
@@ -59,7 +61,9 @@ class WanProfile:
 
     @property
     def window(self) -> int:
-        """Records in flight at most: what one fault can make the edge send twice."""
+        """Records one fault may make Kafka hold twice: those in flight, none exactly once."""
+        if self.delivery == "exactly_once":
+            return 0
         return self.batch * (self.max_in_flight or 4)
 
     def settings(self) -> dict[str, int]:
@@ -69,6 +73,10 @@ class WanProfile:
 
 PROFILES = (WanProfile("1x100", 100, 1), WanProfile("defaults", None, None))
 """Every end-to-end fault test runs with one small batch in flight and with the defaults."""
+EXACTLY_ONCE = WanProfile("exactly_once", None, None, "exactly_once")
+"""The defaults with ``spool.delivery: exactly_once``: the faults that can duplicate a batch
+(a lost ack, a killed process, a cut or flapping WAN) must duplicate nothing."""
+WITH_EXACTLY_ONCE = (*PROFILES, EXACTLY_ONCE)
 PROFILE = PROFILES[0]
 """The profile of the test running (``tests/fault/conftest.py: wan_profile`` sets it)."""
 
@@ -285,6 +293,7 @@ def bed(
                 },
                 "spool": {
                     "dir": str(tmp / "spool"),
+                    "delivery": PROFILE.delivery,
                     "segment_bytes": "1MiB",
                     "max_bytes": "64MiB",
                     "fsync": "interval",

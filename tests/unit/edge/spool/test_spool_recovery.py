@@ -184,3 +184,22 @@ def test_both_ledger_files_lost_means_resend_not_loss(tmp_path: Path) -> None:
     assert [f.reason for f in spool.damage()] == ["ledger_missing"]
     assert spool.append(RECORD) == 51
     spool.close()
+
+
+def test_the_origin_lives_as_long_as_the_spool(tmp_path: Path) -> None:
+    """An exactly-once uplink writes each seq of an origin once: the origin must outlive restarts
+    and the loss of one ledger file, and change when the spool starts its seqs again."""
+    fill(tmp_path, 10)
+    with Spool(tmp_path, OPTIONS) as spool:
+        origin = spool.origin
+    assert origin != 0
+    (tmp_path / "ledger").unlink()
+    with Spool(tmp_path, OPTIONS) as spool:
+        assert spool.origin == origin
+    (tmp_path / "ledger").unlink()
+    (tmp_path / "ledger.copy").unlink()
+    with Spool(tmp_path, OPTIONS) as spool:
+        assert spool.origin not in (0, origin)  # the seqs may repeat: a new origin
+    fresh = tmp_path / "other"
+    with Spool(fresh, OPTIONS) as spool:
+        assert spool.origin not in (0, origin)
