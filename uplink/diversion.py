@@ -3,8 +3,9 @@
 * ``refuse``: the record goes to the refused topic (``refusals``); settled as dead-lettered;
 * ``registration``: the uplink writes its own record for an accepted (de)registration
   (``registration_records``), or refuses it like a foreign topic;
-* ``dead_letter``: the edge's dead letter is written with its value as it is and the sender
-  headers set by the uplink (the ones the batch's key proved).
+* ``dead_letter``: the edge's dead letter, if it is one (its stage and reason, only headers an
+  edge writes, each of bounded size: else refused), is written with its value as it is and the
+  sender headers set by the uplink (the ones the batch's key proved).
 
 Each record is settled exactly once through ``settle`` (``retry``: the edge sends the batch
 again; ``dead``: listed as dead-lettered in the ack; neither: delivered).
@@ -15,14 +16,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Protocol
 
-from fleetlink.uplink.dead_letter import DeadLetter
+from fleetlink.uplink.dead_letter import DeadLetter, edge_dead_letter_problem, stamped
 from fleetlink.uplink.identity import Source
 from fleetlink.uplink.policy import Decision
 from fleetlink.uplink.producer import Delivery, DeliveryCallback
 from fleetlink.uplink.refusals import Refusals
 from fleetlink.uplink.registration_records import RegistrationUnavailableError, RegistrationWriter
 from fleetlink.wire import Record
-from fleetlink.wire.robot_events import EDGE_HEADER, IDENTITY_HEADERS, SITE_HEADER
 
 
 class Settle(Protocol):
@@ -90,8 +90,11 @@ class Diversion:
 
     def _dead_letter(self, record: Record, settle: Settle) -> None:
         source = self.source
-        headers = [h for h in record.headers if h[0] not in IDENTITY_HEADERS]
-        headers += [(SITE_HEADER, source.site.encode()), (EDGE_HEADER, source.edge_id.encode())]
+        problem = edge_dead_letter_problem(record.headers)
+        if problem is not None:
+            self._refuse(record, "dead_letter", problem, settle)
+            return
+        headers = stamped(record.headers, source.site, source.edge_id)
         self._produce(
             DeadLetter(record.kafka_topic, record.key, record.value, headers, record.timestamp_ms),
             record,

@@ -48,25 +48,26 @@ from fleetlink.roswire.subscriber import RosSample
 from fleetlink.schemas.codec import Codec
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.wire import SINGLE_OBJECT_MAGIC, PayloadTemplate, Record, single_object
+from fleetlink.wire import headers as names
 from fleetlink.wire.limits import DEFAULT_MAX_RECORD_BYTES, SINGLE_OBJECT_EXTRA, kafka_record_bytes
 from fleetlink.wire.robot_events import EDGE_HEADER, ROBOT_HEADER, SITE_HEADER
 
-H_SOURCE_TOPIC = "fleetlink.source_topic"
-H_ROS_TYPE = "fleetlink.ros_type"
-H_TYPE_HASH = "fleetlink.type_hash"
+H_SOURCE_TOPIC = names.SOURCE_TOPIC
+H_ROS_TYPE = names.ROS_TYPE
+H_TYPE_HASH = names.TYPE_HASH
 H_SITE = SITE_HEADER
 H_ROBOT = ROBOT_HEADER
-H_SEQ = "fleetlink.seq"
-H_MAPPING = "fleetlink.mapping"
+H_SEQ = names.SEQ
+H_MAPPING = names.MAPPING
 H_EDGE = EDGE_HEADER
 # dead letters (the same names the uplink uses for the ones it makes)
-H_DLQ_STAGE = "fleetlink.dlq.stage"
-H_DLQ_REASON = "fleetlink.dlq.reason"
-H_DLQ_TOPIC = "fleetlink.dlq.topic"
-H_DLQ_SIZE = "fleetlink.dlq.size"
-H_DLQ_SHA256 = "fleetlink.dlq.sha256"
-H_DLQ_TRUNCATED = "fleetlink.dlq.truncated"
-H_ROS_KEY = "fleetlink.ros_key"
+H_DLQ_STAGE = names.DLQ_STAGE
+H_DLQ_REASON = names.DLQ_REASON
+H_DLQ_TOPIC = names.DLQ_TOPIC
+H_DLQ_SIZE = names.DLQ_SIZE
+H_DLQ_SHA256 = names.DLQ_SHA256
+H_DLQ_TRUNCATED = names.DLQ_TRUNCATED
+H_ROS_KEY = names.ROS_KEY
 
 Matcher = Callable[[str], Sequence[BoundMapping]]
 _PLAN_CACHE_SIZE = 4096

@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import fastavro
+import pytest
 
 from fleetlink.common.metrics import NullMetrics
 from fleetlink.schemas.single_object import fingerprint
@@ -202,7 +203,11 @@ def test_registrations_are_written_anew_and_a_held_robot_cannot_be_claimed() -> 
 
 def test_dead_letters_carry_the_sender_the_key_proved() -> None:
     up = Uplink()
-    dl = Record("fleetlink.dead-letter", None, b"raw", (("fleetlink.dlq.reason", b"bad cdr"),), 0, 1, True)
+    sent = (
+        ("fleetlink.dlq.stage", b"decode"),
+        ("fleetlink.dlq.reason", b"bad cdr"),
+    )
+    dl = Record("fleetlink.dead-letter", None, b"raw", sent, 0, 1, True)
     ack = up.run(batch(dl, schemas={}))
     assert isinstance(ack, Ack)
     assert ack.status == "ok"
@@ -211,3 +216,24 @@ def test_dead_letters_carry_the_sender_the_key_proved() -> None:
     assert (topic, value) == ("fleetlink.dead-letter", b"raw")
     assert ("fleetlink.site", b"site-b") in headers
     assert ("fleetlink.edge", b"edge-b") in headers
+
+
+@pytest.mark.parametrize(
+    ("headers", "why"),
+    [
+        ((("fleetlink.dlq.reason", b"bad cdr"),), "no fleetlink.dlq.stage header"),
+        ((("fleetlink.dlq.stage", b"x"), ("fleetlink.dlq.reason", b"y"), ("x-forged", b"1")), "'x-forged'"),
+        ((("fleetlink.dlq.stage", b"x"), ("fleetlink.dlq.reason", b"y" * 5000)), "5000 bytes"),
+    ],
+)
+def test_a_dead_letter_no_edge_would_write_goes_to_the_refused_topic(
+    headers: tuple[tuple[str, bytes], ...], why: str
+) -> None:
+    up = Uplink()
+    ack = up.run(batch(Record("fleetlink.dead-letter", None, b"raw", headers, 0, 1, True), schemas={}))
+    assert isinstance(ack, Ack)
+    assert ack.status == "ok"
+    assert [f.dead_lettered for f in ack.failures] == [True]
+    assert why in ack.failures[0].reason
+    [(topic, _, _value, _headers)] = up.sink.out
+    assert topic == "fleetlink.refused"
