@@ -255,7 +255,12 @@ def start_site(
     }
     stats_path = work / f"edge-{site}.stats"
     pid = start_process(
-        stack, work, f"edge-{site}", edge, ["edge", "run", "--stats-file", str(stats_path)], stats_path.exists
+        stack,
+        work,
+        f"edge-{site}",
+        edge,
+        ["edge", "run", "--stats-file", str(stats_path), "--stats-interval", "5"],
+        stats_path.exists,
     )
     return site_port, router.pid, pid, stats_path
 

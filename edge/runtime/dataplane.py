@@ -19,10 +19,12 @@ again from the next sample of each key. See docs/edge.md ("The receive path").
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import os
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,6 +46,30 @@ from fleetlink.schemas.layout_program import layout_program
 log = logging.getLogger(__name__)
 
 COLLECT_S = 0.002
+DATAPLANE_RUNTIME = (
+    "(rx: (handover: app), tx: (handover: app), net: (handover: app), acc: (handover: app),"
+    " app: (worker_threads: 1))"
+)
+"""The Zenoh runtime of the data plane's own session (a client of one router, receiving only):
+every task on one thread. Its socket's readiness was seen by one runtime's thread and its
+samples read on another's, a thread switch a sample (bench/bench_fleet.py)."""
+
+
+@contextlib.contextmanager
+def _environment(name: str, value: str) -> Iterator[None]:
+    """``name=value`` in the environment while the body runs (the native session's Zenoh reads
+    its runtime settings from the environment when it opens its first session)."""
+    before = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[name]
+        else:
+            os.environ[name] = before
+
+
 """After a first sample, how long ``take`` waits for more (at 10,000 samples/s some 20 come
 together, so the per-take work is shared; a sample waits at most this long for it)."""
 MAX_TOPICS = 65536
@@ -127,9 +153,12 @@ class NativeSource:
     ) -> None:
         config = dataplane_config(python_config)
         try:
-            self.plane = DataPlane(
-                None, [(key, json.dumps(value)) for key, value in config.items()], max_items, max_bytes
-            )
+            with _environment(
+                "ZENOH_RUNTIME", os.environ.get("FLEETLINK_DATAPLANE_RUNTIME", DATAPLANE_RUNTIME)
+            ):
+                self.plane = DataPlane(
+                    None, [(key, json.dumps(value)) for key, value in config.items()], max_items, max_bytes
+                )
         except (ValueError, RuntimeError) as exc:
             raise RuntimeSetupError(f"zenoh: the edge's receive path cannot start: {exc}") from None
         self.max_value_bytes = max_value_bytes

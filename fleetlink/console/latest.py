@@ -7,12 +7,17 @@ fields; long arrays cut to their first ``MAX_ITEMS`` items, bytes as hex). A val
 a link (a string field ``url`` or ``uri`` starting with ``http``; an image record pointing to
 where the picture is kept) is answered with it as ``link``, for the page to show.
 
+A camera's picture (``sensor_msgs/msg/CompressedImage`` in JPEG or PNG, or a raw
+``sensor_msgs/msg/Image`` the console compresses to JPEG when the images extra is installed) is
+answered as ``picture``, a ``data:`` URL the page shows as it is (at most ``MAX_PICTURE_BYTES``).
+
 Over Zenoh the fleet console asks ``fleetlink/<site>/console/latest/<robot>`` (the admin
 token as the attachment, as for every console key).
 """
 
 from __future__ import annotations
 
+import base64
 import math
 import threading
 import time
@@ -21,10 +26,13 @@ from typing import Any
 
 import zenoh
 
+from fleetlink.edge.stages.images import ImageError, compress, content_type_of
 from fleetlink.roswire.names import data_key_expr, parse_data_key
 
 MAX_ITEMS = 32
 MAX_DEPTH = 8
+MAX_PICTURE_BYTES = 2 << 20
+"""The largest picture sent to a page (bytes before base64)."""
 
 
 def plain(value: Any, depth: int = 0) -> Any:  # noqa: PLR0911 - one return per kind of value
@@ -65,6 +73,31 @@ def link_of(value: Any) -> str | None:
             if isinstance(found, str) and found.startswith(("http://", "https://")):
                 return found
     return None
+
+
+def picture_of(typename: str, message: Any) -> str | None:
+    """A ``data:`` URL of the picture ``message`` holds (a compressed or raw camera image), or
+    None: not an image, an encoding the console cannot show, or larger than ``MAX_PICTURE_BYTES``."""
+    data: bytes | None = None
+    content_type = ""
+    if typename == "sensor_msgs/msg/CompressedImage":
+        content_type = content_type_of(str(getattr(message, "format", "")))
+        data = bytes(getattr(message, "data", b""))
+    elif typename == "sensor_msgs/msg/Image":
+        data, content_type = _jpeg_of(message)
+    if not data or not content_type.startswith("image/") or len(data) > MAX_PICTURE_BYTES:
+        return None
+    return f"data:{content_type};base64,{base64.b64encode(data).decode()}"
+
+
+def _jpeg_of(message: Any) -> tuple[bytes | None, str]:
+    fields = {name: getattr(message, name, None) for name in ("encoding", "height", "width", "step", "data")}
+    fields["is_bigendian"] = getattr(message, "is_bigendian", 0)
+    try:
+        jpeg, _format = compress(fields, "jpeg", quality=70)
+    except (ImageError, ImportError, ValueError, TypeError):  # no pillow, or not a picture we show
+        return None, ""
+    return jpeg, "image/jpeg"
 
 
 class LatestValues:
@@ -120,9 +153,13 @@ class LatestValues:
             taken = dict(got)
         for topic, (typename, payload, at) in sorted(taken.items()):
             try:
-                value = plain(self._decode(payload, typename))
+                message = self._decode(payload, typename)
+                value = plain(message)
             except Exception as exc:  # noqa: BLE001 - shown to the operator, not raised
                 out[topic] = {"type": typename, "error": f"does not decode: {exc}", "at": at}
                 continue
             out[topic] = {"type": typename, "value": value, "at": at, "link": link_of(value)}
+            picture = picture_of(typename, message)
+            if picture is not None:
+                out[topic]["picture"] = picture
         return out

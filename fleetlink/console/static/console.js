@@ -716,6 +716,7 @@
       const cards = Object.entries(values).map(([topic, v]) => el("div", { class: "card", dataset: { topic } },
         el("h3", {}, el("code", { text: topic }), el("span", { class: "muted small", text: ` ${v.type}` })),
         v.link ? el("div", {}, el("a", { href: v.link, rel: "noopener noreferrer", target: "_blank", text: v.link })) : null,
+        v.picture && v.picture.startsWith("data:image/") ? el("img", { class: "picture", src: v.picture, alt: `${topic} at ${fmtTime(v.at)}` }) : null,
         el("pre", { class: "value", text: v.error || JSON.stringify(v.value, null, 1).slice(0, 4000) }),
         el("div", { class: "muted small", text: `at ${fmtTime(v.at)}` })));
       replaceChildren(box, cards.length ? el("div", { class: "cards" }, cards) :
