@@ -32,9 +32,14 @@ from fleetlink.console.kafka_tail import KafkaTail, TailRecord
 from fleetlink.console.operations import CommandRefusedError
 from fleetlink.schemas.errors import SchemaError
 from fleetlink.schemas.single_object import confluent_frame
+from fleetlink.uplink.calls.plan import CORRELATION_HEADER, GOAL_HEADER
+from fleetlink.uplink.commands.plan import COMMAND_ID_HEADER
 
 HEX_BYTES = 4096
-COMMAND_ID_HEADER = "fleetlink-command-id"
+ID_HEADERS = {"command": COMMAND_ID_HEADER, "service": CORRELATION_HEADER, "action": GOAL_HEADER}
+"""The header that names a record of each kind of mapping (what its statuses are found by)."""
+VALUE_SUFFIXES = {"command": "", "service": "_Request", "action": "_Goal"}
+"""What a record of each kind holds: the command's message, the service's request, the goal."""
 
 _PRIMITIVE_DEFAULTS: dict[str, Any] = {
     "null": None,
@@ -202,11 +207,16 @@ class KafkaDeadLetters:
 
 
 class StatusBook:
-    """Status records by command id, the newest ``keep`` commands (fed by a ``KafkaTail``)."""
+    """Status records by command id, the newest ``keep`` commands (fed by a ``KafkaTail``). A book
+    of call outcomes (replies, goal results) keys them by ``id_field`` (``correlation_id``,
+    ``goal_id``) instead."""
 
-    def __init__(self, decode: Callable[[bytes], dict[str, Any]], *, keep: int = 2000) -> None:
+    def __init__(
+        self, decode: Callable[[bytes], dict[str, Any]], *, keep: int = 2000, id_field: str = "command_id"
+    ) -> None:
         self._decode = decode
         self.keep = keep
+        self.id_field = id_field
         self._by_id: OrderedDict[str, list[dict[str, Any]]] = OrderedDict()
         self._lock = threading.Lock()
 
@@ -214,7 +224,7 @@ class StatusBook:
         """Add one status record to its command's list; the command least recently heard of beyond
         ``keep`` is forgotten."""
         datum = self._decode(record.value)
-        command_id = str(datum.get("command_id", ""))
+        command_id = str(datum.get(self.id_field, ""))
         entry = {
             "status": str(datum.get("status", "")),
             "site": str(datum.get("site", "")),
@@ -235,8 +245,9 @@ class StatusBook:
 
 
 class KafkaCommands:
-    """Sends the console's commands as records on the command mappings' Kafka topics; their statuses
-    come from a ``StatusBook``."""
+    """Sends the console's commands, service calls and action goals as records on their mappings'
+    Kafka topics; their statuses come from ``StatusBook``s (the command status topic, the replies
+    and results topics)."""
 
     def __init__(
         self,
@@ -245,18 +256,19 @@ class KafkaCommands:
         *,
         schema_for: Callable[[str, str], dict[str, Any]],
         register: Callable[[str, dict[str, Any]], int],
-        statuses: StatusBook,
+        statuses: StatusBook | Sequence[StatusBook],
         robots: Callable[[], Sequence[str]],
         timeout_s: float = 10.0,
     ) -> None:
-        """``mappings``: ``{name, from, to, type}``; ``schema_for(topic, ros_type)`` the value
-        schema to write with; ``register(subject, schema)`` its registry id; ``robots()`` the
-        robots the registrations topic knows."""
+        """``mappings``: ``{name, from, to, type}`` and ``kind`` (``command``, the default,
+        ``service`` or ``action``); ``schema_for(topic, ros_type)`` the value schema to write with;
+        ``register(subject, schema)`` its registry id; ``robots()`` the robots the registrations
+        topic knows."""
         self._mappings = {str(m["name"]): dict(m) for m in mappings}
         self._producer = Producer({**producer_config, "linger.ms": 0})
         self._schema_for = schema_for
         self._register = register
-        self._statuses = statuses
+        self._books = [statuses] if isinstance(statuses, StatusBook) else list(statuses)
         self._robots = robots
         self.timeout_s = timeout_s
         self._lock = threading.Lock()
@@ -264,7 +276,10 @@ class KafkaCommands:
     def mappings(self) -> list[dict[str, Any]]:
         """The command mappings an operator may use: name, from, to, type, robot, broadcast."""
         return [
-            {k: m.get(k) for k in ("name", "from", "to", "type", "robot", "broadcast")}
+            {
+                k: m.get(k, "command" if k == "kind" else None)
+                for k in ("name", "kind", "from", "to", "type", "robot", "broadcast")
+            }
             for m in self._mappings.values()
         ]
 
@@ -281,7 +296,8 @@ class KafkaCommands:
         known = set(self._robots())
         if robot not in known:
             raise CommandRefusedError(f"robot {robot!r} is not registered at any site")
-        topic, ros_type = str(found["from"]), str(found["type"])
+        kind = str(found.get("kind", "command"))
+        topic, ros_type = str(found["from"]), str(found["type"]) + VALUE_SUFFIXES[kind]
         try:
             schema = self._schema_for(topic, ros_type)
             schema_id = self._register(f"{topic}-value", schema)
@@ -293,7 +309,8 @@ class KafkaCommands:
             fastavro.schemaless_writer(body, fastavro.parse_schema(json.loads(json.dumps(schema))), datum)
         except (ValueError, TypeError) as exc:
             raise CommandRefusedError(f"the value does not fit {ros_type}: {exc}") from None
-        command_id = f"console-{uuid.uuid4().hex[:12]}"
+        # a goal's id is a UUID (the action protocol's); commands and calls get a readable one
+        command_id = str(uuid.uuid4()) if kind == "action" else f"console-{uuid.uuid4().hex[:12]}"
         delivered: list[Any] = []
         done = threading.Event()
 
@@ -306,7 +323,7 @@ class KafkaCommands:
                 topic,
                 key=robot.encode(),
                 value=confluent_frame(schema_id, body.getvalue()),
-                headers=[(COMMAND_ID_HEADER, command_id.encode()), ("fleetlink-console-user", user.encode())],
+                headers=[(ID_HEADERS[kind], command_id.encode()), ("fleetlink-console-user", user.encode())],
                 timestamp=int(time.time() * 1000),
                 on_delivery=report,
             )
@@ -326,8 +343,14 @@ class KafkaCommands:
         }
 
     def statuses(self, command_ids: list[str]) -> dict[str, list[dict[str, Any]]]:
-        """The status records of these commands, oldest first."""
-        return self._statuses.of(command_ids)
+        """The status records of these commands, calls and goals, oldest first."""
+        out: dict[str, list[dict[str, Any]]] = {c: [] for c in command_ids}
+        for book in self._books:
+            for command_id, entries in book.of(command_ids).items():
+                out[command_id].extend(entries)
+        for entries in out.values():
+            entries.sort(key=lambda e: e["at_ms"] if isinstance(e["at_ms"], int) else 0)
+        return out
 
     def close(self) -> None:
         """Flush and drop the producer (the console is stopping)."""

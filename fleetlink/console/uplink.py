@@ -166,14 +166,23 @@ class UplinkConsole:
         statuses = KafkaTail(consumer, config.topics.command_status, on_record=book.on_record).start()
         self._tails = [dead, statuses]
         ops.dead_letters = KafkaDeadLetters(dead)
-        if config.commands:
+        if config.commands or config.services or config.actions:
             registry = self._registry = SchemaRegistry(config.registry.url)
             registry.start()
+            books = [book]
+            outcomes = [(service.reply_to, "correlation_id") for service in config.services] + [
+                (action.result_to, "goal_id") for action in config.actions
+            ]
+            for topic, id_field in outcomes:
+                calls = StatusBook(lambda value: decode_registered(registry, value), id_field=id_field)
+                books.append(calls)
+                self._tails.append(KafkaTail(consumer, topic, on_record=calls.on_record).start())
             ops.commands = self._commands = KafkaCommands(
                 kafka.producer_config(),
                 [
                     {
                         "name": m.name,
+                        "kind": "command",
                         "from": m.from_,
                         "to": m.to,
                         "type": m.type,
@@ -181,10 +190,18 @@ class UplinkConsole:
                         "broadcast": m.broadcast,
                     }
                     for m in config.commands
+                ]
+                + [
+                    {"name": m.name, "kind": "service", "from": m.from_, "to": m.to, "type": m.type}
+                    for m in config.services
+                ]
+                + [
+                    {"name": m.name, "kind": "action", "from": m.from_, "to": m.to, "type": m.type}
+                    for m in config.actions
                 ],
                 schema_for=lambda topic, ros_type: command_schema(registry, topic, ros_type),
                 register=registry.register,
-                statuses=book,
+                statuses=books,
                 robots=self._robots,
             )
         return ops
@@ -233,6 +250,20 @@ def decode_status(value: bytes) -> dict[str, Any]:
 
 
 _STATUS = fastavro.parse_schema(json.loads(json.dumps(STATUS_SCHEMA)))
+
+
+def decode_registered(registry: SchemaRegistry, value: bytes) -> dict[str, Any]:
+    """A record the uplink wrote (a call's reply, a goal's result): Confluent header, then the Avro
+    body of the schema its id names in the registry (``{}`` for anything else)."""
+    if len(value) < 5 or value[0] != 0:
+        return {}
+    try:
+        schema = registry.schema_by_id(int.from_bytes(value[1:5], "big"))
+        datum = fastavro.schemaless_reader(io.BytesIO(value[5:]), fastavro.parse_schema(schema))
+    except (RegistryError, ValueError, EOFError) as exc:
+        log.debug("console: an outcome record does not decode: %s", exc)
+        return {}
+    return datum if isinstance(datum, dict) else {}
 
 
 def command_schema(registry: SchemaRegistry, topic: str, ros_type: str) -> dict[str, Any]:

@@ -369,3 +369,70 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
             if sim.poll() is None:
                 sim.kill()
                 sim.wait(10)
+
+
+def test_an_operator_docks_a_robot_and_calls_its_e_stop_from_the_console(
+    kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
+) -> None:
+    """The fleet console lists the service and action mappings beside the command ones; an
+    operator sends a Dock goal and an e-stop request to a robot (a record on each mapping's Kafka
+    topic, as an app writes one) and follows their outcomes from the results and replies topics."""
+    import httpx
+
+    from fleetlink.common.console_config import ConsoleSection
+    from fleetlink.console.uplink import UplinkConsole, console_extensions
+    from fleetlink.console.users import hash_password
+
+    users = tmp_path / "users.yaml"
+    users.write_text(
+        f"users:\n  - {{name: lin, role: operator, password_hash: '{hash_password('operator-pass-1')}'}}\n"
+    )
+    with call_bed(kafka_bootstrap, schema_registry_url) as bed:
+        _register(bed, "tb4_01")
+        console = ConsoleSection(listen="127.0.0.1:0", token_env=None, users_file=users, poll_interval=0.5)
+        config = bed.config.model_copy(update={"console": console})
+        with (
+            Repeater(repeater_config(bed.site, tmp_path / "rep")),
+            fleet(bed.site, bed.requests.ts, LedLog()) as robots,
+        ):
+            robots.add_robot("tb4_01")
+            with Uplink(config, extensions=console_extensions(config)) as uplink:
+                _wait_registered(uplink, "tb4_01")
+                [extension] = uplink.extensions
+                assert isinstance(extension, UplinkConsole)
+                base = f"{extension.url}/console/"
+                change = {"X-Fleetlink-Console": "1"}
+                with httpx.Client(base_url=base, auth=("lin", "operator-pass-1"), timeout=20) as operator:
+                    listed = operator.get("api/command-mappings").json()["mappings"]
+                    assert {(m["name"], m["kind"]) for m in listed} == {
+                        ("estop", "service"),
+                        ("slow", "service"),
+                        ("dock", "action"),
+                    }
+                    goal = operator.post(
+                        "api/commands/send",
+                        json={"mapping": "dock", "robot": "tb4_01", "value": "{}"},
+                        headers=change,
+                    )
+                    assert goal.status_code == 201, goal.text
+                    stop = operator.post(
+                        "api/commands/send",
+                        json={"mapping": "estop", "robot": "tb4_01", "value": "e_stop_on: true"},
+                        headers=change,
+                    )
+                    assert stop.status_code == 201, stop.text
+                    ids = [goal.json()["result"]["command_id"], stop.json()["result"]["command_id"]]
+                    uuid.UUID(ids[0])  # a goal id is a UUID, as the action protocol's
+
+                    def outcomes() -> dict[str, list[str]]:
+                        found = operator.get(f"api/commands/status?ids={','.join(ids)}").json()["statuses"]
+                        return {k: [s["status"] for s in v] for k, v in found.items()}
+
+                    wait_until(
+                        lambda: outcomes()[ids[0]][-1:] == ["succeeded"] and outcomes()[ids[1]] == ["ok"],
+                        timeout=30,
+                        message=f"dock succeeded and e-stop answered: {outcomes()}",
+                    )
+                    assert outcomes()[ids[0]] == ["accepted", "succeeded"]
+                assert robots.model("tb4_01").docked is True
+                assert robots.model("tb4_01").e_stop is True
