@@ -78,13 +78,13 @@ def call_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         client = RosServiceClient(node, args.service, args.type).start()
         print(f"waiting for service {client.service} ...", file=out)
         if not client.wait_for_server(args.timeout):
-            print(f"no server for {client.service} within {args.timeout:g} s", file=out)
+            print(f"no server for {client.service} within {args.timeout:g} s", file=sys.stderr)
             return 1
         print(f"requester: making request: {_dump(to_data(request))}", file=out)
         try:
             raw = client.call_cdr(bytes(ts.serialize_cdr(request, f"{args.type}_Request")), args.timeout)
         except ServiceError as exc:
-            print(f"no response: {exc.reason}", file=out)
+            print(f"no response: {exc.reason}", file=sys.stderr)
             return 1
         response = ts.deserialize_cdr(raw, f"{args.type}_Response")
         print(f"response:\n{_dump(to_data(response))}", file=out)
@@ -106,7 +106,7 @@ def send_goal_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int
         goal = from_data(ts, f"{args.type}_Goal", _values(args.values))
         client = RosActionClient(node, args.action, args.type).start()
         if not client.wait_for_server(args.timeout):
-            print(f"no action server {client.action} within {args.timeout:g} s", file=out)
+            print(f"no action server {client.action} within {args.timeout:g} s", file=sys.stderr)
             return 1
         goal_id = uuid.uuid4()
         if args.feedback:
@@ -122,12 +122,12 @@ def send_goal_command(args: argparse.Namespace, out: TextIO = sys.stdout) -> int
                 goal_id.bytes, bytes(ts.serialize_cdr(goal, f"{args.type}_Goal")), args.timeout
             )
             if not answer.accepted:
-                print("goal rejected", file=out)
+                print("goal rejected", file=sys.stderr)
                 return 1
             print(f"goal accepted with ID: {goal_id.hex}", file=out)
             result = client.get_result(goal_id.bytes, args.timeout)
         except ServiceError as exc:
-            print(f"no answer: {exc.reason}", file=out)
+            print(f"no answer: {exc.reason}", file=sys.stderr)
             return 1
         message = ts.deserialize_cdr(result.result_cdr, f"{args.type}_Result")
         status = result.status.name if isinstance(result.status, GoalStatus) else str(result.status)

@@ -303,3 +303,55 @@ def test_pub_reaches_the_robot(zenoh_router: str, domain: int, sim: subprocess.P
     assert result.stdout.startswith("publishing #1 on /tb4_01/cmd_lightring: ")
     assert sim.stdout is not None
     assert sim.stdout.readline().strip() == "tb4_01 light ring: red"
+
+
+def wait_banner(sim: subprocess.Popen[str]) -> None:
+    """Read the simulator's output until its banner (its robots serve from then on)."""
+    assert sim.stdout is not None
+    for _ in range(20):
+        line = sim.stdout.readline()
+        if not line or line.startswith("simulating"):
+            break
+    assert line.startswith("simulating"), line
+
+
+def test_ros_call_and_action_send_goal_reach_a_simulated_robot(
+    zenoh_router: str, domain: int, sim: subprocess.Popen[str]
+) -> None:
+    """As ``ros2 service call`` and ``ros2 action send_goal``: the robot's e-stop and Dock over
+    rmw_zenoh, their response and result printed as YAML; exit codes tell a missing service."""
+    wait_banner(sim)
+    where = ["-e", zenoh_router, "--domain-id", str(domain)]
+    call = subprocess.run(
+        fleetlink(
+            "ros", "call", "/tb4_01/e_stop", "irobot_create_msgs/srv/EStop", "{e_stop_on: true}", *where
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert call.returncode == 0, call.stderr
+    assert "success: true" in call.stdout
+    assert "e-stop on" in call.stdout
+    goal = subprocess.run(
+        fleetlink(
+            "ros", "action", "send_goal", "/tb4_02/dock", "irobot_create_msgs/action/Dock", "-f", *where
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert goal.returncode == 0, goal.stderr
+    assert "is_docked: true" in goal.stdout
+    assert "sees_dock" in goal.stdout  # the feedback, printed with -f
+    missing = subprocess.run(
+        fleetlink("ros", "call", "/tb4_09/e_stop", "irobot_create_msgs/srv/EStop", "--timeout", "2", *where),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert missing.returncode != 0
+    assert missing.stderr.strip()
