@@ -99,6 +99,9 @@ for only some 350 sessions on its own host (as in deploy/zenoh/edge-router.json5
 
 
 class EdgeAgent:
+    """The edge agent: receives the mapped ROS topics, turns samples into records, spools them and sends
+    them to the uplink; also registers robots and uploads claim-checked payloads."""
+
     def __init__(
         self,
         config: EdgeConfig,
@@ -137,6 +140,9 @@ class EdgeAgent:
 
     # -- lifecycle -------------------------------------------------------------------------------
     def start(self) -> EdgeAgent:
+        """Load the type store, open the spool and the Zenoh session, start the data plane, the WAN
+        senders, processing, registration and subscriptions (once); returns ``self``. On failure whatever
+        had started is torn down again."""
         with self._lock:
             if self._started:
                 return self
@@ -391,6 +397,7 @@ class EdgeAgent:
 
     @property
     def session(self) -> zenoh.Session:
+        """The agent's Zenoh session; raises ``RuntimeSetupError`` when the agent is not started."""
         if self._session is None:
             raise RuntimeSetupError("the edge agent is not started")
         return self._session
@@ -430,6 +437,7 @@ class EdgeAgent:
             self._subscriptions.refresh()
 
     def remove_mapping(self, name: str) -> bool:
+        """Remove a mapping at runtime by name (subscriptions follow); False if there is none."""
         removed = self.table.remove_mapping(name)
         if removed and self._subscriptions is not None:
             self._subscriptions.refresh()
@@ -456,9 +464,11 @@ class EdgeAgent:
 
     # -- state -----------------------------------------------------------------------------------
     def subscribed_topics(self) -> dict[str, str | None]:
+        """Each subscribed topic -> the ROS type it is taken as (``None``: any); empty before ``start``."""
         return {} if self._subscriptions is None else self._subscriptions.topics()
 
     def robots(self) -> dict[str, str]:
+        """The robots registered now: robot name -> robot type."""
         return self.table.robots()
 
     def snapshot(self) -> dict[str, Any]:

@@ -54,6 +54,8 @@ def default_edge_id() -> str:
 
 
 class RosSection(Section):
+    """The ROS side: domain id, distro, extra message packages and the rmw_zenoh attachment version."""
+
     domain_id: int = Field(default=0, ge=0, le=232)
     distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "jazzy"
     """Decides type hashes and the rmw_zenoh wire details."""
@@ -118,6 +120,8 @@ class MappingConfig(Section):
         return _check_template(value, info, "key template", topic=False)
 
     def spec(self) -> MappingSpec:
+        """This mapping as a ``MappingSpec``; without a ``linger``, an aggregate stage's hop or window (at
+        most 5s) is used, else ``None`` (``wan.linger``)."""
         return MappingSpec(
             name=self.name,
             source=self.from_,
@@ -168,12 +172,16 @@ class RobotMappingConfig(MappingConfig):
 
 
 class RobotTypeConfig(Section):
+    """A robot type: the robot namespaces it matches and the mappings each of its robots gets."""
+
     match: NamespaceGlob
     """Glob over robot namespaces, e.g. ``/tb4_*``."""
     mappings: list[RobotMappingConfig] = []
 
 
 class RegistrationSection(Section):
+    """How robots register: discovered in the ROS graph or explicitly on a topic."""
+
     topic: RosTopic = "/fleetlink/register"
     """ROS topic on which robots may register explicitly."""
     discover: bool = True
@@ -183,6 +191,8 @@ class RegistrationSection(Section):
 
 
 class SpoolSection(Section):
+    """The durable spool on local disk: its folder, size, full policy and fsync policy."""
+
     dir: Path
     delivery: Literal["at_least_once", "exactly_once"] = "at_least_once"
     """How the spool's records reach Kafka: ``exactly_once`` has the uplink write each record once
@@ -204,6 +214,7 @@ class SpoolSection(Section):
         return self
 
     def options(self) -> SpoolOptions:
+        """The spool's options, with the durations in seconds and milliseconds."""
         return SpoolOptions(
             max_bytes=int(self.max_bytes),
             segment_bytes=int(self.segment_bytes),
@@ -222,6 +233,7 @@ class MemorySection(Section):
     max_records: int = Field(default=100_000, ge=1)
 
     def buffer(self) -> MemoryBuffer:
+        """A new, empty memory buffer with these bounds."""
         return MemoryBuffer(max_bytes=int(self.max_bytes), max_records=self.max_records)
 
 
@@ -243,6 +255,8 @@ class IntakeSection(Section):
 
 
 class WanSection(Section):
+    """How records cross the WAN to the uplink: batching, acknowledgements, retries, compression."""
+
     # Defaults measured with bench/bench_e2e.py (docs/benchmarks.md): batches of 500 records cost
     # the edge 14% and the uplink 12% more CPU per record than batches of up to 2,000 (each batch
     # is a Zenoh query with its reply callbacks on both sides); 1 MiB, about 1,500 IMU records, is
@@ -287,6 +301,8 @@ class TopicsSection(Section):
 
 
 class AdminSection(Section):
+    """The edge's admin HTTP API."""
+
     listen: str = "127.0.0.1:8480"
     """host:port of the admin HTTP API."""
 
@@ -362,6 +378,7 @@ class EdgeConfig(Section):
         return self
 
     def robot_type_specs(self) -> list[RobotTypeSpec]:
+        """Every robot type as a ``RobotTypeSpec`` with its mapping templates."""
         return [
             RobotTypeSpec(name=n, match=t.match, mappings=tuple(m.spec() for m in t.mappings))
             for n, t in self.robot_types.items()

@@ -19,6 +19,8 @@ from fleetlink.wire import Batch
 
 @dataclass(frozen=True, slots=True)
 class Refused:
+    """A batch refused whole: which check failed (``reason``) and what was wrong (``detail``)."""
+
     reason: str
     """``identity``, ``headers`` or ``schema`` (a metric label)."""
     detail: str
@@ -26,17 +28,24 @@ class Refused:
 
 @dataclass(frozen=True, slots=True)
 class Admitted:
+    """A batch that may be produced: its checked sender and the routes of its diverted topics."""
+
     source: Source
     routes: Mapping[str, Decision]
     """The batch's topics whose records do not go out as they are (empty: none)."""
 
 
 class Admission:
+    """Checks each decoded batch before any record is produced: sender, schema texts, then the topic
+    policy."""
+
     def __init__(self, policy: TopicPolicy, ids: SchemaIds) -> None:
         self._policy = policy
         self._ids = ids
 
     def check(self, source: Source, batch: Batch) -> Admitted | Refused:
+        """Admit ``batch`` from ``source`` with its topics' routes, or refuse it at the first check that
+        fails (schema texts that match are learnt on the way)."""
         problem = identity_problem(source, batch)
         if problem is not None:
             return Refused("identity", problem)

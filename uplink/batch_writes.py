@@ -27,6 +27,7 @@ class DeliveryTally:
         self._lock = threading.Lock()
 
     def delivered(self, report: Delivery) -> None:
+        """Count one delivery report; after the last, call ``done`` with None or the first error."""
         with self._lock:
             if report.error is not None:
                 self._problems.append(str(report.error))

@@ -133,6 +133,9 @@ def default_uplink_id() -> str:
 
 
 class UplinkConfig(Section):
+    """Everything one uplink process needs: Kafka and the schema registry, the sites it serves, and the
+    command, service and action mappings."""
+
     id: KeyChunk = Field(default_factory=default_uplink_id)
     """Names this uplink in the delivery figures consoles add up (``fleetlink/<site>/delivery/<id>``)."""
     kafka: KafkaSection

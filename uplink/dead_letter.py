@@ -17,6 +17,9 @@ from fleetlink.wire.robot_events import IDENTITY_HEADERS
 
 @dataclass(frozen=True, slots=True)
 class DeadLetter:
+    """A record the uplink writes in place of one it could not deliver as it was: where to, key, value,
+    headers, timestamp."""
+
     topic: str
     key: bytes | None
     value: bytes

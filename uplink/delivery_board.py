@@ -29,6 +29,9 @@ class _Site:
 
 
 class DeliveryBoard:
+    """This uplink's running delivery totals per site (thread-safe; at most ``max_sites`` sites and
+    ``max_topics`` topics a site)."""
+
     def __init__(self, *, max_sites: int = 10_000, max_topics: int = 10_000) -> None:
         self.max_sites = max_sites
         self.max_topics = max_topics
@@ -38,6 +41,8 @@ class DeliveryBoard:
     def on_batch(
         self, site: str, status: str, topics: Mapping[str, int] | None = None, dead_lettered: int = 0
     ) -> None:
+        """Count one answered batch of ``site``: its status, the records Kafka acknowledged per topic, its
+        dead letters (beyond the bounds, a new site or topic is not counted)."""
         with self._lock:
             entry = self._sites.get(site)
             if entry is None:
@@ -52,6 +57,7 @@ class DeliveryBoard:
                     entry.records += n
 
     def sites(self) -> list[str]:
+        """The sites whose batches this uplink answered, sorted."""
         with self._lock:
             return sorted(self._sites)
 

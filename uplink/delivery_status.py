@@ -36,6 +36,9 @@ SAMPLES = 200
 
 
 class DeliveryStatus:
+    """Answers queries for this uplink's delivery figures: one reply per site it served, on that site's own
+    key."""
+
     def __init__(
         self,
         uplink_id: str,
@@ -53,13 +56,17 @@ class DeliveryStatus:
         self.answered = 0
 
     def start(self, session: zenoh.Session) -> DeliveryStatus:
+        """Declare the queryable on ``fleetlink/*/delivery/<uplink_id>`` on ``session``; returns self."""
         self._queryable.start(session, f"fleetlink/*/delivery/{self.uplink_id}")
         return self
 
     def stop(self) -> None:
+        """Undeclare the queryable and wait for the answers under way."""
         self._queryable.stop()
 
     def figures(self, site: str) -> dict[str, object] | None:
+        """The reply for ``site``: its delivery totals and recent latencies, with the times in seconds
+        since the epoch (None: a site this uplink never served)."""
         found = self.board.figures(site)
         if found is None:
             return None

@@ -26,10 +26,16 @@ from fleetlink.wire import Record
 
 
 class Settle(Protocol):
-    def __call__(self, record: Record, *, retry: str | None = None, dead: str | None = None) -> None: ...
+    """Settles a record of a batch, exactly once."""
+
+    def __call__(self, record: Record, *, retry: str | None = None, dead: str | None = None) -> None:
+        """Settle ``record``: ``retry`` has the edge send the batch again, ``dead`` lists it as
+        dead-lettered in the ack; neither: delivered."""
 
 
 class Producer(Protocol):
+    """What the diversion needs of the Kafka producer."""
+
     def produce(
         self,
         topic: str,
@@ -39,7 +45,8 @@ class Producer(Protocol):
         headers: list[tuple[str, bytes]],
         timestamp_ms: int,
         on_delivery: DeliveryCallback,
-    ) -> None: ...
+    ) -> None:
+        """Hand one record to Kafka; ``on_delivery`` hears once how it went."""
 
 
 class Diversion:
@@ -61,6 +68,8 @@ class Diversion:
         self._registrations = registrations
 
     def handle(self, record: Record, settle: Settle) -> None:
+        """Write ``record`` where its topic's decision routes it (refused topic, registrations, dead
+        letters) and settle it once Kafka answers."""
         decision = self.routes[record.kafka_topic]
         if decision.route == "refuse":
             self._refuse(record, "topic", decision.reason, settle)

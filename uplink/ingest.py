@@ -56,7 +56,8 @@ class Sink(Protocol):
         headers: Sequence[tuple[str, bytes]] = (),
         timestamp_ms: int = 0,
         on_delivery: Callable[[Delivery], None],
-    ) -> None: ...
+    ) -> None:
+        """Hand one record to Kafka; ``on_delivery`` is called once with its delivery report."""
 
     def produce_raw(
         self,
@@ -67,11 +68,14 @@ class Sink(Protocol):
         headers: list[tuple[str, bytes]],
         timestamp_ms: int,
         callback: RawCallback,
-    ) -> None: ...
+    ) -> None:
+        """Hand one record to Kafka with librdkafka's own delivery ``callback`` (the per-record fast path)."""
 
 
 @dataclass
 class IngestStats:
+    """Batch and record counters of the ingest, shared by threads (change them under ``lock``)."""
+
     batches: int = 0
     batches_ok: int = 0
     batches_failed: int = 0
@@ -129,6 +133,8 @@ class BatchJob:
         self._produced_at = 0.0
 
     def run(self) -> None:
+        """Produce every record (Confluent-framed, diverted or dead-lettered); ``on_done`` hears the ack
+        once all are settled."""
         records = self._batch.records
         if self._counted:
             with self._stats.lock:

@@ -36,6 +36,8 @@ _NOT_OVERRIDABLE = {
 
 
 class SaslSection(Section):
+    """SASL credentials; give exactly one of ``password``, ``password_file`` and ``password_env``."""
+
     mechanism: Literal["PLAIN", "SCRAM-SHA-256", "SCRAM-SHA-512"] = "SCRAM-SHA-512"
     username: str
     password: SecretStr | None = None
@@ -50,6 +52,8 @@ class SaslSection(Section):
         return self
 
     def resolve_password(self) -> SecretStr:
+        """The password from whichever source is given; ``UnsafeKafkaSettingError`` when the file or
+        variable cannot be read."""
         if self.password is not None:
             return self.password
         if self.password_file is not None:
@@ -67,6 +71,8 @@ class SaslSection(Section):
 
 
 class SslSection(Section):
+    """TLS to the brokers: CA, client certificate and key, and whether to verify the broker's host name."""
+
     ca_location: Path | None = None
     certificate_location: Path | None = None
     key_location: Path | None = None
@@ -113,6 +119,8 @@ class KafkaSection(Section):
         return self
 
     def common_config(self) -> dict[str, str | int | float | bool]:
+        """The librdkafka settings producers and consumers share: brokers, client id, security and
+        credentials (in clear: log only :func:`redacted` copies)."""
         conf: dict[str, str | int | float | bool] = {
             "bootstrap.servers": self.bootstrap_servers,
             "security.protocol": self.security_protocol,
@@ -141,6 +149,8 @@ class KafkaSection(Section):
         return int(self.producer_overrides.get("message.max.bytes", self.message_max_bytes))
 
     def producer_config(self) -> dict[str, str | int | float | bool]:
+        """The librdkafka producer settings: this section's, then ``producer_overrides``, then the pinned
+        ``acks=all`` and idempotence."""
         conf = self.common_config()
         conf.update(
             {
@@ -155,6 +165,8 @@ class KafkaSection(Section):
         return conf
 
     def consumer_config(self, group_id: str) -> dict[str, str | int | float | bool]:
+        """The librdkafka consumer settings for ``group_id``: read committed, from the earliest offset,
+        never auto-committing."""
         conf = self.common_config()
         conf.update(
             {

@@ -25,6 +25,9 @@ def percentile(values: list[float], q: float) -> float:
 
 
 class DeliveryLatency:
+    """Recent delivery latencies of edge batches per site, over a sliding window of ``window_s`` seconds
+    (thread-safe)."""
+
     def __init__(
         self,
         *,
@@ -39,6 +42,8 @@ class DeliveryLatency:
         self._lock = threading.Lock()
 
     def observe(self, site: str, seconds: float) -> None:
+        """Record that a batch of ``site`` took ``seconds`` from its arrival to Kafka's last delivery
+        report."""
         now = self._clock()
         with self._lock:
             samples = self._sites.get(site)
@@ -84,5 +89,6 @@ class DeliveryLatency:
         }
 
     def sites(self) -> list[str]:
+        """Every site a latency was observed for, sorted."""
         with self._lock:
             return sorted(self._sites)

@@ -163,6 +163,8 @@ class NativeJob:
         self._produced_at = 0.0
 
     def run(self) -> None:
+        """Produce natively the records of topics whose schema ids are at hand, the rest through a
+        ``BatchJob``; ``on_done`` hears one ack once both parts are settled."""
         with self._stats.lock:
             self._stats.batches += 1
             self._stats.records += len(self._scanned)

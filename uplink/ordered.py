@@ -14,12 +14,16 @@ from concurrent.futures import Executor
 
 
 class KeyedSerialExecutor:
+    """Runs jobs on ``pool``: those of one key one at a time in the order submitted, different keys in
+    parallel."""
+
     def __init__(self, pool: Executor) -> None:
         self._pool = pool
         self._queues: dict[Hashable, deque[Callable[[], None]]] = {}
         self._lock = threading.Lock()
 
     def submit(self, key: Hashable, job: Callable[[], None]) -> None:
+        """Run ``job`` on a pool worker after the jobs of ``key`` submitted before it."""
         with self._lock:
             queue = self._queues.get(key)
             if queue is not None:

@@ -33,6 +33,8 @@ SITE_PLACEHOLDER = "{site}"
 
 @dataclass(frozen=True, slots=True)
 class Decision:
+    """Where records of one topic go (``route``), and why, when they are refused (``reason``)."""
+
     route: Route
     reason: str = ""
 
@@ -70,6 +72,7 @@ class TopicPolicy:
         self._lock = threading.Lock()
 
     def decide(self, site: str, topic: str) -> Decision:
+        """The route of records from ``site`` for ``topic``, decided once and cached."""
         key = (site, topic)
         found = self._cache.get(key)
         if found is not None:

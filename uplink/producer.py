@@ -85,6 +85,8 @@ class KafkaSink:
     # -- lifecycle -------------------------------------------------------------------------
 
     def start(self) -> KafkaSink:
+        """Create the producer (a transactional one registers its id, fencing other holders) and start the
+        poll thread; returns self. Raises ``ProduceError`` when librdkafka refuses."""
         conf: dict[str, Any] = dict(self._settings.producer_config())
         if self._transactional_id is not None:
             timeout_ms = round(self._transaction_timeout_s * 1000)

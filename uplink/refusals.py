@@ -45,6 +45,8 @@ class Refusals:
         """Records sent to the refused topic, by (``site/edge``, reason)."""
 
     def batch(self, source: Source | None, key: str, reason: str, detail: str) -> None:
+        """Count, export and log a batch refused whole; ``key`` names its sender when ``source`` is
+        unknown."""
         name = str(source) if source is not None else key
         with self._lock:
             self.batches[name, reason] += 1
@@ -59,6 +61,7 @@ class Refusals:
         )
 
     def record(self, source: Source, reason: str, topic: str, detail: str) -> None:
+        """Count, export and log a record of ``source`` for ``topic`` that goes to the refused topic."""
         with self._lock:
             self.records[str(source), reason] += 1
         self._metrics.on_refused(source.site, reason, records=1)

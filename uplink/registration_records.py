@@ -36,7 +36,10 @@ _MAX_TEXT = 200
 
 
 class Registry(Protocol):
-    def register(self, subject: str, schema: dict[str, Any]) -> int: ...
+    """The schema registry call the registration writer makes."""
+
+    def register(self, subject: str, schema: dict[str, Any]) -> int:
+        """Register ``schema`` under ``subject`` (or find it there); returns the schema id."""
 
 
 class RegistrationUnavailableError(Exception):
@@ -54,6 +57,9 @@ class Rebuilt:
 
 
 class RegistrationWriter:
+    """Checks the (de)registrations a site sends, claims the robot in the directory, and makes the uplink's
+    own record of each accepted one."""
+
     def __init__(
         self,
         registry: Registry,

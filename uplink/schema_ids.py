@@ -29,9 +29,13 @@ from fleetlink.schemas.single_object import fingerprint
 
 
 class Registry(Protocol):
-    def register(self, subject: str, schema: dict[str, Any]) -> int: ...
+    """The schema registry calls ``SchemaIds`` makes."""
 
-    def set_compatibility(self, subject: str, level: str) -> None: ...
+    def register(self, subject: str, schema: dict[str, Any]) -> int:
+        """Register ``schema`` under ``subject`` (or find it there); returns the schema id."""
+
+    def set_compatibility(self, subject: str, level: str) -> None:
+        """Set the compatibility level (``BACKWARD``, ``FULL``, ``NONE`` ...) of ``subject``."""
 
 
 class SchemaRefusedError(Exception):
@@ -48,6 +52,9 @@ and an edge that left one out is asked for it again."""
 
 
 class SchemaIds:
+    """The schema texts each site sent, verified against their fingerprints, and their registry ids per
+    topic, cached."""
+
     def __init__(
         self, registry: Registry, *, compatibility: str | None = None, max_texts: int = MAX_TEXTS
     ) -> None:

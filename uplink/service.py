@@ -65,12 +65,17 @@ log = logging.getLogger(__name__)
 class UplinkExtension(Protocol):
     """Something run beside the uplink on its session (the fleet console), started and stopped with it."""
 
-    def start(self) -> object: ...
+    def start(self) -> object:
+        """Start the extension, once the uplink has started; what it returns is ignored."""
 
-    def stop(self) -> None: ...
+    def stop(self) -> None:
+        """Stop the extension, before the uplink closes its queryables and its Zenoh session."""
 
 
 class Uplink:
+    """The uplink service: edge batches to Kafka, commands and calls to the sites, delivery figures to
+    consoles."""
+
     def __init__(
         self,
         config: UplinkConfig,
@@ -133,6 +138,9 @@ class Uplink:
     # -- lifecycle -------------------------------------------------------------------------
 
     def start(self) -> Uplink:
+        """Check Kafka access and create missing topics, start the registry client, registrations reader
+        and producers, serve edge batches on the Zenoh session, then the command router, metrics and
+        extensions as configured; returns self."""
         cfg = self.config
         call_types = load_call_types(cfg)  # before any socket: a missing type names its YAML path
         check_kafka_access(cfg.kafka)
@@ -183,6 +191,8 @@ class Uplink:
         return self
 
     def stop(self) -> None:
+        """Stop everything ``start`` started: extensions, queryables, command router and reader, batch
+        workers, producers (flushed, bounded), the Zenoh session and the registry client."""
         if self._gc_before is not None:
             gc.set_threshold(*self._gc_before)
             gc.unfreeze()

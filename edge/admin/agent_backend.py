@@ -174,16 +174,21 @@ def robots_from_agent(data: Mapping[str, Any], robots: Mapping[str, str]) -> lis
 
 
 class AgentBackend:
+    """An ``AdminBackend`` over a started ``EdgeAgent``, with a ``GraphWatcher`` of its own on the agent's
+    session."""
+
     def __init__(self, agent: EdgeAgent) -> None:
         self.agent = agent
         self._graph: GraphWatcher | None = None
 
     def start(self) -> AgentBackend:
+        """Start watching the ROS graph on the agent's session (once); returns ``self``."""
         if self._graph is None:
             self._graph = GraphWatcher(self.agent.session, self.agent.config.ros.domain_id).start()
         return self
 
     def stop(self) -> None:
+        """Stop the graph watcher, if it runs; the agent itself keeps running."""
         if self._graph is not None:
             self._graph.stop()
             self._graph = None
@@ -199,25 +204,32 @@ class AgentBackend:
     def install(
         self, config: EdgeConfig, robot_types: Sequence[RobotTypeSpec], mappings: Sequence[MappingSpec]
     ) -> None:
+        """Apply ``config`` through ``EdgeAgent.reload``, which builds its own specs from it."""
         # EdgeAgent.reload builds its own specs from ``config`` (robot_types/mappings are the same
         # declarations); it swaps the table atomically and refreshes the subscriptions.
         del robot_types, mappings
         self.agent.reload(config)
 
     def mapping_table(self) -> MappingTable:
+        """The agent's live mapping table."""
         return self.agent.table
 
     def topics(self) -> Mapping[str, TopicInfo]:
+        """The discovered ROS topics; empty until ``start`` has run."""
         return {} if self._graph is None else self._graph.topics()
 
     def robots(self) -> Sequence[RobotStatus]:
+        """Each robot the agent knows, with its state and registration history."""
         return robots_from_agent(self.agent.snapshot(), self.agent.robots())
 
     def snapshot(self) -> EdgeSnapshot:
+        """The agent's counters and state now, as an ``EdgeSnapshot``."""
         return snapshot_from_agent(self.agent.snapshot(), self.agent.config)
 
     def spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        """Every damage finding of the agent's durable spool, acknowledged or not."""
         return self.agent.spool_damage()
 
     def acknowledge_spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        """Acknowledge the agent's spool damage findings; returns those that were waiting."""
         return self.agent.acknowledge_spool_damage()

@@ -22,6 +22,8 @@ RobotState = Literal["registered", "lost"]
 
 @dataclass(frozen=True, slots=True)
 class RobotStatus:
+    """One robot known to the edge: its robot type, state and how it came to be registered."""
+
     robot: str
     robot_type: str
     registered_at: float | None = None
@@ -69,6 +71,8 @@ class MappingIssue:
 
 @dataclass(frozen=True, slots=True)
 class BufferState:
+    """One record buffer's spool statistics next to its configured capacity."""
+
     stats: SpoolStats
     capacity_bytes: int
     appended_bytes: int = 0
@@ -147,9 +151,13 @@ class AdminBackend(Protocol):
         """The discovered ROS topics (``GraphWatcher.topics()``)."""
         ...
 
-    def robots(self) -> Sequence[RobotStatus]: ...
+    def robots(self) -> Sequence[RobotStatus]:
+        """Every robot the edge knows, with its state and registration history."""
+        ...
 
-    def snapshot(self) -> EdgeSnapshot: ...
+    def snapshot(self) -> EdgeSnapshot:
+        """The edge's counters and state now."""
+        ...
 
     def spool_damage(self) -> Sequence[Mapping[str, Any]]:
         """Every damage finding of the durable spool (``edge.spool.damage``), acknowledged or not."""

@@ -60,6 +60,8 @@ def effective(base: dict[str, Any], overlay: Overlay, *, source: str = "overlay"
 
 
 def add_mapping(base: dict[str, Any], overlay: Overlay, body: Any) -> Proposal:
+    """Add the mapping in ``body``; raises ``ConflictError`` when one of that name exists and
+    ``InvalidChangeError`` when the result would not validate."""
     entry = _mapping_entry(body, name=None)
     current = apply_overlay(base, overlay)
     name = entry["name"]
@@ -70,6 +72,8 @@ def add_mapping(base: dict[str, Any], overlay: Overlay, body: Any) -> Proposal:
 
 
 def change_mapping(base: dict[str, Any], overlay: Overlay, name: str, body: Any) -> Proposal:
+    """Replace the mapping ``name`` with ``body``; raises ``NotFoundError`` when there is none and
+    ``InvalidChangeError`` when the result would not validate."""
     current = apply_overlay(base, overlay)
     if locate_mapping(current, name) is None:
         raise NotFoundError(f"no mapping named {name!r}")
@@ -79,6 +83,8 @@ def change_mapping(base: dict[str, Any], overlay: Overlay, name: str, body: Any)
 
 
 def remove_mapping(base: dict[str, Any], overlay: Overlay, name: str) -> Proposal:
+    """Remove the mapping ``name`` (from the overlay, and from the config file's declarations when it is
+    declared there); raises ``NotFoundError`` when there is none."""
     current = apply_overlay(base, overlay)
     if locate_mapping(current, name) is None:
         raise NotFoundError(f"no mapping named {name!r}")
@@ -117,6 +123,7 @@ def put_robot_type(base: dict[str, Any], overlay: Overlay, name: str, body: Any)
 
 
 def remove_robot_type(base: dict[str, Any], overlay: Overlay, name: str) -> Proposal:
+    """Remove the robot type ``name`` with its mappings; raises ``NotFoundError`` when there is none."""
     current = apply_overlay(base, overlay)
     if name not in current.get("robot_types", {}):
         raise NotFoundError(f"no robot type named {name!r}")

@@ -19,6 +19,7 @@ class FieldProblem:
     config_path: str | None = None
 
     def as_dict(self) -> dict[str, str | None]:
+        """The problem as a JSON-ready dict (``path``, ``message``, ``config_path``)."""
         return {"path": self.path, "message": self.message, "config_path": self.config_path}
 
 
@@ -29,10 +30,14 @@ class AdminError(EdgeError):
 
 
 class NotFoundError(AdminError):
+    """No mapping or robot type of that name exists."""
+
     status = 404
 
 
 class ConflictError(AdminError):
+    """The change clashes with what exists (a mapping of that name exists already)."""
+
     status = 409
 
 
@@ -49,10 +54,14 @@ class InvalidChangeError(AdminError):
 
 
 class UnauthorizedError(AdminError):
+    """The request carries no admin token or a wrong one."""
+
     status = 401
 
 
 class ForbiddenError(AdminError):
+    """The caller may not make this request, whatever token it carries."""
+
     status = 403
 
 

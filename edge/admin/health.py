@@ -27,6 +27,9 @@ from fleetlink.edge.admin.backend import EdgeSnapshot
 
 @dataclass(frozen=True, slots=True)
 class HealthRules:
+    """Thresholds of ``assess``: the fill ratio (0..1) that counts as ``spool_filling`` and how many
+    seconds back dead letters count."""
+
     spool_fill: float = 0.8
     dead_letter_window_s: float = 60.0
 
@@ -39,6 +42,9 @@ def assess(
     robots: int,
     rules: HealthRules | None = None,
 ) -> Health:
+    """The edge's health from ``snapshot``: every problem found, with the spool fill ratio per stream, the
+    WAN link state and the number of robots. ``recent_dead_letters`` counts each mapping's dead letters
+    within the rules' window; ``now_ms`` is wall-clock milliseconds."""
     rules = rules or HealthRules()
     problems: list[Problem] = []
     if snapshot.failure:

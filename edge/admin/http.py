@@ -65,6 +65,8 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 def error_response(
     status: int, message: str, problems: tuple[FieldProblem, ...] = (), *, retry_after: float | None = None
 ) -> JSONResponse:
+    """An ``ErrorView`` JSON response; 401 adds ``WWW-Authenticate: Bearer``, ``retry_after`` (seconds) a
+    ``Retry-After`` header."""
     views = [ProblemView(path=p.path, message=p.message, config_path=p.config_path) for p in problems]
     body = ErrorView(status=status, error=message, problems=views)
     headers = {"WWW-Authenticate": "Bearer"} if status == 401 else {}
@@ -80,6 +82,8 @@ def create_app(
     metrics: PrometheusMetrics | None = None,
     limiter: LoginLimiter | None = None,
 ) -> FastAPI:
+    """The admin API's FastAPI app on ``service``: token check with lockout, the admin routes, ``/metrics``
+    and ``/health`` when ``metrics`` is given, and JSON error handlers."""
     app = FastAPI(
         title="fleetlink edge admin",
         version=__version__,

@@ -47,6 +47,7 @@ def declared(config: EdgeConfig) -> list[tuple[MappingConfig, str | None]]:
 def mapping_views(
     config: EdgeConfig, overlay: Overlay, table: MappingTable, snapshot: EdgeSnapshot
 ) -> list[MappingView]:
+    """Each declared mapping with its origin, robots, counters, stage counters and issues."""
     robots = {info.name: list(info.robots) for info in table.list()}
     views = []
     for mapping, owner in declared(config):
@@ -87,6 +88,7 @@ def mapping_views(
 
 
 def robot_views(robots: Iterable[RobotStatus]) -> list[RobotView]:
+    """The robots sorted by name, each with its registration time as ISO 8601 UTC text."""
     out = []
     for robot in sorted(robots, key=lambda r: r.robot):
         since = None
@@ -125,6 +127,7 @@ def _match_view(bound: BoundMapping) -> TopicMatchView:
 
 
 def topic_views(topics: Mapping[str, TopicInfo], table: MappingTable) -> list[TopicView]:
+    """The discovered topics sorted by name, each with its publishers and the mappings that match it."""
     out = []
     for name in sorted(topics):
         info = topics[name]

@@ -24,6 +24,8 @@ from fleetlink.common.configfile import PathPart
 
 
 class RobotTypeOverlay(BaseModel):
+    """A robot type created or changed at runtime: its namespace glob only."""
+
     model_config = ConfigDict(extra="forbid")
 
     match: str
@@ -56,9 +58,11 @@ class Overlay(BaseModel):
 
     @property
     def empty(self) -> bool:
+        """Whether the overlay changes nothing."""
         return not (self.robot_types or self.removed_robot_types or self.mappings or self.removed_mappings)
 
     def mapping(self, name: str) -> dict[str, Any] | None:
+        """The overlay's entry for the mapping ``name``; ``None`` when it has none."""
         return next((m for m in self.mappings if m.get("name") == name), None)
 
     def with_mapping(self, body: dict[str, Any]) -> Overlay:
@@ -68,15 +72,20 @@ class Overlay(BaseModel):
         return self.model_copy(update={"mappings": [*kept, body]})
 
     def without_mapping(self, name: str, *, removed: bool) -> Overlay:
+        """Drop the overlay entry of ``name``; with ``removed`` (the config file declares it too) list it
+        among the removed mappings."""
         kept = [m for m in self.mappings if m.get("name") != name]
         gone = sorted({*self.removed_mappings, name}) if removed else self.removed_mappings
         return self.model_copy(update={"mappings": kept, "removed_mappings": gone})
 
     def with_robot_type(self, name: str, match: str) -> Overlay:
+        """Add or replace the robot type ``name`` with ``match``."""
         types = {**self.robot_types, name: RobotTypeOverlay(match=match)}
         return self.model_copy(update={"robot_types": types})
 
     def without_robot_type(self, name: str, *, removed: bool) -> Overlay:
+        """Drop the robot type ``name`` and its mappings from the overlay; with ``removed`` (the config
+        file declares it too) list it among the removed robot types."""
         types = {k: v for k, v in self.robot_types.items() if k != name}
         kept = [m for m in self.mappings if m.get("robot_type") != name]
         gone = sorted({*self.removed_robot_types, name}) if removed else self.removed_robot_types

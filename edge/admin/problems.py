@@ -38,6 +38,8 @@ def document_path(loc: Sequence[Any], data: Any) -> tuple[PathPart, ...]:
 
 
 def message_of(error: Any) -> str:
+    """A pydantic error's message as reported: an unknown key explained, pydantic's ``Value error, ``
+    and ``Assertion failed, `` prefixes removed."""
     if error["type"] == "extra_forbidden":
         return "unknown key (not allowed here; check the spelling)"
     text = str(error["msg"])

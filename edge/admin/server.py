@@ -48,11 +48,17 @@ log = logging.getLogger(__name__)
 class AdminExtension(Protocol):
     """Something served beside the admin API: routes on its HTTP app, keys on its Zenoh session."""
 
-    def mount(self, app: FastAPI) -> None: ...
+    def mount(self, app: FastAPI) -> None:
+        """Add the extension's routes to the admin HTTP app."""
+        ...
 
-    def start(self, session: zenoh.Session) -> object: ...
+    def start(self, session: zenoh.Session) -> object:
+        """Start serving the extension's keys on ``session``."""
+        ...
 
-    def stop(self) -> None: ...
+    def stop(self) -> None:
+        """Stop serving; the extension may be started again."""
+        ...
 
 
 ExtensionFactory = Callable[
@@ -62,6 +68,9 @@ ExtensionFactory = Callable[
 
 
 class EdgeAdmin:
+    """Everything administrative of one edge process: the overlay store, the admin service, the HTTP
+    server, the Zenoh admin space and extensions such as the console."""
+
     def __init__(
         self,
         base: EdgeConfig,
@@ -101,6 +110,10 @@ class EdgeAdmin:
         return effective(config_data(self.base), self._overlay, source=str(self.store.path))
 
     def start(self, backend: AdminBackend, session: zenoh.Session | None = None) -> EdgeAdmin:
+        """Serve the admin API over ``backend``: the HTTP server when a listen address is set, the Zenoh
+        admin space and the extensions when ``session`` is given; returns ``self``.
+
+        Does nothing when already started; on failure whatever had started is stopped again."""
         if self.service is not None:
             return self
         overlay = self._overlay if self._overlay is not None else self.store.load()
@@ -138,6 +151,7 @@ class EdgeAdmin:
             raise
 
     def stop(self) -> None:
+        """Stop the extensions, the Zenoh admin space, the HTTP server and the agent's graph watcher."""
         for extension in self.extensions:
             extension.stop()
         self.extensions = []
@@ -154,6 +168,7 @@ class EdgeAdmin:
 
     @property
     def url(self) -> str:
+        """The admin HTTP API's base URL; raises ``AdminError`` when it is not running."""
         if self.http is None:
             raise AdminError("the admin HTTP API is not running")
         return self.http.url

@@ -41,6 +41,9 @@ DRY_RUN_NAME = "dry-run"
 
 
 class AdminService:
+    """The admin operations over an ``AdminBackend``: reads, dry runs and changes that are validated, saved
+    to the overlay file and installed in the running edge. Changes are serialised by a lock."""
+
     def __init__(
         self,
         base: EdgeConfig,
@@ -61,6 +64,7 @@ class AdminService:
 
     @property
     def site(self) -> str:
+        """The site name of the effective config."""
         return self._config.site
 
     @property
@@ -70,21 +74,25 @@ class AdminService:
 
     @property
     def overlay(self) -> Overlay:
+        """The admin changes applied on top of the config file."""
         return self._overlay
 
     # -- reads -----------------------------------------------------------------------------------
     def mappings(self) -> list[MappingView]:
+        """Every declared mapping with its counters, stage counters, robots and issues."""
         with self._lock:
             config, overlay = self._config, self._overlay
         return mapping_views(config, overlay, self.backend.mapping_table(), self._snapshot())
 
     def mapping(self, name: str) -> MappingView:
+        """The mapping ``name`` with its counters; raises ``NotFoundError`` when there is none."""
         found = [view for view in self.mappings() if view.name == name]
         if not found:
             raise NotFoundError(f"no mapping named {name!r}")
         return found[0]
 
     def robot_types(self) -> list[RobotTypeView]:
+        """Every robot type with its match, mappings, registered robots and origin."""
         with self._lock:
             config, overlay = self._config, self._overlay
         robots = self.backend.mapping_table().robots()
@@ -100,9 +108,11 @@ class AdminService:
         ]
 
     def robots(self) -> list[RobotView]:
+        """The robots the edge knows, sorted by name."""
         return robot_views(self.backend.robots())
 
     def topics(self) -> list[TopicView]:
+        """The discovered ROS topics with their publishers and the mappings that match them."""
         return topic_views(self.backend.topics(), self.backend.mapping_table())
 
     def dry_run(self, body: Any) -> DryRunView:
@@ -124,31 +134,37 @@ class AdminService:
         return DamageAckView(acknowledged=done)
 
     def health(self) -> Health:
+        """The edge's health now (also reports the counters' increase to the metrics)."""
         return self.telemetry.observe(self._snapshot(), robots=len(self.backend.mapping_table().robots()))
 
     # -- changes ---------------------------------------------------------------------------------
     def add_mapping(self, body: Any) -> ChangeView:
+        """Add the mapping in ``body``, save the overlay and install it in the running edge."""
         with self._lock:
             proposal = changes.add_mapping(self._base, self._overlay, body)
             name = str(body["name"])
             return self._commit(proposal, "mapping", name, "created")
 
     def change_mapping(self, name: str, body: Any) -> ChangeView:
+        """Replace the mapping ``name`` with ``body``, save the overlay and install it."""
         with self._lock:
             proposal = changes.change_mapping(self._base, self._overlay, name, body)
             return self._commit(proposal, "mapping", name, "changed")
 
     def remove_mapping(self, name: str) -> ChangeView:
+        """Remove the mapping ``name``, save the overlay and install the result."""
         with self._lock:
             proposal = changes.remove_mapping(self._base, self._overlay, name)
             return self._commit(proposal, "mapping", name, "removed")
 
     def put_robot_type(self, name: str, body: Any) -> ChangeView:
+        """Create or change the robot type ``name`` from ``body``, save the overlay and install it."""
         with self._lock:
             proposal = changes.put_robot_type(self._base, self._overlay, name, body)
             return self._commit(proposal, "robot_type", name, "created" if proposal.created else "changed")
 
     def remove_robot_type(self, name: str) -> ChangeView:
+        """Remove the robot type ``name`` with its mappings, save the overlay and install the result."""
         with self._lock:
             proposal = changes.remove_robot_type(self._base, self._overlay, name)
             return self._commit(proposal, "robot_type", name, "removed")

@@ -175,6 +175,7 @@ def _run(service: AdminService, target: Target, body: Any) -> tuple[int, Any]:  
 
 
 def envelope(status: int, part: Any, *, site: str, edge_id: str) -> bytes:
+    """A reply's JSON bytes: ``status``, ``site``, ``edge_id`` and the keys of ``part``."""
     return json.dumps({"status": status, "site": site, "edge_id": edge_id, **part}).encode()
 
 

@@ -33,6 +33,8 @@ def default_overlay_path(spool_dir: Path) -> Path:
 
 
 class OverlayStore:
+    """The overlay file at ``path``: loads the saved admin changes and saves new ones atomically."""
+
     def __init__(self, path: Path) -> None:
         self.path = path
 

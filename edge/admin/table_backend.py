@@ -19,10 +19,17 @@ from fleetlink.roswire.graph import TopicInfo
 
 
 class GraphSource(Protocol):
-    def topics(self) -> dict[str, TopicInfo]: ...
+    """Where a ``TableBackend`` finds the discovered ROS topics (a ``GraphWatcher``)."""
+
+    def topics(self) -> dict[str, TopicInfo]:
+        """The discovered ROS topics by name."""
+        ...
 
 
 class TableBackend:
+    """An ``AdminBackend`` over a ``MappingTable`` and a graph source; counters, robot states and spool
+    damage come from the callables given (neutral defaults without them)."""
+
     def __init__(
         self,
         table: MappingTable,
@@ -48,6 +55,8 @@ class TableBackend:
     def install(
         self, config: EdgeConfig, robot_types: Sequence[RobotTypeSpec], mappings: Sequence[MappingSpec]
     ) -> None:
+        """Reload the table with the new declarations, register matching robots when ``register_robots`` is
+        set, then call ``on_install``."""
         self.table.reload(robot_types, mappings)
         if self.register_robots:
             self.discover()
@@ -72,21 +81,28 @@ class TableBackend:
         return added
 
     def mapping_table(self) -> MappingTable:
+        """The live mapping table."""
         return self.table
 
     def topics(self) -> Mapping[str, TopicInfo]:
+        """The graph source's discovered topics."""
         return self.graph.topics()
 
     def robots(self) -> Sequence[RobotStatus]:
+        """The robots from the ``robots`` callable, or else the table's robots as registered."""
         if self._robots is not None:
             return self._robots()
         return [RobotStatus(robot=r, robot_type=t) for r, t in sorted(self.table.robots().items())]
 
     def snapshot(self) -> EdgeSnapshot:
+        """The edge's state from the ``snapshot`` callable (an empty snapshot without one)."""
         return self._snapshot()
 
     def spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        """The spool damage findings from the ``spool_damage`` callable (none without one)."""
         return self._damage()
 
     def acknowledge_spool_damage(self) -> Sequence[Mapping[str, Any]]:
+        """Acknowledge through the ``acknowledge_spool_damage`` callable; returns the findings that were
+        waiting."""
         return self._acknowledge()

@@ -27,6 +27,8 @@ _SPOOL_DROPS = (
 
 
 class EdgeTelemetry:
+    """Turns edge snapshots into metrics and health, counting increases since the last look."""
+
     def __init__(
         self,
         metrics: Metrics,

@@ -12,6 +12,8 @@ class _View(BaseModel):
 
 
 class ProblemView(_View):
+    """One problem with a request."""
+
     path: str = Field(description="where in the request body, e.g. 'stages[1].hz' ('<root>': the body)")
     message: str
     config_path: str | None = Field(
@@ -21,12 +23,16 @@ class ProblemView(_View):
 
 
 class ErrorView(_View):
+    """An error answer: the HTTP status, a message and the problems found."""
+
     status: int
     error: str
     problems: list[ProblemView] = []
 
 
 class MappingCountersView(_View):
+    """A mapping's running totals of records."""
+
     received: int = 0
     emitted: int = 0
     dropped: int = 0
@@ -35,6 +41,8 @@ class MappingCountersView(_View):
 
 
 class StageView(_View):
+    """One stage of a mapping with its running totals."""
+
     name: str
     type: str
     received: int = 0
@@ -46,11 +54,15 @@ class StageView(_View):
 
 
 class IssueView(_View):
+    """Something the runtime found wrong with a mapping (it keeps running, degraded)."""
+
     reason: str
     detail: str
 
 
 class MappingView(_View):
+    """A mapping as declared, with where it came from, its robots and its counters."""
+
     name: str
     robot_type: str | None = Field(description="the robot type whose template this is; null: site-level")
     origin: Literal["config", "admin"] = Field(
@@ -69,6 +81,8 @@ class MappingView(_View):
 
 
 class RobotEventView(_View):
+    """One registration or deregistration of a robot at this edge."""
+
     event: Literal["registered", "deregistered"]
     robot_type: str
     reason: str = Field(description="discovered, explicit or liveliness_lost")
@@ -76,6 +90,8 @@ class RobotEventView(_View):
 
 
 class RobotView(_View):
+    """A robot known to the edge: its robot type, state and registration history."""
+
     robot: str
     robot_type: str
     registered_at: float | None = Field(description="seconds since the epoch; null when not known")
@@ -88,12 +104,16 @@ class RobotView(_View):
 
 
 class PublisherView(_View):
+    """A node that publishes a topic, with the type it publishes."""
+
     node: str
     type: str
     type_hash: str
 
 
 class TopicMatchView(_View):
+    """A mapping that takes a topic, with the Kafka topic and key it writes."""
+
     mapping: str
     robot: str | None
     kafka_topic: str = Field(description="the Kafka topic, or its template when it reads message fields")
@@ -101,6 +121,8 @@ class TopicMatchView(_View):
 
 
 class TopicView(_View):
+    """A discovered ROS topic: its types, publishers, subscriber count and matching mappings."""
+
     topic: str
     types: list[str]
     publishers: list[PublisherView]
@@ -109,6 +131,8 @@ class TopicView(_View):
 
 
 class RobotTypeView(_View):
+    """A robot type: its namespace glob, mappings, registered robots and origin."""
+
     name: str
     match: str
     mappings: list[str]
@@ -117,6 +141,8 @@ class RobotTypeView(_View):
 
 
 class DryRunMatchView(_View):
+    """A discovered topic the dry-run mapping would match."""
+
     topic: str
     types: list[str]
     robot: str | None
@@ -129,12 +155,16 @@ class DryRunMatchView(_View):
 
 
 class DryRunView(_View):
+    """What a mapping would match now, without changing anything."""
+
     mapping: str
     robot_type: str | None
     matches: list[DryRunMatchView]
 
 
 class ChangeView(_View):
+    """The result of a change: what was created, changed or removed and where it was saved."""
+
     status: Literal["created", "changed", "removed"]
     kind: Literal["mapping", "robot_type"]
     name: str
@@ -157,4 +187,6 @@ class DamageView(_View):
 
 
 class DamageAckView(_View):
+    """The spool damage findings an acknowledgement cleared."""
+
     acknowledged: list[DamageView] = Field(description="the findings that awaited an acknowledgement")

@@ -34,6 +34,8 @@ _CLIENT = "zenoh"
 
 
 class ZenohAdmin:
+    """The admin API as a Zenoh queryable on ``fleetlink/<site>/admin/**``, answered by a small pool."""
+
     def __init__(
         self,
         session: zenoh.Session,
@@ -56,12 +58,14 @@ class ZenohAdmin:
         """Changes refused because no admin token is configured."""
 
     def start(self) -> ZenohAdmin:
+        """Declare the queryable on the session (once); returns ``self``."""
         if not self._queryable.running:
             self._queryable.start(self.session, self.key)
             log.info("admin queries served on %s", self.key)
         return self
 
     def stop(self) -> None:
+        """Undeclare the queryable and stop its answering threads."""
         self._queryable.stop()
 
     def __enter__(self) -> ZenohAdmin:

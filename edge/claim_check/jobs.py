@@ -28,6 +28,7 @@ class ObjectRef:
     content_type: str
 
     def as_datum(self) -> dict[str, Any]:
+        """The reference as an Avro datum of the ``fleetlink.ObjectRef`` record."""
         return {
             "url": self.url,
             "bucket": self.bucket,

@@ -30,5 +30,7 @@ def content_type_for(value: Mapping[str, Any]) -> str:
 def object_key(
     *, prefix: str, site: str, robot: str | None, mapping: str, stamp_ns: int, sha256: str, content_type: str
 ) -> str:
+    """The object key of a payload: ``<prefix><site>/<robot>/<mapping>/<stamp ns>-<sha256><extension>``,
+    the extension from the content type (``.bin`` when unknown)."""
     extension = EXTENSIONS.get(content_type, ".bin")
     return f"{prefix}{site}/{robot or '_'}/{mapping}/{stamp_ns}-{sha256}{extension}"

@@ -41,6 +41,7 @@ class ClaimCheckError(ConfigError, EdgeError):
 
 
 def ref_field(field: str) -> str:
+    """The name of the reference field added beside ``field``: ``<field>_ref``."""
     return f"{field}_ref"
 
 

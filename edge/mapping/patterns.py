@@ -30,6 +30,7 @@ class Capture:
     multi: bool = False
 
     def text(self) -> str:
+        """The capture as written in a pattern: ``{name}`` or ``{name*}``."""
         return "{" + self.name + ("*" if self.multi else "") + "}"
 
 

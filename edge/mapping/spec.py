@@ -73,10 +73,12 @@ class CompiledMapping:
 
     @property
     def name(self) -> str:
+        """The mapping's name."""
         return self.spec.name
 
 
 def check_name(name: str, *, what: str = "mapping name") -> str:
+    """``name`` if it is a valid key-expression chunk; raises ``MappingError`` otherwise."""
     problem = key_chunk_problem(name)
     if problem is not None:
         raise MappingError(f"{what} {name!r} {problem}")
@@ -84,6 +86,7 @@ def check_name(name: str, *, what: str = "mapping name") -> str:
 
 
 def check_ros_type(ros_type: str, *, mapping: str | None = None) -> str:
+    """``ros_type`` if it looks like ``package/msg/Type``; raises ``MappingError`` otherwise."""
     problem = ros_type_problem(ros_type)
     if problem is not None:
         raise MappingError(f"ROS type {ros_type!r} {problem}", mapping=mapping)
@@ -91,6 +94,7 @@ def check_ros_type(ros_type: str, *, mapping: str | None = None) -> str:
 
 
 def check_captures(template: Template, pattern: TopicPattern, what: str, mapping: str) -> None:
+    """Raise ``MappingError`` when ``template`` uses a capture that ``pattern`` does not capture."""
     captured = set(pattern.captures)
     for name in sorted(template.captures - captured):
         have = ", ".join(pattern.captures) or "nothing"
@@ -103,6 +107,8 @@ def check_captures(template: Template, pattern: TopicPattern, what: str, mapping
 
 
 def check_topic_literal(template: Template, mapping: str) -> None:
+    """Raise ``MappingError`` when the Kafka topic ``template`` (its literal text, for a template) cannot
+    make a legal Kafka topic name."""
     if template.is_literal:
         problem = kafka_topic_problem(template.literal_text)
         if problem:

@@ -62,6 +62,7 @@ class BoundMapping:
 
     @property
     def needs_message_fields(self) -> bool:
+        """Whether the Kafka topic or the key must be rendered from each record's message fields."""
         return not (self.topic_template.is_literal and self.key_template.is_literal)
 
     @property

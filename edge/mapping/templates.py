@@ -30,6 +30,7 @@ class Placeholder:
 
     @property
     def field_path(self) -> tuple[str, ...] | None:
+        """The message field path of a ``{msg...}`` placeholder; ``None`` for a capture."""
         if self.name.startswith("msg."):
             return tuple(self.name.split(".")[1:])
         return None
@@ -133,6 +134,7 @@ class Template:
 
     @property
     def is_literal(self) -> bool:
+        """Whether the template has no placeholders."""
         return all(isinstance(p, str) for p in self.parts)
 
     def bind(self, values: Mapping[str, str], *, for_topic: bool = False) -> Template:

@@ -11,6 +11,9 @@ import random
 
 
 class Backoff:
+    """Exponential backoff with full jitter between ``min_s`` and ``max_s`` seconds; counts failures since
+    the last ``reset``. Not thread-safe: each retrying loop has its own."""
+
     def __init__(self, min_s: float, max_s: float, *, rng: random.Random | None = None) -> None:
         if not 0 < min_s <= max_s:
             raise ValueError(f"backoff needs 0 < min ({min_s}) <= max ({max_s})")
@@ -20,6 +23,8 @@ class Backoff:
         self.attempt = 0
 
     def base(self, attempt: int) -> float:
+        """The upper bound in seconds of the delay after ``attempt`` failures: ``min_s * 2**attempt``, at
+        most ``max_s``."""
         if attempt >= 64:
             return self.max_s
         return float(min(self.max_s, self.min_s * 2.0**attempt))
@@ -31,4 +36,5 @@ class Backoff:
         return base / 2 + self._rng.random() * base / 2
 
     def reset(self) -> None:
+        """Forget the failures (a try succeeded): the next delay starts from ``min_s`` again."""
         self.attempt = 0

@@ -27,11 +27,14 @@ def schema_json(schema: dict[str, Any]) -> str:
 
 @dataclass(frozen=True, slots=True)
 class SchemaIdentity:
+    """A schema's 8-byte CRC-64-AVRO fingerprint and its JSON text."""
+
     fingerprint: bytes
     json: str
 
 
 def identity_of(schema: dict[str, Any]) -> SchemaIdentity:
+    """The fingerprint and JSON text of ``schema``."""
     return SchemaIdentity(fingerprint(schema), schema_json(schema))
 
 
@@ -46,9 +49,11 @@ class AvroWriter:
 
     @property
     def fingerprint(self) -> bytes:
+        """The schema's 8-byte CRC-64-AVRO fingerprint."""
         return self.identity.fingerprint
 
     def body(self, datum: Any) -> bytes:
+        """``datum`` as an Avro binary body; raises ``EncodingError`` when it does not fit the schema."""
         out = io.BytesIO()
         try:
             fastavro.schemaless_writer(out, self._parsed, datum)

@@ -27,6 +27,8 @@ T = TypeVar("T")
 
 @dataclass(slots=True)
 class IntakeStats:
+    """An ``Intake``'s running totals (items and bytes) and what it holds now."""
+
     offered: int = 0
     taken: int = 0
     dropped: int = 0
@@ -36,6 +38,7 @@ class IntakeStats:
     high_water: int = 0
 
     def as_dict(self) -> dict[str, int]:
+        """The counters by field name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
@@ -160,6 +163,7 @@ class Intake(Generic[T]):
         return len(self._items)
 
     def stats(self) -> IntakeStats:
+        """A consistent copy of the counters and of what is queued now."""
         with self._lock:
             return IntakeStats(
                 offered=self._offered,

@@ -45,13 +45,20 @@ class Store(Protocol):
 
     bucket: str
 
-    def put(self, key: str, data: bytes, *, content_type: str, sha256_hex: str | None = None) -> object: ...
+    def put(self, key: str, data: bytes, *, content_type: str, sha256_hex: str | None = None) -> object:
+        """Store ``data`` under ``key``; raises ``ObjectStoreError`` (``retriable`` when trying again may
+        succeed)."""
+        ...
 
-    def url_of(self, key: str) -> str: ...
+    def url_of(self, key: str) -> str:
+        """The URL a record gives for the object at ``key``."""
+        ...
 
 
 @dataclass(slots=True)
 class OffloadStats:
+    """The uploader's running totals, and what waits for upload now."""
+
     uploaded: int = 0
     uploaded_bytes: int = 0
     passed: int = 0
@@ -69,10 +76,14 @@ class OffloadStats:
     outages: int = 0
 
     def as_dict(self) -> dict[str, int]:
+        """The counters by field name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 class Offloader:
+    """Uploads claim-checked payloads on worker threads, in order per lane, retrying with backoff while the
+    store is down; hands every result back through ``post``."""
+
     def __init__(
         self,
         store: Store,
@@ -106,6 +117,7 @@ class Offloader:
 
     # -- lifecycle -------------------------------------------------------------------------------
     def start(self) -> Offloader:
+        """Start the worker threads (once); returns ``self``."""
         if not self._threads:
             for index in range(len(self._queues)):
                 thread = threading.Thread(
@@ -148,10 +160,12 @@ class Offloader:
 
     @property
     def outage_s(self) -> float:
+        """Seconds since uploads began failing; 0.0 while the store takes them."""
         since = self._outage_since
         return 0.0 if since is None else self._clock() - since
 
     def snapshot(self) -> dict[str, object]:
+        """The counters with the current outage (seconds) and the last upload error."""
         with self._lock:
             return {
                 **self.stats.as_dict(),
@@ -161,6 +175,9 @@ class Offloader:
 
     # -- the processing thread -------------------------------------------------------------------
     def submit(self, job: ClaimJob) -> Claimed | None:
+        """Queue ``job`` on its lane's worker; returns ``None`` when queued, else its result now: a job
+        without upload and nothing ahead of it in its lane, or an error when the edge is stopping or
+        ``max_pending_bytes`` of payloads already wait."""
         with self._lock:
             if self._closed:
                 return Claimed(job, error="the edge is stopping: the payload was not uploaded")

@@ -19,6 +19,7 @@ class Outgoing(NamedTuple):
 
     @classmethod
     def of(cls, delivery: Delivery, record: Record, linger_s: float | None = None) -> Outgoing:
+        """Encode ``record`` as the spool payload for the buffer of ``delivery``."""
         return cls(delivery, encode_payload(record), linger_s)
 
     @property
@@ -40,4 +41,5 @@ class MappingCounters:
     """Samples of another type than the mapping declares (not mapped, not dead-lettered)."""
 
     def as_dict(self) -> dict[str, int]:
+        """The counters by field name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -88,17 +88,28 @@ class Taken:
 class SampleSource(Protocol):
     """Where samples come from (``fleetlink.edge.runtime.dataplane.NativeSource``)."""
 
-    def take(self, max_samples: int, timeout_s: float) -> Taken: ...
+    def take(self, max_samples: int, timeout_s: float) -> Taken:
+        """Take up to ``max_samples``, waiting up to ``timeout_s`` seconds for the first; processing thread
+        only."""
+        ...
 
-    def wake(self) -> None: ...
+    def wake(self) -> None:
+        """Make a waiting ``take`` return now; from any thread."""
+        ...
 
-    def sync(self, table_version: int) -> None: ...
+    def sync(self, table_version: int) -> None:
+        """Forget the fast plans when the mapping table changed since the last call."""
+        ...
 
-    def install(self, maker: RecordMaker, keys: Iterable[str]) -> None: ...
+    def install(self, maker: RecordMaker, keys: Iterable[str]) -> None:
+        """Hand the fast plans ``maker`` made for the data ``keys`` to the source."""
+        ...
 
 
 @dataclass(slots=True)
 class ProcessorStats:
+    """The processing thread's running totals: samples taken, records made and appended, and losses."""
+
     samples: int = 0
     records: int = 0
     appended: int = 0
@@ -109,10 +120,14 @@ class ProcessorStats:
     errors: int = 0
 
     def as_dict(self) -> dict[str, int]:
+        """The counters by field name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 class Processor:
+    """The processing thread: takes samples and control items, makes records of them and appends each chunk
+    to the buffer of its delivery class."""
+
     def __init__(
         self,
         intake: Intake[Item],
@@ -160,6 +175,7 @@ class Processor:
             self.source.wake()
 
     def start(self) -> Processor:
+        """Start the processing thread (once); returns ``self``."""
         if self._thread is None:
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name="edge-processor", daemon=True)

@@ -82,7 +82,9 @@ Oversize = Literal["dead_letter", "drop"]
 class TypeSource(Protocol):
     """Where codecs come from (``schemas.codec.get_codec`` over the edge's type store)."""
 
-    def codec(self, typename: str) -> Codec: ...
+    def codec(self, typename: str) -> Codec:
+        """The codec of the ROS type ``typename``; raises ``SchemaError`` when none can be made."""
+        ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,6 +156,8 @@ class ClaimContext:
 
 @dataclass(slots=True)
 class ClaimStats:
+    """What became of the payloads of claim-checking mappings: kept inline, stored, or failed."""
+
     inline: int = 0
     """Records of claim-checking mappings whose payload stayed in the record."""
     claimed: int = 0

@@ -54,10 +54,12 @@ class RobotChange:
 
     @property
     def event(self) -> str:
+        """``registered`` or ``deregistered``."""
         return "registered" if self.registered else "deregistered"
 
     @classmethod
     def from_event(cls, event: RobotEvent, timestamp_ms: int) -> RobotChange:
+        """The change a registry event reports, stamped with ``timestamp_ms`` (wall-clock milliseconds)."""
         return cls(
             event.robot,
             event.robot_type,
@@ -68,6 +70,7 @@ class RobotChange:
 
 
 def event_datum(change: RobotChange, site: str, edge_id: str) -> dict[str, Any]:
+    """The ``EVENT_SCHEMA`` datum of ``change`` at this site and edge."""
     return {
         "robot": change.robot,
         "robot_type": change.robot_type,
@@ -133,6 +136,8 @@ class Registrar:
         self.events = 0
 
     def start(self) -> Registrar:
+        """Declare the robots publisher and the explicit-registration subscriber, then start the robot
+        watcher; returns ``self``."""
         distro_hash = STRING_HASHES.get(self.node.distro)
         self._publisher = self.node.create_publisher(
             ROBOTS_TOPIC,
@@ -151,6 +156,7 @@ class Registrar:
         return self._watcher.prime(timeout_s)
 
     def stop(self) -> None:
+        """Stop the robot watcher and undeclare the publisher and subscriber; cleanup errors are logged."""
         self._watcher.stop()
         for entity in (self._subscriber, self._publisher):
             if entity is not None:
@@ -170,6 +176,7 @@ class Registrar:
         self.stop()
 
     def robots(self) -> dict[str, str]:
+        """The robots registered now: robot name -> robot type."""
         with self._lock:
             return dict(self._registered)
 

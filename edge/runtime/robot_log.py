@@ -17,6 +17,9 @@ from fleetlink.edge.runtime.registration import RobotChange
 
 
 class RobotLog:
+    """Remembers, per robot, when and how it registered and its last ``max_events`` changes (for at most
+    ``max_robots`` robots); thread-safe."""
+
     def __init__(self, *, max_events: int = 20, max_robots: int = 10_000) -> None:
         self.max_events = max_events
         self.max_robots = max_robots
@@ -25,6 +28,8 @@ class RobotLog:
         self._lock = threading.Lock()
 
     def record(self, change: RobotChange) -> None:
+        """Note one registration or deregistration; beyond ``max_robots`` robots, the one heard of longest
+        ago is forgotten."""
         entry = {
             "event": change.event,
             "robot_type": change.robot_type,

@@ -48,6 +48,8 @@ _NS = 1_000_000_000
 
 @dataclass(frozen=True, slots=True)
 class SenderOptions:
+    """How a ``WanSender`` batches, waits and retries (durations in seconds)."""
+
     batch_max_records: int = 2000
     batch_max_bytes: int = 1 << 20
     linger_s: float = 0.02
@@ -74,6 +76,8 @@ class SenderOptions:
 
 @dataclass(slots=True)
 class SenderStats:
+    """One sender's running totals of batches, records, bytes, schemas and outages."""
+
     batches_sent: int = 0
     batches_acked: int = 0
     batches_retried: int = 0
@@ -92,6 +96,7 @@ class SenderStats:
     in_flight: int = 0
 
     def as_dict(self) -> dict[str, int]:
+        """The counters by field name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
@@ -162,10 +167,12 @@ class WanSender:
 
     @property
     def stream(self) -> str:
+        """The name of the buffer's stream."""
         return self.buffer.stream
 
     # -- lifecycle -------------------------------------------------------------------------------
     def start(self) -> WanSender:
+        """Start the sender's thread (once); returns ``self``."""
         if self._thread is None:
             self._thread = threading.Thread(target=self._run, name=f"wan-{self.stream}", daemon=True)
             self._thread.start()
@@ -184,6 +191,7 @@ class WanSender:
         self.wake()
 
     def join(self) -> None:
+        """Wait for the sender's thread to end, up to 2 s past the stop deadline set by ``request_stop``."""
         thread = self._thread
         if thread is not None:
             thread.join(max(0.0, self._stop_deadline - self._clock()) + 2.0)
@@ -244,11 +252,13 @@ class WanSender:
 
     @property
     def outage_s(self) -> float:
+        """Seconds since the current outage began; 0.0 while the link works."""
         since = self._outage_since
         return 0.0 if since is None else self._clock() - since
 
     @property
     def last_error(self) -> str:
+        """The reason the last batch failed (empty before any failure)."""
         return self._last_error
 
     # -- the loop --------------------------------------------------------------------------------
@@ -493,6 +503,8 @@ class WanSender:
             self._limiter.log(logging.DEBUG, "retry", "stream %s: still failing: %s", self.stream, error)
 
     def snapshot(self) -> dict[str, object]:
+        """The counters with the link's health, the current outage (seconds), the last error and the ack
+        latency."""
         return {
             **self.stats.as_dict(),
             "healthy": self._healthy,

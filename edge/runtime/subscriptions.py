@@ -166,6 +166,8 @@ class SubscriptionManager:
 
     # -- lifecycle -------------------------------------------------------------------------------
     def start(self) -> SubscriptionManager:
+        """Start the worker thread and the graph watcher, then compute the subscriptions once; returns
+        ``self``."""
         if self._thread is not None:
             return self
         self._stop.clear()
@@ -177,6 +179,7 @@ class SubscriptionManager:
         return self
 
     def stop(self) -> None:
+        """Stop the graph watcher and the worker thread, then close every subscription."""
         if self._watcher is not None:
             self._watcher.stop()
             self._watcher = None
@@ -217,6 +220,7 @@ class SubscriptionManager:
             return {topic: entry.typename for topic, entry in self._active.items()}
 
     def publishers(self) -> dict[str, list[str]]:
+        """The ROS types announced per topic by the publishers seen in the graph."""
         with self._lock:
             return {topic: sorted(set(types.values())) for topic, types in self._publishers.items()}
 

@@ -19,15 +19,24 @@ Done = Callable[[bytes | None, str | None], None]
 
 
 class Transport(Protocol):
-    def send(self, payload: bytes, timeout_s: float, done: Done) -> None: ...
+    """Carries one encoded batch to the uplink and reports its answer."""
+
+    def send(self, payload: bytes, timeout_s: float, done: Done) -> None:
+        """Send ``payload`` and call ``done(reply, error)`` exactly once: with the reply's bytes, or with
+        ``None`` and the reason within about ``timeout_s`` seconds."""
+        ...
 
 
 class ZenohTransport:
+    """Sends each batch as the payload of a Zenoh query on the uplink's ingest key."""
+
     def __init__(self, session: zenoh.Session, key: str) -> None:
         self.session = session
         self.key = key
 
     def send(self, payload: bytes, timeout_s: float, done: Done) -> None:
+        """Query ``key`` with ``payload`` (one uplink takes it); ``done`` runs once on a Zenoh thread with
+        the first reply's bytes, or with ``None`` and the reason (an error reply, no uplink, the timeout)."""
         began = time.monotonic()
         lock = threading.Lock()
         got: dict[str, bytes | str] = {}

@@ -38,6 +38,8 @@ class TypeStoreCodecs:
         self._lock = threading.Lock()
 
     def codec(self, typename: str) -> Codec:
+        """The codec of ``typename``; raises ``SchemaError`` (``UnknownTypeError`` for a name the type
+        store lacks), and for a type that failed once raises the same error again at once."""
         failed = self._failed.get(typename)
         if failed is not None:
             raise failed

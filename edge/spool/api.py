@@ -52,6 +52,7 @@ class SpoolGroup(NamedTuple):
 
     @property
     def last_seq(self) -> int:
+        """The seq of the group's last record."""
         return self.first_seq + self.records - 1
 
 
@@ -67,10 +68,12 @@ class SpoolBatch:
 
     @property
     def count(self) -> int:
+        """Records in the batch."""
         return sum(g.records for g in self.groups)
 
     @property
     def nbytes(self) -> int:
+        """Bytes of the batch's encoded groups."""
         return sum(len(g.group) for g in self.groups)
 
     @property
@@ -117,6 +120,7 @@ class SpoolStats:
     restarts: the edge reports ``degraded`` while there are any."""
 
     def oldest_age_ms(self, now_ms: int) -> int:
+        """Milliseconds the oldest record held has waited at ``now_ms`` (0 when nothing is held)."""
         return 0 if self.oldest_append_ms is None else max(0, now_ms - self.oldest_append_ms)
 
 
@@ -160,7 +164,9 @@ class RecordBuffer(Protocol):
     """The interface the WAN sender uses (``Spool`` and ``MemoryBuffer``). Thread-safe."""
 
     @property
-    def stream(self) -> str: ...
+    def stream(self) -> str:
+        """The stream's name: one ordered log with its own seqs."""
+        ...
 
     def append(self, payload: bytes) -> int | None:
         """Take one record; returns its seq, or ``None`` when the ``drop_newest`` policy rejected
@@ -208,12 +214,17 @@ class RecordBuffer(Protocol):
         next append call (``edge.spool.marks``); the memory buffer keeps nothing."""
         ...
 
-    def stats(self) -> SpoolStats: ...
+    def stats(self) -> SpoolStats:
+        """Counters since open and the buffer's current state."""
+        ...
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """Close the buffer; later calls raise ``SpoolClosedError``."""
+        ...
 
 
 def check_payloads(payloads: Sequence[bytes], limit: int) -> None:
+    """Raise ``SpoolError`` when any payload is longer than ``limit`` bytes."""
     for payload in payloads:
         if len(payload) > limit:
             raise SpoolError(f"record of {len(payload)} bytes exceeds the {limit}-byte record limit")

@@ -39,6 +39,8 @@ QUIET_REASONS = frozenset({"torn_tail"})
 
 @dataclass(frozen=True, slots=True)
 class Finding:
+    """One piece of damage: what was found, where, and which records it cost."""
+
     reason: str
     file: str
     """The file's name in the spool directory."""
@@ -56,18 +58,22 @@ class Finding:
 
     @property
     def key(self) -> tuple[str, int, str]:
+        """What identifies the finding across opens: ``(file, offset, reason)``."""
         return (self.file, self.offset, self.reason)
 
     @property
     def needs_operator(self) -> bool:
+        """Whether an operator must acknowledge it (a torn tail after a crash needs none)."""
         return self.reason not in QUIET_REASONS
 
     def seqs(self) -> str:
+        """The seqs lost as text for a log line (``seqs 5..9``, or ``no seqs``)."""
         if self.first_seq is None or self.last_seq is None:
             return "no seqs"
         return f"seqs {self.first_seq}..{self.last_seq}"
 
     def as_dict(self) -> dict[str, Any]:
+        """The finding as a JSON-ready dict (the form of ``damage.json``)."""
         return asdict(self)
 
 
@@ -124,6 +130,7 @@ def write_report(path: Path, findings: Sequence[Finding]) -> None:
 
 
 def wall_ms() -> int:
+    """The wall clock in milliseconds since the epoch."""
     return time.time_ns() // 1_000_000
 
 
@@ -136,14 +143,17 @@ class DamageReport:
         self.write_errors = 0
 
     def load(self) -> DamageReport:
+        """Read the findings from ``damage.json`` (none when it is absent or unreadable); returns ``self``."""
         self._findings = read_report(self.path)
         return self
 
     @property
     def findings(self) -> tuple[Finding, ...]:
+        """Every finding kept, acknowledged or not."""
         return tuple(self._findings)
 
     def unacknowledged(self) -> tuple[Finding, ...]:
+        """The findings that still await an operator's acknowledgement."""
         return tuple(f for f in self._findings if f.needs_operator and f.acknowledged_ms is None)
 
     def add(self, found: Iterable[Finding], now_ms: int) -> list[Finding]:

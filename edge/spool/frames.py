@@ -51,6 +51,7 @@ def encode_frame(
 
 
 def encode_segment_header(first_seq: int) -> bytes:
+    """The 16-byte header of a segment whose first record has seq ``first_seq``."""
     return _SEGMENT_HEAD.pack(SEGMENT_MAGIC, first_seq)
 
 
@@ -88,6 +89,8 @@ def group_end(frame: bytes) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Frame:
+    """One valid frame read from a segment: its byte range, seqs, append time and payload."""
+
     offset: int
     end: int
     seq: int
@@ -102,6 +105,7 @@ class Frame:
 
     @property
     def last_seq(self) -> int:
+        """The seq of the frame's last record."""
         return self.seq + self.count - 1
 
     def group(self) -> bytes:

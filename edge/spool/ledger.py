@@ -50,12 +50,15 @@ COPY_NAME = "ledger.copy"
 
 
 def encode_entry(kind: int, value: int) -> bytes:
+    """One 16-byte ledger entry: ``kind``, ``value`` and the CRC-32 of both."""
     body = _BODY.pack(kind, value)
     return body + zlib.crc32(body).to_bytes(4, "little")
 
 
 @dataclass(slots=True)
 class LedgerState:
+    """What one ledger file (or both, merged) says: marks, the segment table, how the spool stopped."""
+
     ack_mark: int = 0
     reserved: int = 1
     clean_next_seq: int | None = None
@@ -77,6 +80,8 @@ class LedgerState:
 
 
 def parse_ledger(data: bytes) -> LedgerState:
+    """The state the entries of one ledger file describe; reading stops at the first damaged or unknown
+    entry (``damaged_at``)."""
     state = LedgerState(fresh=not data)
     newest: int | None = None
     for off in range(0, len(data), ENTRY_SIZE):
@@ -142,6 +147,7 @@ def new_origin() -> int:
 
 
 def fsync_dir(path: Path) -> None:
+    """fsync the directory ``path`` so that files created, renamed or deleted in it are durable."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -272,6 +278,7 @@ class Ledger:
 
     @property
     def segments(self) -> dict[int, int | None]:
+        """A copy of the segment table: first seq -> the last seq known to be in it (``None``: none yet)."""
         return dict(self._segments)
 
     def _state_bytes(self) -> bytes:
@@ -322,6 +329,8 @@ class Ledger:
         return ok and (not sync or self.sync())
 
     def record_ack(self, mark: int, *, sync: bool) -> bool:
+        """Raise the ack mark to ``mark`` (every seq up to it is acknowledged) and append it; fsynced when
+        ``sync``. Returns False when a file could not take it."""
         self._ack_mark = max(self._ack_mark, mark)
         return self._append(ACK, self._ack_mark, sync=sync)
 
@@ -331,6 +340,7 @@ class Ledger:
         return self._append(RESERVE, self._reserved, sync=True)
 
     def record_clean(self, next_seq: int) -> bool:
+        """Append the mark of a clean close (``next_seq``: the seq to use next), fsynced; False on failure."""
         return self._append(CLEAN, next_seq, sync=True)
 
     def record_segment(self, first_seq: int) -> bool:
@@ -370,5 +380,6 @@ class Ledger:
         return ok
 
     def close(self) -> None:
+        """Close both ledger files."""
         for log_file in self._files:
             log_file.close()

@@ -69,6 +69,7 @@ def marks_block_size(data: bytes | memoryview, end: int | None = None) -> int:
 
 
 def decode_marks(block: bytes | memoryview) -> list[Mark]:
+    """The marks of a marks block; raises ``MarksError`` when ``block`` is not exactly one block."""
     size = marks_block_size(block)
     if size != len(block):
         raise MarksError(f"{len(block) - size} bytes before a marks block")
@@ -85,6 +86,7 @@ class MarkBook:
         """Updated since the last ``snapshot``."""
 
     def update(self, marks: Iterable[Mark]) -> None:
+        """Keep the highest seq per publisher GID; beyond ``limit`` the least recently updated go."""
         book = self._marks
         for gid, seq in marks:
             known = book.pop(gid, None)
@@ -94,6 +96,7 @@ class MarkBook:
             del book[next(iter(book))]
 
     def items(self) -> list[Mark]:
+        """Every known mark, least recently updated first."""
         return list(self._marks.items())
 
     def __len__(self) -> int:

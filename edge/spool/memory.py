@@ -55,12 +55,15 @@ class MemoryBuffer:
 
     @property
     def stream(self) -> str:
+        """The stream's name."""
         return self._stream
 
     def open(self) -> MemoryBuffer:
+        """Nothing to open in memory; returns ``self`` (for symmetry with ``Spool.open``)."""
         return self
 
     def close(self) -> None:
+        """Close the buffer: later calls raise ``SpoolClosedError``; what it held is gone."""
         self._closed = True
 
     def __enter__(self) -> MemoryBuffer:
@@ -74,9 +77,13 @@ class MemoryBuffer:
             raise SpoolClosedError(f"memory buffer {self._stream!r} is closed")
 
     def append(self, payload: bytes) -> int | None:
+        """Take one record; returns its seq, or ``None`` when it was dropped because everything held is in
+        flight."""
         return self.append_many((payload,))[0]
 
     def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
+        """``append`` for several records, packed into groups; raises ``SpoolError`` when a record is
+        larger than the buffer."""
         for payload in payloads:
             if len(payload) > self._max_bytes:
                 raise SpoolError(
@@ -89,6 +96,8 @@ class MemoryBuffer:
         return out
 
     def append_group(self, group: bytes) -> int:
+        """Take a group made elsewhere (split to the buffer's group limits); returns the records taken, the
+        rest dropped (counted)."""
         taken = 0
         for part in split_group(group, self._group_records, self._group_bytes):
             if len(part) > self._max_bytes:
@@ -132,6 +141,8 @@ class MemoryBuffer:
     def read_unacked(
         self, max_records: int = 500, max_bytes: int = 1 << 20, *, skip_in_flight: bool = True
     ) -> SpoolBatch | None:
+        """The next batch to send (released batches first, then unread groups), marked in flight; ``None``
+        when there is nothing to send. ``skip_in_flight=False`` first releases everything in flight."""
         if max_records < 1 or max_bytes < 1:
             raise SpoolError("max_records and max_bytes must be positive")
         with self._lock:
@@ -160,6 +171,7 @@ class MemoryBuffer:
             return SpoolBatch(self._stream, groups[0].first_seq, groups[-1].last_seq, groups)
 
     def ack(self, first_seq: int) -> bool:
+        """The batch starting at ``first_seq`` reached Kafka: forget it; False if unknown (stale, counted)."""
         with self._lock:
             self._check_open()
             groups = self._in_flight.pop(first_seq, None) or self._retry.pop(first_seq, None)
@@ -170,6 +182,7 @@ class MemoryBuffer:
             return True
 
     def release(self, first_seq: int) -> bool:
+        """The batch starting at ``first_seq`` must be sent again; False if it is not in flight."""
         with self._lock:
             self._check_open()
             groups = self._in_flight.pop(first_seq, None)
@@ -179,6 +192,7 @@ class MemoryBuffer:
             return True
 
     def release_all(self) -> int:
+        """Everything in flight must be sent again; returns how many batches that was."""
         with self._lock:
             self._check_open()
             count = len(self._in_flight)
@@ -196,6 +210,7 @@ class MemoryBuffer:
             return max(0, self._records - in_flight)
 
     def stats(self) -> SpoolStats:
+        """Counters since creation and what the buffer holds now (the disk and blocking counters stay 0)."""
         with self._lock:
             heads = [g[0].timestamp_ms for g in (*self._in_flight.values(), *self._retry.values())]
             if self._pending:

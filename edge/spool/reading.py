@@ -16,6 +16,8 @@ READ_SLACK = 64 * 1024
 
 @dataclass(slots=True)
 class ReadResult:
+    """What one read of a segment brought: valid frames, where it stopped, and damage met."""
+
     frames: list[Frame]
     end: int
     """Absolute offset just after what was consumed (frames and damage)."""

@@ -38,11 +38,14 @@ SEGMENT_NAME = re.compile(r"(\d{20})\.seg")
 
 
 def segment_name(first_seq: int) -> str:
+    """The file name of the segment whose first record has seq ``first_seq``."""
     return f"{first_seq:020d}.seg"
 
 
 @dataclass(slots=True)
 class Segment:
+    """One segment file: its records' seqs and append time, its valid length and known damage."""
+
     path: Path
     first_seq: int
     size: int
@@ -60,6 +63,7 @@ class Segment:
             self.last_seq = self.first_seq - 1
 
     def damage_at(self, offset: int) -> Damage | None:
+        """The known damaged range that starts at byte ``offset``; ``None`` when there is none."""
         for damage in self.damage:
             if damage.offset == offset:
                 return damage
@@ -104,6 +108,9 @@ class Survey:
 
 @dataclass(slots=True)
 class Recovery:
+    """What ``recover`` left: the segments kept, where the sender resumes, the unacknowledged records they
+    hold, the last seq, the damage found and the marks."""
+
     segments: list[Segment]
     cursor: Cursor
     depth: int

@@ -75,6 +75,7 @@ Item = tuple[int, int, int, bytes]  # first seq, records, append time ms, frame
 
 
 def wall_ms() -> int:
+    """The wall clock in milliseconds since the epoch."""
     return time.time_ns() // 1_000_000
 
 
@@ -126,6 +127,7 @@ class Spool:
 
     @property
     def stream(self) -> str:
+        """The stream's name."""
         return self._stream
 
     @property
@@ -642,6 +644,7 @@ class Spool:
         return True
 
     def release_all(self) -> int:
+        """Everything in flight must be sent again (e.g. after a reconnect); returns how many batches."""
         with self._lock:
             self._check_open()
             return self._release_all_locked()
@@ -700,6 +703,7 @@ class Spool:
             return max(0, self._depth - self._tracker.in_flight_records())
 
     def stats(self) -> SpoolStats:
+        """Counters since open and the spool's current state, including unacknowledged damage."""
         with self._lock:
             stamps = [t for t in (self._tracker.oldest_ts(), self._cursor_ts()) if t is not None]
             return SpoolStats(

@@ -30,12 +30,15 @@ class Slice:
 
 
 class SendTracker:
+    """Tracks what the sender has read, has in flight and must re-send, and from that the ack mark."""
+
     def __init__(self, cursor: Cursor) -> None:
         self.cursor = cursor
         self.in_flight: dict[int, Slice] = {}
         self.retry: dict[int, Slice] = {}
 
     def mark(self) -> int:
+        """The ack mark: every seq up to it is acknowledged (or dropped)."""
         return min((self.cursor.next_seq, *self.in_flight, *self.retry)) - 1
 
     def take_retry(self) -> Slice | None:
@@ -90,8 +93,10 @@ class SendTracker:
         return dropped, orphaned
 
     def in_flight_records(self) -> int:
+        """Records in flight, without those of evicted segments."""
         return sum(s.count for s in self.in_flight.values() if not s.orphan)
 
     def oldest_ts(self) -> int | None:
+        """The append time (ms) of the oldest in-flight or released batch; ``None`` when there is none."""
         stamps = [s.first_ts for s in (*self.in_flight.values(), *self.retry.values()) if not s.orphan]
         return min(stamps, default=None)

@@ -49,6 +49,9 @@ def _number(value: Any) -> float:
 
 
 class AggregateStage:
+    """Event-time windows per (robot, topic): emits one record per window with the chosen statistics of
+    numeric fields. Durations in nanoseconds."""
+
     def __init__(
         self,
         fields: Sequence[str],
@@ -89,6 +92,8 @@ class AggregateStage:
         self._state: dict[tuple[str, str], _KeyState] = {}
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:
+        """Add the sample's values to each window it falls in that is still open; returns the windows the
+        key's watermark closed (a sample whose windows are all closed counts as late)."""
         counters = self.counters
         counters.received += 1
         try:
@@ -132,6 +137,7 @@ class AggregateStage:
         return self._emit(key, state, lambda start: start + self.window_ns <= watermark)
 
     def tick(self, now_ns: int) -> list[Sample]:
+        """Close and emit every window of the keys that received nothing for ``idle_timeout_ns``."""
         out: list[Sample] = []
         for key, state in self._state.items():
             if state.windows and now_ns - state.last_arrival_ns >= self.idle_timeout_ns:
@@ -161,9 +167,12 @@ class AggregateStage:
 
     @property
     def open_windows(self) -> int:
+        """Windows open now, over all keys."""
         return sum(len(state.windows) for state in self._state.values())
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:
+        """The derived record schema of the windows (robot, window bounds, count, one column per field and
+        op); raises ``StageConfigError`` when a field is not a number."""
         index, root = root_node(input_schema)
         for text, steps in zip(self.fields, self._paths, strict=True):
             kind = kind_of(resolve_path(index, root, steps))

@@ -100,12 +100,14 @@ class SchemaIndex:
             return Node(schema, namespace)
 
     def fullname_of(self, node: Node) -> str | None:
+        """The full name of the named type at ``node``; ``None`` when it is not a named type."""
         if isinstance(node.schema, dict) and node.schema.get("type") in NAMED:
             return _fullname(str(node.schema["name"]), node.namespace)
         return None
 
 
 def schema_fullname(schema: dict[str, Any], namespace: str | None) -> str:
+    """The full name of the named ``schema``, in ``namespace`` unless it names its own."""
     return _fullname(str(schema["name"]), schema.get("namespace") or namespace)
 
 

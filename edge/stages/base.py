@@ -50,6 +50,7 @@ class StageCounters:
     nan: int = 0
 
     def as_dict(self) -> dict[str, int]:
+        """The counters by field name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

@@ -43,6 +43,9 @@ def _check_pillow() -> None:
 
 
 class CompressImageStage:
+    """Compresses sensor_msgs/Image samples to sensor_msgs/CompressedImage (JPEG with ``quality``, or PNG
+    with zlib ``level``)."""
+
     def __init__(
         self, fmt: ImageFormat = "jpeg", *, quality: int = 80, level: int = 1, name: str = "compress_image"
     ) -> None:
@@ -55,6 +58,8 @@ class CompressImageStage:
         self.last_error: str | None = None
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:  # noqa: ARG002 - stateless
+        """The sample's image compressed, as a CompressedImage value with the same header; an image that
+        cannot be compressed is counted as an error and dropped."""
         counters = self.counters
         counters.received += 1
         value = sample.value
@@ -71,9 +76,12 @@ class CompressImageStage:
         return [dataclasses.replace(sample, value=out, raw=None)]
 
     def tick(self, now_ns: int) -> list[Sample]:  # noqa: ARG002 - nothing is time-driven here
+        """Nothing: the stage holds no samples."""
         return []
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:
+        """The CompressedImage schema of the input's ROS distro; raises ``StageConfigError`` unless the
+        input is sensor_msgs/Image."""
         name = input_schema.get("name", "")
         namespace = input_schema.get("namespace")
         full = name if "." in name or not namespace else f"{namespace}.{name}"

@@ -34,6 +34,8 @@ class FilterStage:
         self._predicate = compile_predicate(self._node)
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:  # noqa: ARG002 - stateless
+        """The sample if ``expr`` holds for it, else nothing; a sample it cannot be evaluated on is counted
+        as an error and dropped."""
         counters = self.counters
         counters.received += 1
         try:
@@ -49,6 +51,7 @@ class FilterStage:
         return []
 
     def tick(self, now_ns: int) -> list[Sample]:  # noqa: ARG002 - nothing is time-driven here
+        """Nothing: the stage holds no samples."""
         return []
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:

@@ -25,6 +25,8 @@ class ImageError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class Encoding:
+    """How an image encoding lays out a pixel: channels, bytes per channel, channel order."""
+
     channels: int
     depth: int
     """Bytes per channel."""

@@ -72,6 +72,9 @@ class _KeyState:
 
 
 class OnChangeStage:
+    """Forwards a sample when any of ``fields`` moved (numbers by more than ``deadband``) since the last
+    forwarded one of its (robot, topic); with ``heartbeat_ns``, also a held sample after that long."""
+
     def __init__(
         self,
         fields: Sequence[str],
@@ -95,6 +98,8 @@ class OnChangeStage:
         self._state: dict[tuple[str, str], _KeyState] = {}
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:
+        """The sample if a field moved since the key's last forwarded sample (or a heartbeat is due), else
+        nothing; with a heartbeat the unchanged sample is held, replacing an older held one."""
         counters = self.counters
         counters.received += 1
         try:
@@ -132,6 +137,7 @@ class OnChangeStage:
         return [sample]
 
     def tick(self, now_ns: int) -> list[Sample]:
+        """The held samples of the keys whose heartbeat is due (nothing without a heartbeat)."""
         if self.heartbeat_ns is None:
             return []
         out: list[Sample] = []
@@ -149,6 +155,7 @@ class OnChangeStage:
 
     @property
     def held(self) -> int:
+        """Samples held for a heartbeat now."""
         return sum(1 for state in self._state.values() if state.pending is not None)
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:

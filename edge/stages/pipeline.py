@@ -72,6 +72,7 @@ class Pipeline:
             )
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:
+        """Feed ``sample`` through every stage in order; returns what the last stage emits."""
         self.counters.received += 1
         batch = [sample]
         for stage in self.stages:
@@ -85,6 +86,7 @@ class Pipeline:
         return batch
 
     def tick(self, now_ns: int) -> list[Sample]:
+        """Tick every stage in order, feeding what a stage emits through the stages after it."""
         carried: list[Sample] = []
         for stage in self.stages:
             out = [result for item in carried for result in stage.process(item, now_ns)]
@@ -94,6 +96,8 @@ class Pipeline:
         return carried
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:
+        """The schema of what the last stage emits; raises ``StageConfigError`` naming the stage that does
+        not fit."""
         schema = input_schema
         for position, stage in enumerate(self.stages):
             try:
@@ -103,6 +107,7 @@ class Pipeline:
         return schema
 
     def stage_counters(self) -> dict[str, dict[str, int]]:
+        """Each stage's counters, by stage name."""
         return {stage.name: stage.counters.as_dict() for stage in self.stages}
 
     def totals(self) -> StageCounters:

@@ -82,6 +82,8 @@ def _declared(index: SchemaIndex, root: Node, steps: Steps) -> tuple[Node, dict[
 
 
 class ProjectStage:
+    """Keeps only the chosen field paths, nested as in the message or flattened to top-level fields."""
+
     def __init__(self, fields: Sequence[str], *, flatten: bool = False, name: str = "project") -> None:
         if not fields:
             raise StageConfigError("project needs at least one field")
@@ -104,6 +106,8 @@ class ProjectStage:
             self._tree = _build_tree(self._paths)
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:  # noqa: ARG002 - stateless
+        """A new sample with only the chosen fields; a sample lacking one is counted as an error and
+        dropped."""
         counters = self.counters
         counters.received += 1
         try:
@@ -120,14 +124,18 @@ class ProjectStage:
         return [Sample(sample.robot, sample.topic, sample.stamp_ns, value, None)]
 
     def tick(self, now_ns: int) -> list[Sample]:  # noqa: ARG002 - nothing is time-driven here
+        """Nothing: the stage holds no samples."""
         return []
 
     def derived_name(self, input_schema: dict[str, Any]) -> str:
+        """The full name of the derived record: the input's name, ``_proj_`` and a hash of the options."""
         index, root = root_node(input_schema)
         full = index.fullname_of(root) or "record"
         return f"{full}_proj_{short_hash([list(self.fields), self.flatten])}"
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:
+        """The derived record schema with only the chosen fields; raises ``StageConfigError`` when a path
+        is not in the input."""
         index, root = root_node(input_schema)
         full = self.derived_name(input_schema)
         defined: set[str] = set()

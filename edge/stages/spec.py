@@ -41,6 +41,8 @@ def _check_paths(paths: list[str]) -> list[str]:
 
 
 class FilterSpec(_Spec):
+    """Forward a sample only when an expression on its fields holds."""
+
     type: Literal["filter"]
     expr: Annotated[str, Field(min_length=1, max_length=4096)]
 
@@ -55,12 +57,16 @@ class FilterSpec(_Spec):
 
 
 class ThrottleSpec(_Spec):
+    """At most ``hz`` samples per second per robot and topic."""
+
     type: Literal["throttle"]
     hz: Annotated[float, Field(gt=0, le=1_000_000)]
     keep: Literal["latest", "first"] = "latest"
 
 
 class OnChangeSpec(_Spec):
+    """Forward a sample only when one of the fields changed."""
+
     type: Literal["on_change"]
     fields: FieldPaths
     deadband: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
@@ -77,6 +83,8 @@ class OnChangeSpec(_Spec):
 
 
 class ProjectSpec(_Spec):
+    """Keep only the chosen fields."""
+
     type: Literal["project"]
     fields: FieldPaths
     flatten: bool = False
@@ -85,6 +93,8 @@ class ProjectSpec(_Spec):
 
 
 class AggregateSpec(_Spec):
+    """Event-time windows per robot and topic over numeric fields."""
+
     type: Literal["aggregate"]
     window: DurationNs
     hop: DurationNs | None = None

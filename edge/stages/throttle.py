@@ -21,6 +21,9 @@ Keep = Literal["first", "latest"]
 
 
 class ThrottleStage:
+    """At most ``hz`` samples per second per (robot, topic) on processing time, keeping the first or the
+    latest sample of each period."""
+
     def __init__(self, hz: float, keep: Keep = "latest", *, name: str = "throttle") -> None:
         if not hz > 0:
             raise ValueError(f"throttle hz must be > 0, got {hz}")
@@ -33,6 +36,8 @@ class ThrottleStage:
         self._held: dict[tuple[str, str], tuple[int, Sample]] = {}  # keep: latest
 
     def process(self, sample: Sample, now_ns: int) -> list[Sample]:
+        """``keep: first``: the sample if it is the first of its period. ``keep: latest``: holds it and
+        returns the sample held from an earlier period, if any."""
         counters = self.counters
         counters.received += 1
         key = (sample.robot, sample.topic)
@@ -58,6 +63,7 @@ class ThrottleStage:
         return [held[1]]
 
     def tick(self, now_ns: int) -> list[Sample]:
+        """The held samples whose period is over (``keep: latest``)."""
         if not self._held:
             return []
         period = now_ns // self.period_ns
@@ -69,7 +75,9 @@ class ThrottleStage:
 
     @property
     def held(self) -> int:
+        """Samples held until their period ends now."""
         return len(self._held)
 
     def output_schema(self, input_schema: dict[str, Any]) -> dict[str, Any]:
+        """The input schema: throttling does not change the records."""
         return input_schema

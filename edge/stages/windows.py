@@ -35,6 +35,7 @@ class RunningStats:
         self.last_stamp = -(2**63)
 
     def add(self, value: float, stamp_ns: int) -> None:
+        """Count ``value``, with event time ``stamp_ns``, in the statistics."""
         self.count += 1
         delta = value - self.mean
         self.mean += delta / self.count

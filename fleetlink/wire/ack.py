@@ -19,6 +19,9 @@ _STATUS_NAMES: dict[int, AckStatus] = {0: "ok", 1: "error", 2: "need_schemas"}
 
 @dataclass(frozen=True, slots=True)
 class RecordFailure:
+    """A record of a batch that was not produced: its ``seq``, why, and whether it went to the dead-letter
+    topic instead (else the edge sends it again)."""
+
     seq: int
     reason: str
     dead_lettered: bool
@@ -63,6 +66,8 @@ class Ack:
 
 
 def encode_ack(ack: Ack) -> bytes:
+    """The wire bytes of ``ack``: magic, version, range and status, detail, failures, missing schemas,
+    record limit."""
     parts = [
         ACK_MAGIC,
         bytes([VERSION]),
@@ -81,6 +86,8 @@ def encode_ack(ack: Ack) -> bytes:
 
 
 def decode_ack(data: bytes) -> Ack:
+    """Parse and check an ack; raises ``WireError`` naming what is wrong and where. An ack that ends
+    before the record limit reads it as 0 (not said)."""
     r = Reader(data)
     if r.take(3, "ack magic") != ACK_MAGIC:
         raise WireError("not a fleetlink ack", offset=0)

@@ -43,6 +43,7 @@ _SEQ_LEN = struct.Struct("<QI")
 
 
 def zstd_available() -> bool:
+    """Whether this Python can compress and decompress with the ``zstd`` codec."""
     return _zstd is not None
 
 
@@ -67,6 +68,7 @@ class Batch:
 
     @property
     def last_seq(self) -> int:
+        """The seq of the last record (``first_seq`` when the batch has none)."""
         return self.records[-1].seq if self.records else self.first_seq
 
 

@@ -85,6 +85,9 @@ def outcome_key(site: str, repeater_id: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class CallEnvelope:
+    """What the uplink asks a robot's site: call a ROS service, send an action goal or cancel a goal, by
+    its deadline."""
+
     kind: CallKind
     call_id: str
     """The request's correlation id (service) or the goal id as a UUID text (goal, cancel)."""
@@ -105,6 +108,9 @@ class CallEnvelope:
 
 @dataclass(frozen=True, slots=True)
 class Outcome:
+    """What became of a call, as a repeater reports it: a service reply, a goal's feedback or result, or a
+    cancel's answer."""
+
     kind: OutcomeKind
     call_id: str
     robot: str
@@ -121,6 +127,8 @@ class Outcome:
 
 @dataclass(frozen=True, slots=True)
 class OutcomeBatch:
+    """The outcomes one repeater of ``site`` sends the uplink in one query."""
+
     repeater: str
     site: str
     outcomes: tuple[Outcome, ...] = field(default_factory=tuple)
@@ -144,6 +152,8 @@ def call_fields(env: CallEnvelope) -> dict[str, Any]:
 
 
 def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    """Check ``env`` and pack it as an ``FLK`` envelope, zlib-compressed when larger than
+    ``compress_above`` bytes and smaller so."""
     check_call(env)
     header = call_fields(env)
     if env.source:
@@ -152,6 +162,7 @@ def encode_call(env: CallEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> b
 
 
 def decode_call(data: bytes) -> CallEnvelope:
+    """Parse and check a call envelope; raises :class:`EnvelopeError` naming the field that is wrong."""
     what = "call envelope"
     header, payload = unpack_envelope(data, MAGIC, what)
     get = Fields(header, what, data)
@@ -211,6 +222,7 @@ def check_call(env: CallEnvelope) -> None:
 
 
 def outcome_to_json(out: Outcome) -> dict[str, Any]:
+    """The JSON object of ``out``: empty optional fields left out, the CDR payload as base64."""
     obj: dict[str, Any] = {
         "kind": out.kind,
         "id": out.call_id,
@@ -231,6 +243,8 @@ def outcome_to_json(out: Outcome) -> dict[str, Any]:
 
 
 def outcome_from_json(obj: object, data: bytes = b"") -> Outcome:
+    """Read and check one outcome's JSON object; ``data`` is the whole message, quoted in errors
+    (:class:`EnvelopeError`)."""
     if not isinstance(obj, dict):
         raise EnvelopeError("outcome", "not a JSON object", data)
     get = Fields(obj, "outcome", data)
@@ -264,6 +278,8 @@ def outcome_from_json(obj: object, data: bytes = b"") -> Outcome:
 
 
 def check_outcome(out: Outcome, data: bytes = b"") -> None:
+    """Raise :class:`EnvelopeError` unless every field of ``out`` is usable (``data`` is quoted in the
+    error)."""
     if out.kind not in OUTCOME_KINDS:
         raise EnvelopeError("outcome", f"kind {out.kind!r} is not one of {sorted(OUTCOME_KINDS)}", data)
     if out.status not in STATUSES[out.kind]:
@@ -296,6 +312,7 @@ def encode_outcomes(batch: OutcomeBatch, *, compress_above: int = COMPRESS_ABOVE
 
 
 def decode_outcomes(data: bytes) -> OutcomeBatch:
+    """Parse and check an outcome batch (JSON, zlib-compressed or not); raises :class:`EnvelopeError`."""
     raw = unpack_json(data, "outcome batch")
     if len(raw) > MAX_ENVELOPE:
         raise EnvelopeError("outcome batch", f"larger than {MAX_ENVELOPE} bytes", data)

@@ -51,6 +51,9 @@ SETTLED: frozenset[str] = frozenset({"applied", "duplicate", "expired", "superse
 
 @dataclass(frozen=True, slots=True)
 class CommandEnvelope:
+    """A command for a repeater: publish ``body`` on a robot's ROS topic every ``period_ms`` while its
+    lease holds."""
+
     command_id: str
     robot: str
     ros_topic: str
@@ -74,12 +77,15 @@ class CommandEnvelope:
 
     @property
     def lease_ms(self) -> int:
+        """How long the command is valid from when it was issued, in milliseconds."""
         return self.lease_until_ms - self.issued_at_ms
 
     def without_schema(self) -> CommandEnvelope:
+        """A copy without the writer schema's text, for a site that already has it."""
         return _replace_schema(self, None)
 
     def with_schema(self, schema: str) -> CommandEnvelope:
+        """A copy carrying ``schema``, the writer schema's JSON text."""
         return _replace_schema(self, schema)
 
 
@@ -104,6 +110,8 @@ def _replace_schema(env: CommandEnvelope, schema: str | None) -> CommandEnvelope
 
 @dataclass(frozen=True, slots=True)
 class CommandReply:
+    """A repeater's answer to a command envelope: what it did with the command (``result``) and why."""
+
     command_id: str
     robot: str
     result: Result
@@ -114,6 +122,9 @@ class CommandReply:
 
 @dataclass(frozen=True, slots=True)
 class StatusEvent:
+    """What later became of a command at a site: delivered, superseded, expired or rejected (``at_ms``:
+    when)."""
+
     command_id: str
     robot: str
     ros_topic: str
@@ -125,6 +136,8 @@ class StatusEvent:
 
 @dataclass(frozen=True, slots=True)
 class StatusBatch:
+    """The status events one repeater of ``site`` sends in one query; an empty batch is a heartbeat."""
+
     repeater: str
     site: str
     events: tuple[StatusEvent, ...] = field(default_factory=tuple)
@@ -132,6 +145,9 @@ class StatusBatch:
 
 @dataclass(frozen=True, slots=True)
 class StatusAck:
+    """The uplink's answer to a status or outcome batch: how many records Kafka took (0 and ``detail`` when
+    it failed)."""
+
     accepted: int
     detail: str = ""
 
@@ -140,6 +156,8 @@ class StatusAck:
 
 
 def encode_envelope(env: CommandEnvelope, *, compress_above: int = COMPRESS_ABOVE) -> bytes:
+    """Check ``env`` and pack it as an ``FLC`` envelope, zlib-compressed when larger than
+    ``compress_above`` bytes and smaller so."""
     check_envelope(env)
     header: dict[str, Any] = {
         "id": env.command_id,
@@ -163,6 +181,7 @@ def encode_envelope(env: CommandEnvelope, *, compress_above: int = COMPRESS_ABOV
 
 
 def decode_envelope(data: bytes) -> CommandEnvelope:
+    """Parse and check a command envelope; raises :class:`EnvelopeError` naming the field that is wrong."""
     header, value = unpack_envelope(data, MAGIC, "command envelope")
     try:
         fp, view = split_single_object(value)
@@ -226,6 +245,8 @@ def check_envelope(env: CommandEnvelope) -> None:
 
 
 def encode_reply(reply: CommandReply) -> bytes:
+    """Compact JSON of ``reply``, empty fields left out; raises :class:`EnvelopeError` for an unknown
+    result."""
     if reply.result not in RESULTS:
         raise EnvelopeError("command reply", f"result {reply.result!r} is not one of {sorted(RESULTS)}")
     obj = {
@@ -240,6 +261,7 @@ def encode_reply(reply: CommandReply) -> bytes:
 
 
 def decode_reply(data: bytes) -> CommandReply:
+    """Parse and check a repeater's reply; raises :class:`EnvelopeError` naming the field that is wrong."""
     get = Fields(json_object(data, "command reply", data), "command reply", data)
     result = get.text("result")
     if result not in RESULTS:
@@ -273,6 +295,7 @@ def encode_status_batch(batch: StatusBatch, *, compress_above: int = COMPRESS_AB
 
 
 def status_to_json(event: StatusEvent) -> dict[str, Any]:
+    """The JSON object of one status event."""
     return {
         "id": event.command_id,
         "robot": event.robot,
@@ -285,6 +308,8 @@ def status_to_json(event: StatusEvent) -> dict[str, Any]:
 
 
 def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
+    """Read and check one status event's JSON object; ``data`` is the whole message, quoted in errors
+    (:class:`EnvelopeError`)."""
     if not isinstance(obj, dict):
         raise EnvelopeError("status event", "not a JSON object", data)
     get = Fields(obj, "status event", data)
@@ -303,6 +328,7 @@ def status_from_json(obj: object, data: bytes = b"") -> StatusEvent:
 
 
 def decode_status_batch(data: bytes) -> StatusBatch:
+    """Parse and check a status batch (JSON, zlib-compressed or not); raises :class:`EnvelopeError`."""
     obj = json_object(unpack_json(data, "status batch"), "status batch", data)
     get = Fields(obj, "status batch", data)
     events = obj.get("events")
@@ -314,9 +340,12 @@ def decode_status_batch(data: bytes) -> StatusBatch:
 
 
 def encode_status_ack(ack: StatusAck) -> bytes:
+    """Compact JSON of ``ack``."""
     return json.dumps({"accepted": ack.accepted, "detail": ack.detail}, separators=(",", ":")).encode()
 
 
 def decode_status_ack(data: bytes) -> StatusAck:
+    """Parse and check the uplink's status ack; raises :class:`EnvelopeError` naming the field that is
+    wrong."""
     get = Fields(json_object(data, "status ack", data), "status ack", data)
     return StatusAck(get.integer("accepted"), get.text("detail", allow_empty=True))

@@ -92,6 +92,8 @@ def inflate(packed: bytes, what: str, data: bytes | None = None) -> bytes:
 
 
 def json_object(raw: bytes, what: str, data: bytes) -> dict[str, Any]:
+    """Parse ``raw`` as a JSON object; raises :class:`EnvelopeError` about ``what`` (quoting ``data``) when
+    it is not one."""
     try:
         obj = json.loads(raw)
     except (UnicodeDecodeError, ValueError) as exc:
@@ -111,6 +113,8 @@ class Fields:
         return EnvelopeError(self._what, f"field {name!r} {reason}", self._data)
 
     def text(self, name: str, *, allow_empty: bool = False) -> str:
+        """The string field ``name``; it must be present and non-empty unless ``allow_empty`` (then missing
+        reads as ``""``)."""
         value = self._obj.get(name, "" if allow_empty else None)
         if not isinstance(value, str):
             raise self._fail(name, "must be a string")
@@ -119,6 +123,7 @@ class Fields:
         return value
 
     def optional_text(self, name: str) -> str | None:
+        """The string field ``name``, or None when it is missing or null."""
         value = self._obj.get(name)
         if value is None:
             return None
@@ -127,6 +132,7 @@ class Fields:
         return value
 
     def integer(self, name: str) -> int:
+        """The integer field ``name``: present, not a boolean, not negative."""
         value = self._obj.get(name)
         if not isinstance(value, int) or isinstance(value, bool):
             raise self._fail(name, "must be an integer")

@@ -14,6 +14,7 @@ U64 = struct.Struct("<Q")
 
 
 def str16(text: str) -> bytes:
+    """``text`` as UTF-8 behind its u16 length; raises ``WireError`` when longer than 65535 bytes."""
     data = text.encode("utf-8")
     if len(data) > 0xFFFF:
         raise WireError(f"text of {len(data)} bytes does not fit a 16-bit length")
@@ -31,6 +32,7 @@ class Reader:
         self.end = len(data) if end is None else end
 
     def take(self, n: int, what: str) -> bytes:
+        """The next ``n`` bytes; ``what`` names them in the error when fewer are left."""
         if n > self.end - self.pos:
             raise WireError(f"truncated {what}: needs {n} bytes, {self.end - self.pos} left", offset=self.pos)
         out = bytes(self.data[self.pos : self.pos + n])
@@ -38,6 +40,7 @@ class Reader:
         return out
 
     def unpack(self, fmt: struct.Struct, what: str) -> tuple[int, ...]:
+        """The values of struct ``fmt`` at the current position, which moves past them."""
         if fmt.size > self.end - self.pos:
             raise WireError(f"truncated {what}", offset=self.pos)
         values = fmt.unpack_from(self.data, self.pos)
@@ -45,6 +48,7 @@ class Reader:
         return values
 
     def text(self, what: str, wide: bool = False) -> str:
+        """UTF-8 text behind a u16 length (u32 when ``wide``)."""
         (n,) = self.unpack(U32 if wide else U16, f"{what} length")
         start = self.pos
         try:
@@ -53,9 +57,11 @@ class Reader:
             raise WireError(f"{what} is not valid UTF-8", offset=start) from None
 
     def blob(self, what: str) -> bytes:
+        """Bytes behind a u32 length."""
         (n,) = self.unpack(U32, f"{what} length")
         return self.take(n, what)
 
     def done(self, what: str) -> None:
+        """Raise ``WireError`` unless every byte up to the end was read; ``what`` names what they held."""
         if self.pos != self.end:
             raise WireError(f"{self.end - self.pos} unexpected trailing bytes after {what}", offset=self.pos)

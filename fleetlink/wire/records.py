@@ -115,6 +115,8 @@ class PayloadTemplate:
         return self._flags
 
     def payload(self, value: bytes, timestamp_ms: int, source_seq: int | None = None) -> bytes:
+        """The payload of one record with ``value``, ``timestamp_ms`` (ms since the epoch) and, when given,
+        ``source_seq``."""
         if source_seq is None:
             return _PAYLOAD_HEAD.pack(self._flags, timestamp_ms, len(value)) + value + self._tail
         if not 0 <= source_seq < 1 << 64:

@@ -108,6 +108,7 @@ def test_a_fenced_uplinks_open_transaction_never_shows(
 
     def produce_then_wait(part: Batch, sink: KafkaSink, dead: dict[int, str]) -> Ack:
         ack = produce_all(part, sink, dead)
+
         def take_over() -> None:
             b.write(batch(data, range(11, 31)), produce_all)
             b_took_over.set()

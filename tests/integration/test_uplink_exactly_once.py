@@ -109,9 +109,7 @@ def test_a_batch_sent_again_is_written_once(
         assert (stats.committed, stats.skipped_records, stats.takeovers) == (2, 60, 1)
     assert committed_values(kafka_bootstrap, topic) == values(range(1, 81))
     marks_seen = committed_values(kafka_bootstrap, marks)
-    assert [decode_mark(v) for v in marks_seen][-1] == decode_mark(
-        b'{"origin":"123456789abcdef0","seq":80}'
-    )
+    assert [decode_mark(v) for v in marks_seen][-1] == decode_mark(b'{"origin":"123456789abcdef0","seq":80}')
 
 
 def test_a_new_spool_starts_its_seqs_again_under_a_new_origin(

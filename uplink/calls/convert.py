@@ -33,15 +33,25 @@ class _Ros(Protocol):
 
 
 class UplinkConfigLike(Protocol):
+    """What :func:`load_call_types` reads of the uplink config: the call mappings and the ROS section."""
+
     @property
-    def services(self) -> Sequence[_Mapping]: ...
+    def services(self) -> Sequence[_Mapping]:
+        """The service mappings (only their ``type`` is read)."""
+
     @property
-    def actions(self) -> Sequence[_Mapping]: ...
+    def actions(self) -> Sequence[_Mapping]:
+        """The action mappings (only their ``type`` is read)."""
+
     @property
-    def ros(self) -> _Ros: ...
+    def ros(self) -> _Ros:
+        """The ROS distro and the folders of extra interface packages."""
 
 
 class CallTypes:
+    """Codecs of the call mappings' ROS types: Kafka's Avro values to CDR for the robots, and their CDR
+    back to Avro."""
+
     def __init__(self, typestore: Typestore, distro: Distro) -> None:
         self.typestore = typestore
         self.distro: Distro = distro

@@ -65,14 +65,17 @@ class CallMapping(Section):
 
     @property
     def to_template(self) -> Template:
+        """``to`` parsed into literals and the ``{robot}`` placeholder."""
         return parse_template(self.to)
 
     @property
     def robot_ref(self) -> Ref:
+        """Where the addressed robot comes from: the record key or a field of the record."""
         return parse_template(self.robot).refs[0]
 
     @property
     def timeout_ms(self) -> int:
+        """``timeout`` in whole milliseconds (at least 1)."""
         return max(1, round(self.timeout * 1000))
 
 

@@ -36,7 +36,10 @@ OUTCOME_KEY = "fleetlink/*/call-outcome/*"
 
 
 class Registry(Protocol):
-    def register(self, subject: str, schema: dict[str, Any]) -> int: ...
+    """The schema registry call the outcome writer makes."""
+
+    def register(self, subject: str, schema: dict[str, Any]) -> int:
+        """Register ``schema`` under ``subject`` (or find it there); returns the schema id."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,9 @@ def _ns(typename: str, kind: str) -> tuple[str, str]:
 
 
 class OutcomeWriter:
+    """Writes call outcomes to their mappings' Kafka topics (Avro, Confluent wire format), registering each
+    topic's schema once."""
+
     def __init__(
         self,
         sink: Sink,
@@ -77,6 +83,7 @@ class OutcomeWriter:
         self.dropped = 0
 
     def knows(self, out: Outcome) -> bool:
+        """Whether this uplink has the service (for a reply) or action mapping ``out`` names."""
         return out.mapping in (self._services if out.kind == "reply" else self._actions)
 
     def _target(self, out: Outcome) -> _Target:
@@ -172,10 +179,13 @@ class OutcomeWriter:
         self.written += 1
 
     def write_and_wait(self, outcomes: Sequence[Outcome], timeout: float = 60.0) -> str | None:
+        """Produce ``outcomes`` and wait up to ``timeout`` seconds: None when Kafka has them all, else the
+        problem."""
         return wait_written(lambda done: self.write(outcomes, done), timeout, "outcome")
 
 
 def site_of_outcome_key(key: str) -> str | None:
+    """The site of a ``fleetlink/<site>/call-outcome/<repeater>`` key, or None for any other key."""
     parts = key.split("/")
     if len(parts) == 4 and parts[0] == "fleetlink" and parts[2] == "call-outcome":
         return parts[1]
@@ -212,6 +222,8 @@ class OutcomeIntake:
         self.dropped = 0
 
     def on_query(self, query: zenoh.Query) -> None:
+        """Take a repeater's outcome batch: refuse it when malformed or naming another site, else write the
+        outcomes it may report and answer once Kafka has them."""
         payload = query.payload
         try:
             if payload is None:

@@ -47,10 +47,14 @@ def _header(record: CommandRecord, name: str) -> str | None:
 
 
 def correlation_id(record: CommandRecord) -> str:
+    """A service call's id: the ``fleetlink-correlation-id`` header, else the record's source (at most 200
+    characters)."""
     return (_header(record, CORRELATION_HEADER) or record.source)[:200]
 
 
 def goal_id(record: CommandRecord) -> str:
+    """A goal's id: the ``fleetlink-goal-id`` header as a UUID, else a UUID made from the record's source;
+    ``RoutingError`` when the header is no UUID."""
     given = _header(record, GOAL_HEADER)
     if given is not None:
         try:
@@ -75,6 +79,8 @@ def cancel_target(record: CommandRecord, value: Mapping[str, Any]) -> tuple[str,
 
 
 def robot_of(mapping: CallMapping, record: CommandRecord, value: Mapping[str, Any]) -> str:
+    """The robot a request or goal record addresses, by the mapping's ``robot``; ``RoutingError`` when it
+    names none."""
     return resolve(mapping.robot_ref, key=record.text_key, robot=None, record=value)
 
 

@@ -31,6 +31,9 @@ _PART = {"service": "_Request", "goal": "_Goal"}
 
 
 class CallRoute:
+    """Turns a decoded request, goal or cancel record into a call, sends it to the robot's site, and gives
+    the outcome to write when it cannot go out."""
+
     def __init__(
         self,
         types: CallTypes,

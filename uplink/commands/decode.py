@@ -35,11 +35,18 @@ _READ_ERRORS = (
 
 
 class SchemaSource(Protocol):
-    def schema_by_id(self, schema_id: int) -> dict[str, Any]: ...
+    """Where writer schemas are looked up by id (the schema registry)."""
+
+    def schema_by_id(self, schema_id: int) -> dict[str, Any]:
+        """The schema registered with ``schema_id``; ``RegistryUnavailableError`` when the registry cannot
+        be reached, another ``RegistryError`` when it has no such schema."""
 
 
 @dataclass(frozen=True, slots=True)
 class WriterSchema:
+    """The schema a value was written with: its registry id, compact JSON text, Avro fingerprint and parsed
+    form."""
+
     schema_id: int
     text: str
     fingerprint: bytes
@@ -48,18 +55,26 @@ class WriterSchema:
 
 @dataclass(frozen=True, slots=True)
 class DecodedValue:
+    """A decoded record value: its writer schema, the Avro body without the Confluent header, and the
+    record read from it."""
+
     writer: WriterSchema
     body: bytes
     record: dict[str, Any]
 
 
 class CommandDecoder:
+    """Decodes record values in the Confluent wire format, fetching each writer schema from the registry
+    once."""
+
     def __init__(self, registry: SchemaSource) -> None:
         self._registry = registry
         self._writers: dict[int, WriterSchema] = {}
         self._lock = threading.Lock()
 
     def decode(self, value: bytes | None) -> DecodedValue:
+        """The writer schema, body and record of ``value``; ``UndecodableValueError`` when it is none (a
+        tombstone included), ``RegistryUnreachableError`` when the registry cannot be reached."""
         if value is None:
             raise UndecodableValueError("the record has no value (tombstone): no command", None)
         try:
@@ -84,6 +99,8 @@ class CommandDecoder:
         return DecodedValue(writer, bytes(body), record)
 
     def writer(self, schema_id: int, raw: bytes | None = None) -> WriterSchema:
+        """The writer schema with ``schema_id``, fetched once and cached; ``raw`` is the value quoted when
+        the id is unknown or the schema unusable (``UndecodableValueError``)."""
         with self._lock:
             known = self._writers.get(schema_id)
         if known is not None:

@@ -88,10 +88,13 @@ class RobotDirectory:
         return problem
 
     def owner(self, robot: str) -> Owner | None:
+        """The site holding ``robot``, whether it is registered there and since when (None: no site holds
+        it)."""
         with self._lock:
             return self._robots.get(robot)
 
     def site_of(self, robot: str) -> str | None:
+        """The site where ``robot`` is registered or was last known (None: unknown, so every site)."""
         with self._lock:
             entry = self._robots.get(robot)
         return None if entry is None else entry.site
@@ -102,6 +105,7 @@ class RobotDirectory:
             return sorted(r for r, e in self._robots.items() if e.registered)
 
     def sites(self) -> list[str]:
+        """Every site that holds or last held a robot, sorted."""
         with self._lock:
             return sorted({e.site for e in self._robots.values()})
 

@@ -38,6 +38,9 @@ MAX_BACKOFF_S = 2.0
 
 @dataclass
 class ForwardResult:
+    """How one forward ended: settled or not, the repeaters' replies, why it did not settle, and how many
+    queries it took."""
+
     forward: Forward
     settled: bool
     replies: list[CommandReply] = field(default_factory=list)
@@ -46,6 +49,9 @@ class ForwardResult:
 
 
 class Forwarder:
+    """Sends signed command and call envelopes to their sites as Zenoh queries, again and again until a
+    repeater settles them."""
+
     def __init__(
         self,
         session: zenoh.Session,
@@ -65,6 +71,8 @@ class Forwarder:
         self._limiter = LogLimiter(log)
 
     def send(self, fwd: Forward) -> ForwardResult:
+        """Send a command to its site (every site when unknown) until a repeater settles it, its lease ends
+        or the uplink stops; the schema text is left out where a site has acknowledged it."""
         full = fwd.envelope
         fp = full.schema_fp
         with self._lock:

@@ -59,16 +59,20 @@ class Ref:
 
     @property
     def text(self) -> str:
+        """The placeholder as written in a template, braces included (``{msg.robot_id}``)."""
         return "{" + ".".join((self.kind, *self.path)) + "}"
 
 
 @dataclass(frozen=True, slots=True)
 class Template:
+    """A name template (``to``, ``robot``) split into literal text and placeholders."""
+
     text: str
     parts: tuple[str | Ref, ...]
 
     @property
     def refs(self) -> tuple[Ref, ...]:
+        """The template's placeholders, in order."""
         return tuple(p for p in self.parts if isinstance(p, Ref))
 
     def sample(self, value: str = "r1") -> str:
@@ -76,6 +80,7 @@ class Template:
         return "".join(p if isinstance(p, str) else value for p in self.parts)
 
     def render(self, *, key: str | None, robot: str | None, record: Mapping[str, Any] | None) -> str:
+        """The template with every placeholder filled in; ``RoutingError`` when one cannot be."""
         out: list[str] = []
         for part in self.parts:
             out.append(part if isinstance(part, str) else resolve(part, key=key, robot=robot, record=record))
@@ -111,6 +116,8 @@ def parse_template(text: str) -> Template:
 
 
 def resolve(ref: Ref, *, key: str | None, robot: str | None, record: Mapping[str, Any] | None) -> str:
+    """What ``ref`` stands for: the record key, the target robot, or a string or integer field of the
+    record; ``RoutingError`` when it is missing or of another type."""
     if ref.kind == "key":
         if not key:
             raise RoutingError("the record has no key, but the mapping needs {key}")
@@ -136,6 +143,8 @@ def resolve(ref: Ref, *, key: str | None, robot: str | None, record: Mapping[str
 
 
 class RepeatSection(Section):
+    """How often the repeater publishes a command, and for how long."""
+
     model_config = ConfigDict(frozen=True)
 
     period: PositiveSeconds = 1.0
@@ -145,6 +154,8 @@ class RepeatSection(Section):
 
 
 class CommandQoS(Section):
+    """The QoS of the repeater's publisher on the robot's ROS topic."""
+
     model_config = ConfigDict(frozen=True)
 
     reliability: Literal["reliable", "best_effort"] = "reliable"
@@ -152,6 +163,7 @@ class CommandQoS(Section):
     depth: int = Field(default=10, ge=1, le=10_000)
 
     def to_keyexpr(self) -> str:
+        """The QoS as rmw_zenoh's compact string."""
         return QoS(
             reliability=Reliability.RELIABLE if self.reliability == "reliable" else Reliability.BEST_EFFORT,
             durability=Durability.VOLATILE if self.durability == "volatile" else Durability.TRANSIENT_LOCAL,
@@ -226,6 +238,7 @@ class CommandMapping(Section):
 
     @property
     def to_template(self) -> Template:
+        """``to`` parsed into literals and placeholders."""
         return parse_template(self.to)
 
     @property
@@ -243,19 +256,24 @@ class CommandMapping(Section):
 
     @property
     def qos_text(self) -> str | None:
+        """The publisher QoS as rmw_zenoh's compact string (None: reliable, volatile, depth 10)."""
         return None if self.qos is None else self.qos.to_keyexpr()
 
     @property
     def period_ms(self) -> int:
+        """``repeat.period`` in whole milliseconds (at least 1)."""
         return max(1, round(self.repeat.period * 1000))
 
     @property
     def lease_ms(self) -> int:
+        """``repeat.lease`` in whole milliseconds (at least 1)."""
         return max(1, round(self.repeat.lease * 1000))
 
 
 @dataclass(frozen=True, slots=True)
 class Target:
+    """A robot a record addresses and the ROS topic its command goes to."""
+
     robot: str
     ros_topic: str
 

@@ -25,12 +25,15 @@ class _Partition:
 
 
 class OffsetTracker:
+    """The records in flight per partition, and the offsets that may be committed (thread-safe)."""
+
     def __init__(self, *, clock: Callable[[], float] = time.monotonic) -> None:
         self._parts: dict[TopicPartitionKey, _Partition] = {}
         self._lock = threading.Lock()
         self._clock = clock
 
     def begin(self, tp: TopicPartitionKey, offset: int) -> None:
+        """Note the record at ``offset`` of ``tp`` as handed out and in flight."""
         now = self._clock()
         with self._lock:
             part = self._parts.setdefault(tp, _Partition())
@@ -38,12 +41,14 @@ class OffsetTracker:
             part.highest = max(part.highest, offset)
 
     def done(self, tp: TopicPartitionKey, offset: int) -> None:
+        """Note the record at ``offset`` of ``tp`` as settled (ignored for a forgotten partition)."""
         with self._lock:
             part = self._parts.get(tp)
             if part is not None:
                 part.pending.pop(offset, None)
 
     def in_flight(self) -> int:
+        """How many records, over all partitions, are handed out and not settled."""
         with self._lock:
             return sum(len(p.pending) for p in self._parts.values())
 
@@ -65,6 +70,7 @@ class OffsetTracker:
         return out
 
     def committed(self, positions: dict[TopicPartitionKey, int]) -> None:
+        """Note ``positions`` (partition -> offset) as committed to Kafka."""
         with self._lock:
             for tp, position in positions.items():
                 part = self._parts.get(tp)

@@ -35,10 +35,12 @@ class CommandRecord:
 
     @property
     def source(self) -> str:
+        """Where the record was read: ``<topic>:<partition>:<offset>``."""
         return f"{self.topic}:{self.partition}:{self.offset}"
 
     @property
     def text_key(self) -> str | None:
+        """The key as text (undecodable UTF-8 replaced), or None for a null key."""
         return None if self.key is None else self.key.decode("utf-8", "replace")
 
 
@@ -52,6 +54,8 @@ class Forward:
 
 
 def command_id(record: CommandRecord) -> str:
+    """The command id: the ``fleetlink-command-id`` header (at most 1000 characters), else the record's
+    source."""
     for name, value in record.headers:
         if name == COMMAND_ID_HEADER and value:
             text = value.decode("utf-8", "replace").strip()
@@ -66,6 +70,7 @@ def issued_at_ms(record: CommandRecord, now_ms: int) -> int:
 
 
 def lease_until_ms(record: CommandRecord, mapping: CommandMapping, now_ms: int) -> int:
+    """When the command's lease ends: its start plus the mapping's lease (ms since the epoch)."""
     return issued_at_ms(record, now_ms) + mapping.lease_ms
 
 

@@ -30,6 +30,9 @@ METADATA_EVERY_S = 5.0
 
 
 class RegistrationsReader:
+    """Follows the registrations topic from its beginning on a thread of its own, applying every record to
+    ``directory``."""
+
     def __init__(
         self, kafka: KafkaSection, topic: str, decoder: CommandDecoder, directory: RobotDirectory
     ) -> None:
@@ -46,6 +49,8 @@ class RegistrationsReader:
         self.undecodable = 0
 
     def start(self, catch_up_s: float = 10.0) -> RegistrationsReader:
+        """Assign the topic's partitions from the beginning, start the reading thread, and wait up to
+        ``catch_up_s`` seconds for it to reach the end (a warning if not); returns self."""
         conf: dict[str, Any] = dict(self._kafka.common_config())
         conf.update(
             {
@@ -70,6 +75,7 @@ class RegistrationsReader:
         return self
 
     def stop(self) -> None:
+        """Stop the reading thread (waiting up to 10 s) and close the consumer."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(10)
@@ -88,6 +94,7 @@ class RegistrationsReader:
 
     @property
     def caught_up(self) -> bool:
+        """Whether the reader has reached the end of every partition once since it started."""
         return self._caught_up.is_set()
 
     def _assign_new(self, consumer: Consumer) -> None:

@@ -59,6 +59,8 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class RouterStats:
+    """The command router's counters, updated by its worker threads through :meth:`add`."""
+
     records: int = 0
     forwards: int = 0
     dead_lettered: int = 0
@@ -69,12 +71,16 @@ class RouterStats:
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def add(self, **counts: int) -> None:
+        """Add ``counts`` (counter name -> amount) under the lock."""
         with self.lock:
             for name, value in counts.items():
                 setattr(self, name, getattr(self, name) + value)
 
 
 class CommandRouter:
+    """Reads the command, request and goal topics, sends each record to its robots' sites, and commits its
+    offset once it has settled."""
+
     def __init__(
         self,
         config: UplinkConfig,
@@ -149,6 +155,8 @@ class CommandRouter:
     # -- lifecycle ------------------------------------------------------------------------
 
     def start(self, *, registrations_catch_up_s: float = 10.0) -> CommandRouter:
+        """Declare the status (and outcome) queryables, start the registrations reader when the directory
+        is the router's own, then the workers and the consumer thread; returns self."""
         cfg = self.config
         self._stop.clear()
         self._queryable = self._session.declare_queryable(STATUS_KEY, self.intake.on_query)
@@ -168,6 +176,8 @@ class CommandRouter:
         return self
 
     def stop(self) -> None:
+        """Stop the consumer thread and the workers, commit what has settled, close the consumer and the
+        registrations reader, and undeclare the queryables."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(15)
@@ -218,6 +228,7 @@ class CommandRouter:
             self._calls = by_topic
 
     def in_flight(self) -> int:
+        """How many records were read and have not settled yet."""
         return self._tracker.in_flight()
 
     def lag_s(self) -> float:

@@ -12,6 +12,8 @@ from fleetlink.wire.command_auth import ANY_SITE, sign_envelope
 
 
 class CommandSigner:
+    """Signs the envelopes the uplink sends with its Ed25519 key, each for the site it addresses."""
+
     def __init__(self, key: Ed25519PrivateKey) -> None:
         self._key = key
 

@@ -17,6 +17,9 @@ from fleetlink.wire.commands import StatusBatch, StatusEvent
 
 @dataclass(frozen=True, slots=True)
 class CheckedStatus:
+    """A status batch after the checks: the events to write, how many were dropped, and why it is
+    refused whole, if it is."""
+
     events: list[StatusEvent]
     dropped: int
     problem: str | None = None
@@ -24,6 +27,7 @@ class CheckedStatus:
 
 
 def site_of_status_key(key: str) -> str | None:
+    """The site of a ``fleetlink/<site>/command-status/<repeater>`` key, or None for any other key."""
     parts = key.split("/")
     if len(parts) == 4 and parts[0] == "fleetlink" and parts[2] == "command-status":
         return parts[1]
@@ -31,6 +35,8 @@ def site_of_status_key(key: str) -> str | None:
 
 
 def check_status(key: str, batch: StatusBatch, owner_of: Callable[[str], Owner | None]) -> CheckedStatus:
+    """Check a status batch against ``key``: refuse it when it names another site, drop events about robots
+    another site holds, and give the rest the key's site."""
     site = site_of_status_key(key)
     if site is None:
         return CheckedStatus([], 0, f"{key!r} is not a status key")

@@ -41,6 +41,7 @@ _PARSED = fastavro.parse_schema(copy.deepcopy(STATUS_SCHEMA))
 
 
 def status_datum(event: StatusEvent) -> dict[str, Any]:
+    """The ``CommandStatus`` Avro datum of ``event`` (its detail cut to 2000 characters)."""
     return {
         "command_id": event.command_id,
         "robot": event.robot,

@@ -27,10 +27,15 @@ STATUS_KEY = "fleetlink/*/command-status/*"
 
 
 class Registry(Protocol):
-    def register(self, subject: str, schema: dict[str, Any]) -> int: ...
+    """The schema registry call the status writer makes."""
+
+    def register(self, subject: str, schema: dict[str, Any]) -> int:
+        """Register ``schema`` under ``subject`` (or find it there); returns the schema id."""
 
 
 class StatusWriter:
+    """Writes command status events to the status topic, keyed by robot, registering its schema once."""
+
     def __init__(self, sink: Sink, registry: Registry, topic: str) -> None:
         self._sink = sink
         self._registry = registry
@@ -40,12 +45,15 @@ class StatusWriter:
         self.written = 0
 
     def schema_id(self) -> int:
+        """The registry id of the status schema, registered under the topic's subject on first use
+        (``RegistryError`` when that fails)."""
         with self._lock:
             if self._schema_id is None:
                 self._schema_id = self._registry.register(subject_for_topic(self.topic), STATUS_SCHEMA)
             return self._schema_id
 
     def write(self, events: Sequence[StatusEvent], done: Done) -> None:
+        """Produce ``events``; ``done`` once with None when Kafka has them all, else the first problem."""
         if not events:
             done(None)
             return
@@ -71,6 +79,8 @@ class StatusWriter:
         self.written += 1
 
     def write_and_wait(self, events: Sequence[StatusEvent], timeout: float = 60.0) -> str | None:
+        """Produce ``events`` and wait up to ``timeout`` seconds: None when Kafka has them all, else the
+        problem."""
         return wait_written(lambda done: self.write(events, done), timeout, "status")
 
 
@@ -89,6 +99,8 @@ class StatusIntake:
         """Status events about a robot another site holds."""
 
     def on_query(self, query: zenoh.Query) -> None:
+        """Take a repeater's status batch: refuse it when malformed or naming another site, answer a
+        heartbeat at once, else write the events it may report and answer once Kafka has them."""
         payload = query.payload
         try:
             if payload is None:

@@ -34,6 +34,7 @@ SEQUENCES = frozenset({"array", "bytes"})
 
 
 def const_kind(value: object) -> str:
+    """The kind of a literal: ``bool``, ``number`` or ``string``."""
     if isinstance(value, bool):
         return "bool"
     if isinstance(value, int | float):

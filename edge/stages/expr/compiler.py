@@ -47,6 +47,7 @@ _EQUATABLE = frozenset({"number", "string", "bool", "bytes"})
 
 
 def runtime_kind(value: Any) -> str:  # noqa: PLR0911 - one return per kind
+    """The kind of a decoded message value (``number``, ``string``, ``array``, ...) for checks and errors."""
     value = plain(value)
     if type(value) is bool:
         return "bool"
@@ -68,6 +69,7 @@ def _is_number(value: Any) -> bool:
 
 
 def as_bool(value: Any) -> bool:
+    """``value`` if it is a bool; raises ``EvaluationError`` otherwise."""
     value = plain(value)
     if type(value) is bool:
         return value
@@ -75,6 +77,7 @@ def as_bool(value: Any) -> bool:
 
 
 def as_number(value: Any, what: str) -> int | float:
+    """``value`` if it is a number; raises ``EvaluationError`` naming ``what`` otherwise."""
     value = plain(value)
     if type(value) is float or type(value) is int:
         return value
@@ -313,6 +316,7 @@ def _call(node: Call) -> Fn:
 
 
 def compile_node(node: Node) -> Fn:  # noqa: PLR0911 - one branch per node type
+    """The closure that evaluates ``node`` on a sample."""
     if isinstance(node, Const):
         value = node.value
         return lambda _s: value

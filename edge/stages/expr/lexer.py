@@ -42,6 +42,8 @@ _ESCAPES = {"n": "\n", "t": "\t", "r": "\r", "\\": "\\", '"': '"', "'": "'", "0"
 
 @dataclass(frozen=True, slots=True)
 class Token:
+    """One token: its kind, its source text, its 1-based column and, for literals, its value."""
+
     kind: TokenKind
     text: str
     column: int
