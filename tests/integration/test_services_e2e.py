@@ -436,3 +436,16 @@ def test_an_operator_docks_a_robot_and_calls_its_e_stop_from_the_console(
                     assert outcomes()[ids[0]] == ["accepted", "succeeded"]
                 assert robots.model("tb4_01").docked is True
                 assert robots.model("tb4_01").e_stop is True
+        # every call is in the audit topic: who sent what, with its id
+        with TopicLog(kafka_bootstrap, schema_registry_url, config.topics.audit, avro=False) as audit:
+
+            def audited() -> list[dict[str, Any]]:
+                found = (json.loads(r["value"]) for r in list(audit.records))
+                return [r for r in found if (r.get("detail") or {}).get("command_id") in ids]
+
+            wait_until(lambda: len(audited()) == 2, timeout=20, message="the calls in the audit topic")
+            sent = audited()
+        assert {(r["user"], r["role"], r["action"], r["target"], r["status"]) for r in sent} == {
+            ("lin", "operator", "command.send", "tb4_01", 201)
+        }
+        assert {r["detail"]["mapping"] for r in sent} == {"dock", "estop"}
