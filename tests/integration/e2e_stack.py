@@ -105,6 +105,10 @@ def edge_config(
             "max_in_flight": 1,
         },
         "topics": {"dead_letter": cloud_.dead_letter, "registrations": cloud_.registrations},
+        # an edge in the test process reports the whole test runner's memory (500 MB and more
+        # with Kafka clients, browsers' drivers and several edges): a bound that fits it keeps
+        # its health about the site, not the runner (process edges keep the default bound)
+        "intake": {"max_bytes": "768MiB"},
     }
     data.update(extra)
     return EdgeConfig.model_validate(data)
