@@ -293,11 +293,16 @@ class TopicLog:
         with self._lock:
             return [r["value"] for r in self.records]
 
-    def statuses(self, command_id: str | None = None, robot: str | None = None) -> list[str]:
+    def statuses(
+        self, command_id: str | None = None, robot: str | None = None, site: str | None = None
+    ) -> list[str]:
+        """The statuses in Kafka order; ``site=""`` keeps the ones the uplink decided itself."""
         return [
             v["status"]
             for v in self.values()
-            if command_id in (None, v["command_id"]) and robot in (None, v["robot"])
+            if command_id in (None, v["command_id"])
+            and robot in (None, v["robot"])
+            and site in (None, v["site"])
         ]
 
 
