@@ -352,8 +352,9 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
             # on its own (site "") once the lease ends, which may land before the site's.
             try:
                 wait_until(
-                    lambda: distinct(status.statuses(f"cut-{run}", site=site.name))
-                    == ["delivered", "expired"],
+                    lambda: (
+                        distinct(status.statuses(f"cut-{run}", site=site.name)) == ["delivered", "expired"]
+                    ),
                     timeout=60,
                     message="statuses reach Kafka after the heal",
                 )
