@@ -207,7 +207,7 @@ class BatchJob:
         schema_id = self._ids.id_for(batch.site, record.kafka_topic, fingerprint, batch.schemas)
         return confluent_frame(schema_id, bytes(body))
 
-    def _report(self, index: int, error: KafkaError | None, _msg: Message) -> None:
+    def _report(self, index: int, error: KafkaError | None, _msg: Message | None) -> None:
         """librdkafka's delivery report for record ``index`` (on the producer's poll thread)."""
         record = self._batch.records[index]
         if self._on_delivery is not None:

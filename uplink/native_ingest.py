@@ -73,17 +73,35 @@ class NativeIngest:
         topics: list[int],
         heads: dict[tuple[int, bytes], bytes],
         on_done: Callable[[Failures], None],
+        *,
+        min_seq: int = 0,
     ) -> list[int]:
         """Produce the records of ``topics`` (ids of ``scanned.topics()``) whose schema has a
-        Confluent header in ``heads``; ``on_done(failures)`` once they are delivered (at once
-        when there is none). Returns the indices of the records left to the caller."""
+        Confluent header in ``heads`` and whose seq is above ``min_seq``; ``on_done(failures)``
+        once they are delivered (at once when there is none). Returns the indices of the
+        records left to the caller (none at or below ``min_seq``)."""
         with self._lock:  # the batch id is registered before its first report can arrive
-            batch_id, produced, others = self.producer.produce(scanned, topics, heads)
+            batch_id, produced, others = self.producer.produce(scanned, topics, heads, min_seq)
             if produced:
                 self._jobs[batch_id] = on_done
         if not produced:
             on_done([])
         return others
+
+    def produce_one(
+        self,
+        topic: str,
+        key: bytes | None,
+        value: bytes,
+        *,
+        headers: list[tuple[str, bytes]],
+        timestamp_ms: int,
+        on_done: Callable[[Failures], None],
+    ) -> None:
+        """Produce one record; ``on_done(failures)`` once it is delivered (or not)."""
+        with self._lock:
+            batch_id = self.producer.produce_one(topic, key, value, headers, timestamp_ms)
+            self._jobs[batch_id] = on_done
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -145,8 +163,14 @@ class NativeJob:
         on_done: Callable[[Ack], None],
         stats: IngestStats,
         on_delivery: Callable[[str, bool, float], None] | None = None,
+        min_seq: int = 0,
+        counted: bool = True,
     ) -> None:
+        """``min_seq``: records at or below it are not produced (an exactly-once stream's that
+        Kafka has); ``counted`` False: the caller counts the batch in ``stats``."""
         self._head = head
+        self._min_seq = min_seq
+        self._counted = counted
         self._scanned = scanned
         self._native = native
         self._sink = sink
@@ -165,9 +189,10 @@ class NativeJob:
     def run(self) -> None:
         """Produce natively the records of topics whose schema ids are at hand, the rest through a
         ``BatchJob``; ``on_done`` hears one ack once both parts are settled."""
-        with self._stats.lock:
-            self._stats.batches += 1
-            self._stats.records += len(self._scanned)
+        if self._counted:
+            with self._stats.lock:
+                self._stats.batches += 1
+                self._stats.records += len(self._scanned)
         topics: list[int] = []
         heads: dict[tuple[int, bytes], bytes] = {}
         for index, (topic, _count, _raw, fps) in enumerate(self._scanned.topics()):
@@ -182,7 +207,7 @@ class NativeJob:
             topics.append(index)
         self._produced_topics = topics
         self._produced_at = time.monotonic()
-        others = self._native.produce(self._scanned, topics, heads, self._native_done)
+        others = self._native.produce(self._scanned, topics, heads, self._native_done, min_seq=self._min_seq)
         self._python_part(others, self._part_done)
 
     def _python_part(self, indices: list[int], on_done: Callable[[Ack], None]) -> None:
@@ -219,7 +244,8 @@ class NativeJob:
             return
         latency = time.monotonic() - self._produced_at
         failed = [index for index, *_ in failures]
-        for topic, delivered, undelivered in self._scanned.delivery_counts(self._produced_topics, failed):
+        counts = self._scanned.delivery_counts(self._produced_topics, failed, self._min_seq)
+        for topic, delivered, undelivered in counts:
             for _ in range(delivered):
                 on_delivery(topic, True, latency)
             for _ in range(undelivered):
@@ -237,7 +263,8 @@ class NativeJob:
         if finished:
             status = "error" if parts.retry else "ok"
             detail = parts.retry[0].reason if parts.retry else ""
-            count_outcome(self._stats, status)
+            if self._counted:
+                count_outcome(self._stats, status)
             self._on_done(
                 self._ack(tuple(sorted(parts.dead + parts.retry, key=lambda f: f.seq)), status, detail)
             )

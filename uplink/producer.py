@@ -36,8 +36,9 @@ class Delivery:
 
 
 DeliveryCallback = Callable[[Delivery], None]
-RawCallback = Callable[[KafkaError | None, Message], None]
-"""librdkafka's own delivery callback ``(error or None, message)``."""
+RawCallback = Callable[[KafkaError | None, Message | None], None]
+"""librdkafka's own delivery callback ``(error or None, message)`` (no message from the native
+producer: ``uplink.native_sink``)."""
 
 
 def _produce_error(err: KafkaError) -> ProduceError:
@@ -54,6 +55,21 @@ def _exception_error(exc: KafkaException) -> ProduceError:
     if err is None:
         return ProduceError(str(exc), code="_UNKNOWN", retriable=False)
     return _produce_error(err)
+
+
+def producer_settings(
+    settings: KafkaSection, transactional_id: str | None = None, transaction_timeout_s: float = 60.0
+) -> dict[str, Any]:
+    """The librdkafka settings of the uplink's producer; with ``transactional_id``, of a
+    transactional one whose transactions time out after ``transaction_timeout_s``."""
+    conf: dict[str, Any] = dict(settings.producer_config())
+    if transactional_id is not None:
+        timeout_ms = round(transaction_timeout_s * 1000)
+        conf["transactional.id"] = transactional_id
+        conf["transaction.timeout.ms"] = timeout_ms
+        # librdkafka: a record may not outlive the transaction that holds it
+        conf["delivery.timeout.ms"] = min(int(conf.get("delivery.timeout.ms", timeout_ms)), timeout_ms)
+    return conf
 
 
 class KafkaSink:
@@ -87,13 +103,7 @@ class KafkaSink:
     def start(self) -> KafkaSink:
         """Create the producer (a transactional one registers its id, fencing other holders) and start the
         poll thread; returns self. Raises ``ProduceError`` when librdkafka refuses."""
-        conf: dict[str, Any] = dict(self._settings.producer_config())
-        if self._transactional_id is not None:
-            timeout_ms = round(self._transaction_timeout_s * 1000)
-            conf["transactional.id"] = self._transactional_id
-            conf["transaction.timeout.ms"] = timeout_ms
-            # librdkafka: a record may not outlive the transaction that holds it
-            conf["delivery.timeout.ms"] = min(int(conf.get("delivery.timeout.ms", timeout_ms)), timeout_ms)
+        conf = producer_settings(self._settings, self._transactional_id, self._transaction_timeout_s)
         log.info("starting Kafka producer %s", redacted(conf))
         conf["error_cb"] = self._on_client_error
         try:

@@ -43,13 +43,14 @@ from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.delivery_board import DeliveryBoard, acked_scanned, acked_topics
 from fleetlink.uplink.delivery_status import DeliveryStatus
 from fleetlink.uplink.diversion import Diversion
-from fleetlink.uplink.exactly_once import ExactlyOnceWriter, MarksReader
+from fleetlink.uplink.exactly_once import ExactlyOnceWriter, MarksReader, Pending, TxnSink, above, at_or_below
 from fleetlink.uplink.exactly_once.writer import ExactlyOnceStats
 from fleetlink.uplink.identity import Source, source_of
 from fleetlink.uplink.ingest import BatchJob, IngestStats, count_outcome
 from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
 from fleetlink.uplink.native_ingest import NativeIngest, NativeJob, view
+from fleetlink.uplink.native_sink import NativeSink
 from fleetlink.uplink.ordered import KeyedSerialExecutor
 from fleetlink.uplink.policy import Decision, InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
@@ -393,7 +394,9 @@ class Uplink:
             return
 
         if batch.origin:  # the edge asks for exactly-once delivery
-            self._write_exactly_once(query, data, verdict.source, verdict.routes, arrived)
+            self._write_exactly_once(
+                query, data, batch, scanned, source=verdict.source, routes=verdict.routes, arrived=arrived
+            )
             return
 
         def done(ack: Ack) -> None:
@@ -433,21 +436,25 @@ class Uplink:
         self,
         query: zenoh.Query,
         data: bytes,
+        batch: Batch,
+        scanned: ScannedBatch | None,
+        *,
         source: Source,
         routes: Mapping[str, Decision],
         arrived: float,
     ) -> None:
         """An exactly-once batch, on the edge's worker: its transaction is committed (or not)
-        before the edge's next batch is looked at."""
+        before the edge's next batch is looked at. With ``scanned`` (the native path) ``batch``
+        is its view; without, the decoded batch."""
         sink, ids, registrations = self._sink, self._ids, self._registrations
         if sink is None or ids is None or registrations is None:
             self._finish(query, error="uplink stopping")
             return
-        batch = decode_batch(data)  # read once already: it decodes
         timeout_s = self.config.exactly_once.transaction_timeout
         metered = not isinstance(self.metrics, NullMetrics)
+        on_delivery = self.metrics.on_delivered if metered else None
 
-        def run(part: Batch, txn: KafkaSink, dead: dict[int, str]) -> Ack:
+        def waited(start: Callable[[Callable[[Ack], None]], None], part: Batch) -> Ack:
             answers: list[Ack] = []
             answered = threading.Event()
 
@@ -455,43 +462,71 @@ class Uplink:
                 answers.append(ack)
                 answered.set()
 
+            start(on_done)
+            if not answered.wait(timeout_s):
+                detail = f"not all delivered within {timeout_s:g} s"
+                return Ack(part.edge_id, part.stream, part.first_seq, part.last_seq, "error", (), detail)
+            return answers[0]
+
+        def run(txn: TxnSink, after: int, dead: dict[int, str]) -> Ack:
             diversion = (
                 Diversion(source, routes, sink=txn, refusals=self.refusals, registrations=registrations)
                 if routes
                 else None
             )
-            BatchJob(
-                part,
+            job = partial(
+                BatchJob,
                 sink=txn,
                 schema_ids=ids,
                 dead_letter_topic=self.config.topics.dead_letter,
-                on_done=on_done,
                 stats=self.stats,
                 dead_letter_max_bytes=self._dlq_max,
-                on_delivery=self.metrics.on_delivered if metered else None,
+                on_delivery=on_delivery,
                 diversion=diversion,
                 counted=False,
                 dead=dead,
-            ).run()
-            if not answered.wait(timeout_s):
-                detail = f"not all delivered within {timeout_s:g} s"
-                return Ack(batch.edge_id, batch.stream, part.first_seq, part.last_seq, "error", (), detail)
-            return answers[0]
+            )
+            if scanned is not None and isinstance(txn, NativeSink) and not dead:
+                return waited(
+                    lambda done: NativeJob(
+                        batch,
+                        scanned,
+                        native=txn.ingest,
+                        sink=txn,
+                        schema_ids=ids,
+                        routes=routes,
+                        job=job,
+                        on_done=done,
+                        stats=self.stats,
+                        on_delivery=on_delivery,
+                        min_seq=after,
+                        counted=False,
+                    ).run(),
+                    batch,
+                )
+            part = above(batch if scanned is None else decode_batch(data), after)
+            return waited(lambda done: job(part, on_done=done).run(), part)
 
+        records = len(scanned) if scanned is not None else len(batch.records)
+        pending = (
+            Pending(batch, scanned.last_seq(), scanned.at_or_below)
+            if scanned is not None
+            else Pending(batch, batch.last_seq, at_or_below(batch))
+        )
         with self.stats.lock:
             self.stats.batches += 1
-            self.stats.records += len(batch.records)
+            self.stats.records += records
         try:
-            ack = self._exactly_once().write(batch, run)
+            ack = self._exactly_once().write(pending, run)
         except Exception as exc:  # answer the edge whatever failed: it sends the batch again
             log.exception(
                 "exactly-once batch %s/%s %d..: not written", batch.edge_id, batch.stream, batch.first_seq
             )
             ack = Ack(
-                batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, "error", (), repr(exc)[:200]
+                batch.edge_id, batch.stream, batch.first_seq, pending.last_seq, "error", (), repr(exc)[:200]
             )
         count_outcome(self.stats, ack.status)
-        self._answered(batch, None, ack, arrived)
+        self._answered(batch, scanned, ack, arrived)
         self._finish(query, ack)
 
     def _exactly_once(self) -> ExactlyOnceWriter:
@@ -500,8 +535,18 @@ class Uplink:
             if self._eo_writer is None:
                 cfg = self.config
                 self._marks = MarksReader(cfg.kafka, cfg.topics.marks, f"fleetlink-marks-{cfg.id}").start()
+                native = self._native is not None
+
+                def make_sink(transactional_id: str) -> TxnSink:
+                    kind = NativeSink if native else KafkaSink
+                    return kind(
+                        cfg.kafka,
+                        transactional_id=transactional_id,
+                        transaction_timeout_s=cfg.exactly_once.transaction_timeout,
+                    )
+
                 self._eo_writer = ExactlyOnceWriter(
-                    cfg.kafka,
+                    make_sink,
                     marks=self._marks,
                     marks_topic=cfg.topics.marks,
                     prefix=cfg.exactly_once.transactional_id_prefix,

@@ -189,6 +189,11 @@ impl ScannedBatch {
         out
     }
 
+    /// How many records have a seq at or below `seq`.
+    fn at_or_below(&self, seq: u64) -> usize {
+        self.records.iter().filter(|r| r.seq <= seq).count()
+    }
+
     /// The seq of the last record.
     fn last_seq(&self) -> u64 {
         self.records.last().map(|r| r.seq).unwrap_or(0)
@@ -207,11 +212,16 @@ impl ScannedBatch {
     }
 
     /// Per topic among `topics` (ids): `(topic, delivered, failed)`, failed being the records
-    /// whose index is in `failed` (delivery reports of a natively produced part).
-    fn delivery_counts(&self, topics: Vec<u32>, failed: Vec<u32>) -> Vec<(String, u64, u64)> {
+    /// whose index is in `failed` (delivery reports of a natively produced part); records at or
+    /// below `min_seq` were not produced.
+    #[pyo3(signature = (topics, failed, min_seq=0))]
+    fn delivery_counts(&self, topics: Vec<u32>, failed: Vec<u32>, min_seq: u64) -> Vec<(String, u64, u64)> {
         let failed: std::collections::HashSet<u32> = failed.into_iter().collect();
         let mut counts: HashMap<u32, (u64, u64)> = topics.iter().map(|t| (*t, (0, 0))).collect();
         for (i, r) in self.records.iter().enumerate() {
+            if r.seq <= min_seq {
+                continue;
+            }
             if let Some(c) = counts.get_mut(&self.tails[r.tail as usize].topic_id) {
                 if failed.contains(&(i as u32)) {
                     c.1 += 1;
@@ -375,6 +385,25 @@ struct Handle(*mut c_void);
 unsafe impl Send for Handle {}
 unsafe impl Sync for Handle {}
 
+/// Hand one record to librdkafka, waiting while its queue is full; a record it refuses at once
+/// is settled with that error.
+fn hand_over(api: &Api, rk: &Handle, shared: &Shared, args: &[Vu], id: u32, index: u32) {
+    loop {
+        let err = unsafe { (api.produceva)(rk.0, args.as_ptr(), args.len() - 1) };
+        if err.is_null() {
+            return;
+        }
+        let code = unsafe { (api.error_code)(err) };
+        unsafe { (api.error_destroy)(err) };
+        if code == rdkafka::ERR_QUEUE_FULL {
+            std::thread::sleep(Duration::from_millis(1));
+            continue;
+        }
+        shared.settle(id, index, code);
+        return;
+    }
+}
+
 /// A librdkafka producer of its own (idempotent, `acks=all`: the config the Python side gives).
 #[pyclass(module = "fleetlink._native")]
 pub struct NativeProducer {
@@ -384,6 +413,15 @@ pub struct NativeProducer {
     stop: Arc<AtomicBool>,
     poller: Mutex<Option<JoinHandle<()>>>,
     next_batch: Mutex<u32>,
+}
+
+impl NativeProducer {
+    fn batch_id(&self) -> u32 {
+        let mut next = self.next_batch.lock().unwrap();
+        let id = *next;
+        *next = next.wrapping_add(1).max(1);
+        id
+    }
 }
 
 #[pymethods]
@@ -434,20 +472,20 @@ impl NativeProducer {
     /// bytes`). Returns
     /// `(batch_id, produced, others)`: `others` the indices of the records left to Python.
     /// Waits (the GIL released) while librdkafka's queue is full.
+    ///
+    /// Records at or below `min_seq` are in neither part: an exactly-once stream's records
+    /// that Kafka already has.
+    #[pyo3(signature = (batch, topics, heads, min_seq=0))]
     fn produce(
         &self,
         py: Python<'_>,
         batch: &Bound<'_, ScannedBatch>,
         topics: Vec<u32>,
         heads: HashMap<(u32, Vec<u8>), Vec<u8>>,
+        min_seq: u64,
     ) -> PyResult<(u32, usize, Vec<u32>)> {
         let batch = batch.get();
-        let id = {
-            let mut next = self.next_batch.lock().unwrap();
-            let id = *next;
-            *next = next.wrapping_add(1).max(1);
-            id
-        };
+        let id = self.batch_id();
         let ok: std::collections::HashSet<u32> = topics.into_iter().collect();
         let mut heads5: HashMap<(u32, [u8; 8]), [u8; 5]> = HashMap::new();
         for ((t, fp), h) in heads {
@@ -458,6 +496,9 @@ impl NativeProducer {
         let mut mine = Vec::new();
         let mut others = Vec::new();
         for (i, r) in batch.records.iter().enumerate() {
+            if r.seq <= min_seq {
+                continue;
+            }
             let topic = batch.tails[r.tail as usize].topic_id;
             let go = ok.contains(&topic)
                 && (r.flags & FLAG_RAW_VALUE != 0 || {
@@ -510,23 +551,69 @@ impl NativeProducer {
                     args.push(Vu::header(SEQ_HEADER.as_ptr() as *const std::ffi::c_char, &seqtext));
                 }
                 args.push(Vu::int(rdkafka::VTYPE_END, 0));
-                loop {
-                    let err = unsafe { (api.produceva)(rk.0, args.as_ptr(), args.len() - 1) };
-                    if err.is_null() {
-                        break;
-                    }
-                    let code = unsafe { (api.error_code)(err) };
-                    unsafe { (api.error_destroy)(err) };
-                    if code == rdkafka::ERR_QUEUE_FULL {
-                        std::thread::sleep(Duration::from_millis(1));
-                        continue;
-                    }
-                    shared.settle(id, i, code);
-                    break;
-                }
+                hand_over(&api, &rk, &shared, &args, id, i);
             }
         });
         Ok((id, produced, others))
+    }
+
+    /// Produce one record, reported as a batch of its own (`wait_done`); returns its batch id.
+    #[pyo3(signature = (topic, key, value, headers, timestamp_ms))]
+    fn produce_one(
+        &self,
+        py: Python<'_>,
+        topic: &str,
+        key: Option<Vec<u8>>,
+        value: Vec<u8>,
+        headers: Vec<(String, Vec<u8>)>,
+        timestamp_ms: i64,
+    ) -> PyResult<u32> {
+        let id = self.batch_id();
+        let topic_c = CString::new(topic)?;
+        let names = headers.iter().map(|(n, _)| CString::new(n.as_str())).collect::<Result<Vec<_>, _>>()?;
+        self.shared.batches.lock().unwrap().insert(id, BatchState { remaining: 1, failures: vec![] });
+        let (api, rk, shared) = (self.api.clone(), self.rk.clone(), self.shared.clone());
+        py.detach(|| {
+            let mut args: Vec<Vu> = vec![
+                Vu::cstr(rdkafka::VTYPE_TOPIC, topic_c.as_ptr()),
+                Vu::mem(rdkafka::VTYPE_VALUE, &value),
+            ];
+            if let Some(k) = &key {
+                args.push(Vu::mem(rdkafka::VTYPE_KEY, k));
+            }
+            args.push(Vu::i64(rdkafka::VTYPE_TIMESTAMP, timestamp_ms));
+            args.push(Vu::int(rdkafka::VTYPE_MSGFLAGS, rdkafka::MSG_F_COPY));
+            args.push(Vu::ptr(rdkafka::VTYPE_OPAQUE, ((id as u64) << 32) as *mut c_void));
+            for (name, (_, val)) in names.iter().zip(&headers) {
+                args.push(Vu::header(name.as_ptr(), val));
+            }
+            args.push(Vu::int(rdkafka::VTYPE_END, 0));
+            hand_over(&api, &rk, &shared, &args, id, 0)
+        });
+        Ok(id)
+    }
+
+    /// A call of the transactional API (a producer made with a `transactional.id`): `op` one of
+    /// `init`, `begin`, `commit`, `abort`. Returns None, or what failed: `(name, message, fatal,
+    /// retriable, requires abort)`. Waits (the GIL released) up to `timeout_s`.
+    #[allow(clippy::type_complexity)]
+    fn transaction(
+        &self,
+        py: Python<'_>,
+        op: &str,
+        timeout_s: f64,
+    ) -> PyResult<Option<(String, String, bool, bool, bool)>> {
+        let (api, rk) = (self.api.clone(), self.rk.clone());
+        let ms = (timeout_s * 1000.0) as c_int;
+        let call: unsafe fn(&Api, *mut c_void, c_int) -> *mut c_void = match op {
+            "init" => |a, rk, ms| unsafe { (a.init_transactions)(rk, ms) },
+            "begin" => |a, rk, _| unsafe { (a.begin_transaction)(rk) },
+            "commit" => |a, rk, ms| unsafe { (a.commit_transaction)(rk, ms) },
+            "abort" => |a, rk, ms| unsafe { (a.abort_transaction)(rk, ms) },
+            _ => return Err(PyValueError::new_err(format!("no transaction call {op:?}"))),
+        };
+        let failed = py.detach(|| api.take_error(unsafe { call(&api, rk.0, ms) }));
+        Ok(failed.map(|e| (e.name, e.message, e.fatal, e.retriable, e.requires_abort)))
     }
 
     /// Batches whose every record has its delivery report: `(batch_id, failures)`, failures as

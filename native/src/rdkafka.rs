@@ -114,6 +114,23 @@ pub struct Api {
     pub destroy: unsafe extern "C" fn(*mut c_void),
     pub err2name: unsafe extern "C" fn(c_int) -> *const c_char,
     pub err2str: unsafe extern "C" fn(c_int) -> *const c_char,
+    pub init_transactions: unsafe extern "C" fn(*mut c_void, c_int) -> *mut c_void,
+    pub begin_transaction: unsafe extern "C" fn(*mut c_void) -> *mut c_void,
+    pub commit_transaction: unsafe extern "C" fn(*mut c_void, c_int) -> *mut c_void,
+    pub abort_transaction: unsafe extern "C" fn(*mut c_void, c_int) -> *mut c_void,
+    pub error_name: unsafe extern "C" fn(*const c_void) -> *const c_char,
+    pub error_is_fatal: unsafe extern "C" fn(*const c_void) -> c_int,
+    pub error_is_retriable: unsafe extern "C" fn(*const c_void) -> c_int,
+    pub error_txn_requires_abort: unsafe extern "C" fn(*const c_void) -> c_int,
+}
+
+/// A failed call of librdkafka's transactional API, read out of its `rd_kafka_error_t`.
+pub struct TxnError {
+    pub name: String,
+    pub message: String,
+    pub fatal: bool,
+    pub retriable: bool,
+    pub requires_abort: bool,
 }
 
 macro_rules! sym {
@@ -144,6 +161,14 @@ impl Api {
                 destroy: sym!(lib, "rd_kafka_destroy"),
                 err2name: sym!(lib, "rd_kafka_err2name"),
                 err2str: sym!(lib, "rd_kafka_err2str"),
+                init_transactions: sym!(lib, "rd_kafka_init_transactions"),
+                begin_transaction: sym!(lib, "rd_kafka_begin_transaction"),
+                commit_transaction: sym!(lib, "rd_kafka_commit_transaction"),
+                abort_transaction: sym!(lib, "rd_kafka_abort_transaction"),
+                error_name: sym!(lib, "rd_kafka_error_name"),
+                error_is_fatal: sym!(lib, "rd_kafka_error_is_fatal"),
+                error_is_retriable: sym!(lib, "rd_kafka_error_is_retriable"),
+                error_txn_requires_abort: sym!(lib, "rd_kafka_error_txn_requires_abort"),
                 _lib: lib,
             })
         }
@@ -151,6 +176,25 @@ impl Api {
 
     pub fn err_name(&self, code: c_int) -> String {
         unsafe { CStr::from_ptr((self.err2name)(code)).to_string_lossy().into_owned() }
+    }
+
+    /// Read and free an `rd_kafka_error_t` (None for a null one: the call succeeded).
+    pub fn take_error(&self, err: *mut c_void) -> Option<TxnError> {
+        if err.is_null() {
+            return None;
+        }
+        unsafe {
+            let text = |p: *const c_char| CStr::from_ptr(p).to_string_lossy().into_owned();
+            let out = TxnError {
+                name: text((self.error_name)(err)),
+                message: text((self.error_string)(err)),
+                fatal: (self.error_is_fatal)(err) != 0,
+                retriable: (self.error_is_retriable)(err) != 0,
+                requires_abort: (self.error_txn_requires_abort)(err) != 0,
+            };
+            (self.error_destroy)(err);
+            Some(out)
+        }
     }
 
     pub fn err_str(&self, code: c_int) -> String {

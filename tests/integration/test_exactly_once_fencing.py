@@ -10,8 +10,10 @@ from collections.abc import Iterator
 import pytest
 from confluent_kafka.admin import AdminClient, NewTopic
 
-from fleetlink.uplink.exactly_once import ExactlyOnceWriter, MarksReader
+from fleetlink.uplink.exactly_once import ExactlyOnceWriter, MarksReader, Pending, TxnSink, above, at_or_below
+from fleetlink.uplink.exactly_once.writer import RunJob
 from fleetlink.uplink.kafka_settings import KafkaSection
+from fleetlink.uplink.native_sink import NativeSink
 from fleetlink.uplink.producer import Delivery, KafkaSink
 from fleetlink.wire import Ack, Batch, Record
 from tests.integration.test_uplink_exactly_once import committed_values, values
@@ -24,22 +26,31 @@ def batch(topic: str, seqs: range) -> Batch:
     return Batch("fence-site", "edge", "durable", seqs.start, records, origin=ORIGIN)
 
 
-def produce_all(part: Batch, sink: KafkaSink, _dead: dict[int, str]) -> Ack:
-    """What the uplink's batch job does, reduced to producing every record and waiting."""
-    left = len(part.records)
-    lock, done = threading.Lock(), threading.Event()
+def produce_all(part: Batch) -> RunJob:
+    """What the uplink's batch job does, reduced to producing the records above the mark and waiting."""
 
-    def delivered(_d: Delivery) -> None:
-        nonlocal left
-        with lock:
-            left -= 1
-            if left == 0:
-                done.set()
+    def run(sink: TxnSink, after: int, _dead: dict[int, str]) -> Ack:
+        todo = above(part, after).records
+        left = len(todo)
+        lock, done = threading.Lock(), threading.Event()
 
-    for r in part.records:
-        sink.produce(r.kafka_topic, r.key, r.value, on_delivery=delivered)
-    assert done.wait(20)
-    return Ack(part.edge_id, part.stream, part.first_seq, part.last_seq, "ok")
+        def delivered(_d: Delivery) -> None:
+            nonlocal left
+            with lock:
+                left -= 1
+                if left == 0:
+                    done.set()
+
+        for r in todo:
+            sink.produce(r.kafka_topic, r.key, r.value, on_delivery=delivered)
+        assert done.wait(20)
+        return Ack(part.edge_id, part.stream, part.first_seq, part.last_seq, "ok")
+
+    return run
+
+
+def write(writer: ExactlyOnceWriter, part: Batch, run: RunJob | None = None) -> Ack:
+    return writer.write(Pending(part, part.last_seq, at_or_below(part)), run or produce_all(part))
 
 
 @pytest.fixture
@@ -52,9 +63,18 @@ def topics(kafka_bootstrap: str) -> tuple[str, str]:
     return data, marks
 
 
-@pytest.fixture
-def writers(kafka_bootstrap: str, topics: tuple[str, str]) -> Iterator[list[ExactlyOnceWriter]]:
+@pytest.fixture(params=["python", "native"])
+def writers(
+    request: pytest.FixtureRequest, kafka_bootstrap: str, topics: tuple[str, str]
+) -> Iterator[list[ExactlyOnceWriter]]:
+    """Two uplinks' writers, with the producer the uplink uses without and with its native path."""
     kafka = KafkaSection(bootstrap_servers=kafka_bootstrap)
+
+    def make_sink(transactional_id: str) -> TxnSink:
+        if request.param == "native":
+            return NativeSink(kafka, transactional_id=transactional_id, transaction_timeout_s=20)
+        return KafkaSink(kafka, transactional_id=transactional_id, transaction_timeout_s=20)
+
     prefix = f"fence{uuid.uuid4().hex[:6]}"
     out, readers = [], []
     for n in range(2):
@@ -62,7 +82,7 @@ def writers(kafka_bootstrap: str, topics: tuple[str, str]) -> Iterator[list[Exac
         readers.append(reader)
         out.append(
             ExactlyOnceWriter(
-                kafka,
+                make_sink,
                 marks=reader,
                 marks_topic=topics[1],
                 prefix=prefix,
@@ -86,9 +106,9 @@ def test_uplinks_taking_turns_write_every_record_once(
     for n, start in enumerate(range(1, 400, 50)):
         writer = (a, b)[n % 2]
         part = batch(data, range(max(1, start - 20), start + 50))  # overlapping: sent again in part
-        ack = writer.write(part, produce_all)
+        ack = write(writer, part)
         if ack.status != "ok":  # this writer was fenced since its last batch: the edge resends
-            ack = writer.write(part, produce_all)
+            ack = write(writer, part)
         answers.append(ack.status)
     assert answers == ["ok"] * 8
     assert committed_values(kafka_bootstrap, data) == values(range(1, 401))
@@ -103,23 +123,25 @@ def test_a_fenced_uplinks_open_transaction_never_shows(
     over: A's commit fails, A answers error, and only B's copy of those records is committed."""
     data, _marks = topics
     a, b = writers
-    assert a.write(batch(data, range(1, 11)), produce_all).status == "ok"
+    assert write(a, batch(data, range(1, 11))).status == "ok"
     b_took_over = threading.Event()
 
-    def produce_then_wait(part: Batch, sink: KafkaSink, dead: dict[int, str]) -> Ack:
-        ack = produce_all(part, sink, dead)
+    stale_part = batch(data, range(11, 31))
+
+    def produce_then_wait(sink: TxnSink, after: int, dead: dict[int, str]) -> Ack:
+        ack = produce_all(stale_part)(sink, after, dead)
 
         def take_over() -> None:
-            b.write(batch(data, range(11, 31)), produce_all)
+            write(b, batch(data, range(11, 31)))
             b_took_over.set()
 
         threading.Thread(target=take_over).start()
         assert b_took_over.wait(30)
         return ack
 
-    stale = a.write(batch(data, range(11, 31)), produce_then_wait)
+    stale = write(a, stale_part, produce_then_wait)
     assert stale.status == "error"
     assert "not committed" in stale.detail
     assert committed_values(kafka_bootstrap, data) == values(range(1, 31))
-    assert a.write(batch(data, range(21, 41)), produce_all).status == "ok"  # A takes it back
+    assert write(a, batch(data, range(21, 41))).status == "ok"  # A takes it back
     assert committed_values(kafka_bootstrap, data) == values(range(1, 41))

@@ -163,3 +163,41 @@ def test_a_restarted_uplink_reads_the_mark_back_and_another_fences_the_first(
     assert got == values(range(1, 351))
     key = MarkKey("eo-site", "eo-edge", "durable")
     assert key.transactional_id(prefix) == f"{prefix}.eo-site.eo-edge.durable"
+
+
+@pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
+def test_a_record_kafka_refuses_goes_to_the_dead_letter_topic_in_the_transaction(
+    kafka_bootstrap: str,
+    schema_registry_url: str,
+    zenoh_router: str,
+    edge_session: zenoh.Session,
+    names: tuple[str, str, str],
+    native: bool,
+) -> None:
+    """A record larger than the producer takes is refused for good: the batch still commits,
+    that record in the dead-letter topic and every other one in its topic, each once."""
+    topic, marks, prefix = names
+    dead_letters = f"{topic}.dlq"
+    cfg = config(kafka_bootstrap, schema_registry_url, zenoh_router, marks, prefix)
+    cfg = cfg.model_copy(
+        update={
+            "kafka": cfg.kafka.model_copy(update={"message_max_bytes": 4_000}),
+            "topics": cfg.topics.model_copy(update={"dead_letter": dead_letters}),
+            "ingest": cfg.ingest.model_copy(update={"native": native}),
+        }
+    )
+    sent = batch(topic, range(1, 21))
+    big = sent.records[4]._replace(value=b"x" * 10_000)
+    sent = dataclasses.replace(sent, records=(*sent.records[:4], big, *sent.records[5:]))
+    with Uplink(cfg) as uplink:
+        ack = send(edge_session, sent)
+        assert ack.status == "ok", ack.detail
+        assert [(f.seq, f.dead_lettered) for f in ack.failures] == [(5, True)]
+        again = send(edge_session, sent)  # the ack was lost: nothing is written twice
+        assert again.status == "ok", again.detail
+        stats = uplink.exactly_once_stats
+        assert stats is not None
+        assert stats.committed == 1
+        assert stats.skipped_records == 20
+    assert committed_values(kafka_bootstrap, topic) == values(range(1, 5)) + values(range(6, 21))
+    assert len(committed_values(kafka_bootstrap, dead_letters)) == 1

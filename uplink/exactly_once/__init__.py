@@ -9,8 +9,19 @@ mark were written before (the edge sent the batch again) and are skipped. Marks 
 compacted topic (``topics.marks``), read back when a producer takes a stream over.
 """
 
-from fleetlink.uplink.exactly_once.marks import Mark, MarkKey, decode_mark, encode_mark, unwritten
+from fleetlink.uplink.exactly_once.marks import Mark, MarkKey, above, at_or_below, decode_mark, encode_mark
 from fleetlink.uplink.exactly_once.marks_reader import MarksReader
-from fleetlink.uplink.exactly_once.writer import ExactlyOnceWriter
+from fleetlink.uplink.exactly_once.writer import ExactlyOnceWriter, Pending, TxnSink
 
-__all__ = ["ExactlyOnceWriter", "Mark", "MarkKey", "MarksReader", "decode_mark", "encode_mark", "unwritten"]
+__all__ = [
+    "ExactlyOnceWriter",
+    "Mark",
+    "MarkKey",
+    "MarksReader",
+    "Pending",
+    "TxnSink",
+    "above",
+    "at_or_below",
+    "decode_mark",
+    "encode_mark",
+]

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
-from fleetlink.wire import Batch, Record
+from fleetlink.wire import Batch
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,9 +56,13 @@ def decode_mark(value: bytes) -> Mark | None:
         return None
 
 
-def unwritten(batch: Batch, mark: Mark) -> tuple[Record, ...]:
-    """The records of ``batch`` not yet in Kafka: all of them when the mark is another spool's
-    (a new origin starts its seqs again), else those above the mark."""
-    if mark.origin != batch.origin:
-        return batch.records
-    return tuple(r for r in batch.records if r.seq > mark.seq)
+def above(batch: Batch, seq: int) -> Batch:
+    """``batch`` with only its records whose seq is above ``seq`` (what Kafka does not have yet
+    when ``seq`` is the stream's mark; 0: all of them)."""
+    records = tuple(r for r in batch.records if r.seq > seq)
+    return replace(batch, records=records, first_seq=records[0].seq if records else batch.first_seq)
+
+
+def at_or_below(batch: Batch) -> Callable[[int], int]:
+    """How many records of ``batch`` have a seq at or below a given one."""
+    return lambda seq: sum(1 for r in batch.records if r.seq <= seq)

@@ -14,26 +14,62 @@ topic instead, as the at-least-once path does.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.uplink.errors import ProduceError
-from fleetlink.uplink.exactly_once.marks import Mark, MarkKey, encode_mark, unwritten
+from fleetlink.uplink.exactly_once.marks import Mark, MarkKey, encode_mark
 from fleetlink.uplink.exactly_once.marks_reader import MarksReader
-from fleetlink.uplink.kafka_settings import KafkaSection
-from fleetlink.uplink.producer import Delivery, KafkaSink
+from fleetlink.uplink.ingest import Sink
+from fleetlink.uplink.producer import Delivery
 from fleetlink.wire import Ack, Batch
 
 log = logging.getLogger(__name__)
 
-RunJob = Callable[[Batch, KafkaSink, dict[int, str]], Ack]
-"""Produce a batch's records through a sink and wait for every delivery report: the uplink's
-``BatchJob`` run to its end. The dict holds seqs to send to the dead-letter topic unproduced."""
+
+class TxnSink(Sink, Protocol):
+    """A transactional producer (``uplink.producer.KafkaSink`` or ``uplink.native_sink.NativeSink``
+    made with a transactional id)."""
+
+    def start(self) -> TxnSink:
+        """Create the producer and register its transactional id (fencing other holders)."""
+
+    def begin(self) -> None:
+        """Open a transaction."""
+
+    def commit(self, timeout_s: float) -> None:
+        """Commit the open transaction (``ProduceError``, ``fatal`` when fenced)."""
+
+    def abort(self, timeout_s: float) -> None:
+        """Abort the open transaction."""
+
+    def stop(self, flush_timeout: float = 10.0) -> int:
+        """Close the producer; returns records not delivered."""
+
+
+SinkFactory = Callable[[str], TxnSink]
+"""Makes the (unstarted) producer of a transactional id."""
+
+RunJob = Callable[[TxnSink, int, dict[int, str]], Ack]
+"""Produce, through a sink, the batch's records whose seq is above a given one (0: all), and
+wait for every delivery report: the uplink's batch job run to its end. The dict holds seqs to
+send to the dead-letter topic unproduced."""
+
+
+@dataclass(frozen=True, slots=True)
+class Pending:
+    """An exactly-once batch as the writer sees it."""
+
+    batch: Batch
+    """Its head: site, edge, stream, origin, first seq."""
+    last_seq: int
+    at_or_below: Callable[[int], int]
+    """How many of its records have a seq at or below a given one."""
 
 
 @dataclass
@@ -57,7 +93,7 @@ class ExactlyOnceStats:
 
 @dataclass
 class _Stream:
-    sink: KafkaSink
+    sink: TxnSink
     mark: Mark
     used: float
 
@@ -67,7 +103,7 @@ class ExactlyOnceWriter:
 
     def __init__(
         self,
-        kafka: KafkaSection,
+        make_sink: SinkFactory,
         *,
         marks: MarksReader,
         marks_topic: str,
@@ -76,7 +112,7 @@ class ExactlyOnceWriter:
         idle_close_s: float,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self._kafka = kafka
+        self._make_sink = make_sink
         self._marks = marks
         self._marks_topic = marks_topic
         self._prefix = prefix
@@ -88,30 +124,39 @@ class ExactlyOnceWriter:
         self._limiter = LogLimiter(log)
         self.stats = ExactlyOnceStats()
 
-    def write(self, batch: Batch, run: RunJob) -> Ack:
-        """Write what ``batch`` holds beyond its stream's mark, exactly once; the ack covers the
+    def write(self, pending: Pending, run: RunJob) -> Ack:
+        """Write what the batch holds beyond its stream's mark, exactly once; the ack covers the
         whole batch. Called for one stream at a time (the uplink runs an edge's batches in order)."""
+        batch = pending.batch
         key = MarkKey.of(batch)
         try:
             stream = self._stream(key)
         except ProduceError as exc:
-            return _answer(batch, "error", f"exactly-once producer for {key.stream} not ready: {exc}")
-        todo = unwritten(batch, stream.mark)
-        skipped = len(batch.records) - len(todo)
+            return _answer(
+                batch, pending.last_seq, "error", f"exactly-once producer for {key.stream} not ready: {exc}"
+            )
+        after = stream.mark.seq if stream.mark.origin == batch.origin else 0  # another spool: all of it
+        skipped = pending.at_or_below(after) if after else 0
         if skipped:
             self.stats.add(skipped_records=skipped)
-        if not todo:
-            return _answer(batch, "ok", "")
-        part = dataclasses.replace(batch, records=todo, first_seq=todo[0].seq)
+        if after >= pending.last_seq:
+            return _answer(batch, pending.last_seq, "ok", "")
         dead: dict[int, str] = {}
         while True:
-            ack, refused = self._transaction(key, stream, part, run, dead)
+            ack, refused = self._transaction(key, stream, pending, after=after, run=run, dead=dead)
             if not refused.keys() - dead.keys():
-                return dataclasses.replace(ack, first_seq=batch.first_seq, last_seq=batch.last_seq)
+                return replace(ack, first_seq=batch.first_seq, last_seq=pending.last_seq)
             dead.update(refused)  # once more at once, those records to the dead-letter topic
 
     def _transaction(
-        self, key: MarkKey, stream: _Stream, part: Batch, run: RunJob, dead: dict[int, str]
+        self,
+        key: MarkKey,
+        stream: _Stream,
+        pending: Pending,
+        *,
+        after: int,
+        run: RunJob,
+        dead: dict[int, str],
     ) -> tuple[Ack, dict[int, str]]:
         """One attempt; returns the ack and, when the transaction could not commit after records
         were dead-lettered (Kafka refused them for good, which aborts a transaction), those
@@ -120,11 +165,11 @@ class ExactlyOnceWriter:
         ack: Ack | None = None
         try:
             sink.begin()
-            ack = run(part, sink, dead)
+            ack = run(sink, after, dead)
             if ack.status != "ok":
                 self._abort(key, stream, ack.detail)
                 return ack, {}
-            new_mark = Mark(part.origin, part.last_seq)
+            new_mark = Mark(pending.batch.origin, pending.last_seq)
             sink.produce(self._marks_topic, key.kafka_key(), encode_mark(new_mark), on_delivery=_ignore)
             sink.commit(self._timeout_s)
         except ProduceError as exc:
@@ -132,7 +177,9 @@ class ExactlyOnceWriter:
             refused = (
                 {} if ack is None or exc.fatal else {f.seq: f.reason for f in ack.failures if f.dead_lettered}
             )
-            return _answer(part, "error", f"transaction not committed: {exc}"), refused
+            return _answer(
+                pending.batch, pending.last_seq, "error", f"transaction not committed: {exc}"
+            ), refused
         stream.mark = new_mark
         stream.used = self._clock()
         self._marks.note(key, new_mark)
@@ -168,11 +215,8 @@ class ExactlyOnceWriter:
         if stream is not None:
             return stream
         self._close_idle()
-        sink = KafkaSink(
-            self._kafka,
-            transactional_id=key.transactional_id(self._prefix),
-            transaction_timeout_s=self._timeout_s,
-        ).start()  # fences the previous owner: its open transaction is aborted
+        sink = self._make_sink(key.transactional_id(self._prefix)).start()
+        # registering the id fenced the previous owner: its open transaction is aborted
         if not self._marks.catch_up(self._timeout_s):
             sink.stop(0)
             raise ProduceError("the marks topic could not be read to its end", code="_MARKS", retriable=True)
@@ -206,12 +250,12 @@ def _ignore(_delivery: Delivery) -> None:
     """The mark's own delivery report: a mark Kafka did not take fails the commit."""
 
 
-def _answer(batch: Batch, status: str, detail: str) -> Ack:
+def _answer(batch: Batch, last_seq: int, status: str, detail: str) -> Ack:
     return Ack(
         edge_id=batch.edge_id,
         stream=batch.stream,
         first_seq=batch.first_seq,
-        last_seq=batch.last_seq,
+        last_seq=last_seq,
         status="ok" if status == "ok" else "error",
         failures=(),
         detail=detail[:1000],
