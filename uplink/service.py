@@ -443,32 +443,17 @@ class Uplink:
         routes: Mapping[str, Decision],
         arrived: float,
     ) -> None:
-        """An exactly-once batch, on the edge's worker: its transaction is committed (or not)
-        before the edge's next batch is looked at. With ``scanned`` (the native path) ``batch``
+        """Hand an exactly-once batch to its stream's writer, which answers the edge once the
+        transaction holding it committed (or not). With ``scanned`` (the native path) ``batch``
         is its view; without, the decoded batch."""
         sink, ids, registrations = self._sink, self._ids, self._registrations
         if sink is None or ids is None or registrations is None:
             self._finish(query, error="uplink stopping")
             return
-        timeout_s = self.config.exactly_once.transaction_timeout
         metered = not isinstance(self.metrics, NullMetrics)
         on_delivery = self.metrics.on_delivered if metered else None
 
-        def waited(start: Callable[[Callable[[Ack], None]], None], part: Batch) -> Ack:
-            answers: list[Ack] = []
-            answered = threading.Event()
-
-            def on_done(ack: Ack) -> None:
-                answers.append(ack)
-                answered.set()
-
-            start(on_done)
-            if not answered.wait(timeout_s):
-                detail = f"not all delivered within {timeout_s:g} s"
-                return Ack(part.edge_id, part.stream, part.first_seq, part.last_seq, "error", (), detail)
-            return answers[0]
-
-        def run(txn: TxnSink, after: int, dead: dict[int, str]) -> Ack:
+        def run(txn: TxnSink, after: int, dead: dict[int, str], done: Callable[[Ack], None]) -> None:
             diversion = (
                 Diversion(source, routes, sink=txn, refusals=self.refusals, registrations=registrations)
                 if routes
@@ -487,27 +472,28 @@ class Uplink:
                 dead=dead,
             )
             if scanned is not None and isinstance(txn, NativeSink) and not dead:
-                return waited(
-                    lambda done: NativeJob(
-                        batch,
-                        scanned,
-                        native=txn.ingest,
-                        sink=txn,
-                        schema_ids=ids,
-                        routes=routes,
-                        job=job,
-                        on_done=done,
-                        stats=self.stats,
-                        on_delivery=on_delivery,
-                        min_seq=after,
-                        counted=False,
-                    ).run(),
+                NativeJob(
                     batch,
-                )
-            part = above(batch if scanned is None else decode_batch(data), after)
-            return waited(lambda done: job(part, on_done=done).run(), part)
+                    scanned,
+                    native=txn.ingest,
+                    sink=txn,
+                    schema_ids=ids,
+                    routes=routes,
+                    job=job,
+                    on_done=done,
+                    stats=self.stats,
+                    on_delivery=on_delivery,
+                    min_seq=after,
+                    counted=False,
+                ).run()
+                return
+            job(above(batch if scanned is None else decode_batch(data), after), on_done=done).run()
 
-        records = len(scanned) if scanned is not None else len(batch.records)
+        def answer(ack: Ack) -> None:
+            count_outcome(self.stats, ack.status)
+            self._answered(batch, scanned, ack, arrived)
+            self._finish(query, ack)
+
         pending = (
             Pending(batch, scanned.last_seq(), scanned.at_or_below)
             if scanned is not None
@@ -515,19 +501,8 @@ class Uplink:
         )
         with self.stats.lock:
             self.stats.batches += 1
-            self.stats.records += records
-        try:
-            ack = self._exactly_once().write(pending, run)
-        except Exception as exc:  # answer the edge whatever failed: it sends the batch again
-            log.exception(
-                "exactly-once batch %s/%s %d..: not written", batch.edge_id, batch.stream, batch.first_seq
-            )
-            ack = Ack(
-                batch.edge_id, batch.stream, batch.first_seq, pending.last_seq, "error", (), repr(exc)[:200]
-            )
-        count_outcome(self.stats, ack.status)
-        self._answered(batch, scanned, ack, arrived)
-        self._finish(query, ack)
+            self.stats.records += len(scanned) if scanned is not None else len(batch.records)
+        self._exactly_once().submit(pending, run, answer)
 
     def _exactly_once(self) -> ExactlyOnceWriter:
         """The writer of exactly-once batches, made (and the marks topic read) on first use."""

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import threading
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from functools import partial
 
 import pytest
 from confluent_kafka.admin import AdminClient, NewTopic
@@ -27,24 +28,26 @@ def batch(topic: str, seqs: range) -> Batch:
 
 
 def produce_all(part: Batch) -> RunJob:
-    """What the uplink's batch job does, reduced to producing the records above the mark and waiting."""
+    """What the uplink's batch job does, reduced to producing the records above the mark."""
 
-    def run(sink: TxnSink, after: int, _dead: dict[int, str]) -> Ack:
+    def run(sink: TxnSink, after: int, _dead: dict[int, str], done: Callable[[Ack], None]) -> None:
         todo = above(part, after).records
         left = len(todo)
-        lock, done = threading.Lock(), threading.Event()
+        lock = threading.Lock()
+        ok = Ack(part.edge_id, part.stream, part.first_seq, part.last_seq, "ok")
 
         def delivered(_d: Delivery) -> None:
             nonlocal left
             with lock:
                 left -= 1
-                if left == 0:
-                    done.set()
+                last = left == 0
+            if last:
+                done(ok)
 
+        if not todo:
+            done(ok)
         for r in todo:
             sink.produce(r.kafka_topic, r.key, r.value, on_delivery=delivered)
-        assert done.wait(20)
-        return Ack(part.edge_id, part.stream, part.first_seq, part.last_seq, "ok")
 
     return run
 
@@ -128,8 +131,18 @@ def test_a_fenced_uplinks_open_transaction_never_shows(
 
     stale_part = batch(data, range(11, 31))
 
-    def produce_then_wait(sink: TxnSink, after: int, dead: dict[int, str]) -> Ack:
-        ack = produce_all(stale_part)(sink, after, dead)
+    def produce_then_wait(
+        sink: TxnSink, after: int, dead: dict[int, str], done: Callable[[Ack], None]
+    ) -> None:
+        produced: list[Ack] = []
+        all_in = threading.Event()
+
+        def produced_all(ack: Ack) -> None:
+            produced.append(ack)
+            all_in.set()
+
+        produce_all(stale_part)(sink, after, dead, produced_all)
+        assert all_in.wait(20)
 
         def take_over() -> None:
             write(b, batch(data, range(11, 31)))
@@ -137,7 +150,7 @@ def test_a_fenced_uplinks_open_transaction_never_shows(
 
         threading.Thread(target=take_over).start()
         assert b_took_over.wait(30)
-        return ack
+        done(produced[0])
 
     stale = write(a, stale_part, produce_then_wait)
     assert stale.status == "error"
@@ -145,3 +158,87 @@ def test_a_fenced_uplinks_open_transaction_never_shows(
     assert committed_values(kafka_bootstrap, data) == values(range(1, 31))
     assert write(a, batch(data, range(21, 41))).status == "ok"  # A takes it back
     assert committed_values(kafka_bootstrap, data) == values(range(1, 41))
+
+
+def submit_all(
+    writer: ExactlyOnceWriter,
+    parts: list[tuple[Batch, RunJob]],
+    held_first: tuple[threading.Event, threading.Event] | None = None,
+) -> list[Ack]:
+    """Submit batches one after the other as the uplink does and wait for every answer; with
+    ``held_first`` (started, release): the others once the first batch's job started, then
+    release it."""
+    answers: dict[int, Ack] = {}
+    all_in = threading.Event()
+
+    def answer(n: int, ack: Ack) -> None:
+        answers[n] = ack
+        if len(answers) == len(parts):
+            all_in.set()
+
+    for n, (part, run) in enumerate(parts):
+        writer.submit(Pending(part, part.last_seq, at_or_below(part)), run, partial(answer, n))
+        if n == 0 and held_first is not None:
+            assert held_first[0].wait(30)  # the first batch's transaction is under way
+    if held_first is not None:
+        held_first[1].set()
+    assert all_in.wait(60)
+    return [answers[n] for n in range(len(parts))]
+
+
+def held(part: Batch, started: threading.Event, release: threading.Event) -> RunJob:
+    """A batch job that says it started and waits for ``release`` before it produces: the
+    batches after it queue up."""
+
+    def run(sink: TxnSink, after: int, dead: dict[int, str], done: Callable[[Ack], None]) -> None:
+        started.set()
+        assert release.wait(30)
+        produce_all(part)(sink, after, dead, done)
+
+    return run
+
+
+def test_batches_waiting_for_a_transaction_share_the_next_one(
+    kafka_bootstrap: str, topics: tuple[str, str], writers: list[ExactlyOnceWriter]
+) -> None:
+    data, _marks = topics
+    a, _b = writers
+    started, release = threading.Event(), threading.Event()
+    first = batch(data, range(1, 11))
+    later = [batch(data, range(s, s + 10)) for s in (11, 21, 31)]
+    answers = submit_all(
+        a, [(first, held(first, started, release))] + [(p, produce_all(p)) for p in later], (started, release)
+    )
+    assert [(x.status, x.first_seq, x.last_seq) for x in answers] == [
+        ("ok", 1, 10),
+        ("ok", 11, 20),
+        ("ok", 21, 30),
+        ("ok", 31, 40),
+    ]
+    assert a.stats.committed == 2  # the first alone, the three that waited in one transaction
+    assert committed_values(kafka_bootstrap, data) == values(range(1, 41))
+
+
+def test_a_failed_batch_fails_its_whole_group_and_nothing_of_it_shows(
+    kafka_bootstrap: str, topics: tuple[str, str], writers: list[ExactlyOnceWriter]
+) -> None:
+    data, _marks = topics
+    a, _b = writers
+    started, release = threading.Event(), threading.Event()
+    first = batch(data, range(1, 11))
+    good, bad = batch(data, range(11, 21)), batch(data, range(21, 31))
+
+    def refused(_sink: TxnSink, _after: int, _dead: dict[int, str], done: Callable[[Ack], None]) -> None:
+        done(Ack(bad.edge_id, bad.stream, bad.first_seq, bad.last_seq, "error", (), "registry down"))
+
+    answers = submit_all(
+        a,
+        [(first, held(first, started, release)), (good, produce_all(good)), (bad, refused)],
+        (started, release),
+    )
+    assert [x.status for x in answers] == ["ok", "error", "error"]
+    assert "registry down" in answers[1].detail  # the good batch says why it was not written
+    assert committed_values(kafka_bootstrap, data) == values(range(1, 11))
+    again = submit_all(a, [(good, produce_all(good)), (bad, produce_all(bad))])  # the edge resends
+    assert [x.status for x in again] == ["ok", "ok"]
+    assert committed_values(kafka_bootstrap, data) == values(range(1, 31))

@@ -1,15 +1,22 @@
-"""One exactly-once batch: its unwritten records and the stream's new mark, in one transaction.
+"""Exactly-once batches: their unwritten records and the stream's new mark, in one transaction.
+
+Batches are submitted per stream in the order the edge sent them. A stream's batches that wait
+while its transaction runs are written together in the next one (group commit: an edge keeps
+several batches in flight, and one transaction's fixed cost — registering partitions with the
+coordinator, the commit — is paid once for all of them); each batch is answered after the
+commit that holds it. The mark is produced first in each transaction, so its partition joins
+with the records' in one request and the commit has nothing left to send.
 
 A stream's producer is made on its first batch here: registering its ``transactional.id`` fences
 the previous owner (another uplink, or this one before a restart), whose open transaction Kafka
 aborts; then the marks topic is read up to its end, so the stream's mark is the last one any
 owner committed. From there this uplink's own commits keep the mark. A producer fenced later
-(another uplink took the stream over) fails its commit: the batch is answered ``error``, the
+(another uplink took the stream over) fails its commit: the batches are answered ``error``, the
 producer dropped, and the next batch of the stream takes it over again.
 
 A batch whose records Kafka refuses one by one (a non-retriable delivery error) cannot commit:
-it is written again at once, in a new transaction, with those records sent to the dead-letter
-topic instead, as the at-least-once path does.
+the group is written again at once, in a new transaction, with those records sent to the
+dead-letter topic instead, as the at-least-once path does.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Protocol
 
 from fleetlink.common.ratelimit import LogLimiter
@@ -55,10 +63,15 @@ class TxnSink(Sink, Protocol):
 SinkFactory = Callable[[str], TxnSink]
 """Makes the (unstarted) producer of a transactional id."""
 
-RunJob = Callable[[TxnSink, int, dict[int, str]], Ack]
+Answer = Callable[[Ack], None]
+
+RunJob = Callable[[TxnSink, int, dict[int, str], Answer], None]
 """Produce, through a sink, the batch's records whose seq is above a given one (0: all), and
-wait for every delivery report: the uplink's batch job run to its end. The dict holds seqs to
-send to the dead-letter topic unproduced."""
+call the answer once every delivery report is in: the uplink's batch job. The dict holds seqs
+to send to the dead-letter topic unproduced."""
+
+MAX_GROUP = 16
+"""Batches of one stream written in one transaction at most."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,6 +111,21 @@ class _Stream:
     used: float
 
 
+@dataclass
+class _Item:
+    pending: Pending
+    run: RunJob
+    answer: Answer
+    after: int = 0
+    """Its records above this seq are written (set when its group is planned)."""
+
+
+@dataclass
+class _Queue:
+    items: list[_Item] = field(default_factory=list)
+    writing: bool = False
+
+
 class ExactlyOnceWriter:
     """The transactional producers of the exactly-once streams this uplink serves."""
 
@@ -120,71 +148,167 @@ class ExactlyOnceWriter:
         self._idle_close_s = idle_close_s
         self._clock = clock
         self._streams: dict[MarkKey, _Stream] = {}
+        self._queues: dict[MarkKey, _Queue] = {}
+        self._writers: set[threading.Thread] = set()
+        self._stopping = False
         self._lock = threading.Lock()
         self._limiter = LogLimiter(log)
         self.stats = ExactlyOnceStats()
 
+    def submit(self, pending: Pending, run: RunJob, answer: Answer) -> None:
+        """Write what the batch holds beyond its stream's mark, exactly once, and ``answer`` (from
+        another thread) with an ack covering the whole batch. Submit a stream's batches in order."""
+        key = MarkKey.of(pending.batch)
+        item = _Item(pending, run, answer)
+        with self._lock:
+            if self._stopping:
+                stopping = True
+            else:
+                stopping = False
+                queue = self._queues.setdefault(key, _Queue())
+                queue.items.append(item)
+                if queue.writing:
+                    return
+                queue.writing = True
+                thread = threading.Thread(
+                    target=self._drain, args=(key, queue), name=f"exactly-once-{key.stream}", daemon=True
+                )
+                self._writers.add(thread)
+        if stopping:
+            answer(_answer(pending, "error", "uplink stopping"))
+            return
+        thread.start()
+
     def write(self, pending: Pending, run: RunJob) -> Ack:
-        """Write what the batch holds beyond its stream's mark, exactly once; the ack covers the
-        whole batch. Called for one stream at a time (the uplink runs an edge's batches in order)."""
-        batch = pending.batch
-        key = MarkKey.of(batch)
+        """``submit`` and wait for the answer."""
+        answers: list[Ack] = []
+        answered = threading.Event()
+
+        def answer(ack: Ack) -> None:
+            answers.append(ack)
+            answered.set()
+
+        self.submit(pending, run, answer)
+        answered.wait()
+        return answers[0]
+
+    def _drain(self, key: MarkKey, queue: _Queue) -> None:
+        """Write the stream's waiting batches, a group per transaction, until none waits."""
+        try:
+            while True:
+                with self._lock:
+                    group, queue.items = queue.items[:MAX_GROUP], queue.items[MAX_GROUP:]
+                    if not group or self._stopping:
+                        left, queue.items = queue.items, []
+                        queue.writing = False
+                        break
+                try:
+                    answers = self._write_group(key, group)
+                except Exception as exc:  # answer the edge whatever failed: it sends the batches again
+                    log.exception("exactly-once %s: batches not written", key)
+                    answers = [_answer(i.pending, "error", repr(exc)[:200]) for i in group]
+                for item, ack in zip(group, answers, strict=True):
+                    item.answer(ack)
+            for item in group + left:
+                item.answer(_answer(item.pending, "error", "uplink stopping"))
+        finally:
+            with self._lock:
+                self._writers.discard(threading.current_thread())
+
+    def _write_group(self, key: MarkKey, group: list[_Item]) -> list[Ack]:
         try:
             stream = self._stream(key)
         except ProduceError as exc:
-            return _answer(
-                batch, pending.last_seq, "error", f"exactly-once producer for {key.stream} not ready: {exc}"
-            )
-        after = stream.mark.seq if stream.mark.origin == batch.origin else 0  # another spool: all of it
-        skipped = pending.at_or_below(after) if after else 0
-        if skipped:
-            self.stats.add(skipped_records=skipped)
-        if after >= pending.last_seq:
-            return _answer(batch, pending.last_seq, "ok", "")
-        dead: dict[int, str] = {}
-        while True:
-            ack, refused = self._transaction(key, stream, pending, after=after, run=run, dead=dead)
-            if not refused.keys() - dead.keys():
-                return replace(ack, first_seq=batch.first_seq, last_seq=pending.last_seq)
-            dead.update(refused)  # once more at once, those records to the dead-letter topic
+            return [
+                _answer(i.pending, "error", f"exactly-once producer for {key.stream} not ready: {exc}")
+                for i in group
+            ]
+        answers: dict[int, Ack] = {}
+        todo: list[_Item] = []
+        mark = stream.mark
+        for n, item in enumerate(group):
+            pending = item.pending
+            item.after = mark.seq if mark.origin == pending.batch.origin else 0  # another spool: all of it
+            skipped = pending.at_or_below(item.after) if item.after else 0
+            if skipped:
+                self.stats.add(skipped_records=skipped)
+            if item.after >= pending.last_seq:
+                answers[n] = _answer(pending, "ok", "")
+                continue
+            todo.append(item)
+            mark = Mark(pending.batch.origin, pending.last_seq)
+        if todo:
+            dead: dict[int, str] = {}
+            while True:
+                acks, refused = self._transaction(key, stream, todo, mark, dead)
+                if not refused.keys() - dead.keys():
+                    break
+                dead.update(refused)  # once more at once, those records to the dead-letter topic
+            written = iter(acks)
+            for n, item in enumerate(group):
+                if n not in answers:
+                    ack = next(written)
+                    answers[n] = replace(
+                        ack, first_seq=item.pending.batch.first_seq, last_seq=item.pending.last_seq
+                    )
+        return [answers[n] for n in range(len(group))]
 
     def _transaction(
-        self,
-        key: MarkKey,
-        stream: _Stream,
-        pending: Pending,
-        *,
-        after: int,
-        run: RunJob,
-        dead: dict[int, str],
-    ) -> tuple[Ack, dict[int, str]]:
-        """One attempt; returns the ack and, when the transaction could not commit after records
-        were dead-lettered (Kafka refused them for good, which aborts a transaction), those
-        records (seq -> reason), to send to the dead-letter topic unproduced next time."""
+        self, key: MarkKey, stream: _Stream, todo: list[_Item], new_mark: Mark, dead: dict[int, str]
+    ) -> tuple[list[Ack], dict[int, str]]:
+        """One attempt at a group; returns an ack per batch and, when the transaction could not
+        commit after records were dead-lettered (Kafka refused them for good, which aborts a
+        transaction), those records (seq -> reason), to send to the dead-letter topic unproduced
+        next time."""
         sink = stream.sink
-        ack: Ack | None = None
+        acks: list[Ack | None] = [None] * len(todo)
+        left = len(todo)
+        lock, all_in = threading.Lock(), threading.Event()
+
+        def answered(n: int, ack: Ack) -> None:
+            nonlocal left
+            acks[n] = ack
+            with lock:
+                left -= 1
+                if left == 0:
+                    all_in.set()
+
         try:
             sink.begin()
-            ack = run(sink, after, dead)
-            if ack.status != "ok":
-                self._abort(key, stream, ack.detail)
-                return ack, {}
-            new_mark = Mark(pending.batch.origin, pending.last_seq)
+            # the mark first: its partition joins the transaction with the records' in one
+            # request, and the commit has nothing left to send (an aborted group aborts it too)
             sink.produce(self._marks_topic, key.kafka_key(), encode_mark(new_mark), on_delivery=_ignore)
+            for n, item in enumerate(todo):
+                item.run(sink, item.after, dead, partial(answered, n))
+            if not all_in.wait(self._timeout_s):
+                why = f"not all delivered within {self._timeout_s:g} s"
+                self._abort(key, stream, why)
+                return [_answer(i.pending, "error", why) for i in todo], {}
+            done = [a for a in acks if a is not None]
+            failed = next((a for a in done if a.status != "ok"), None)
+            if failed is not None:
+                self._abort(key, stream, failed.detail)
+                why = f"transaction aborted: {failed.detail}"
+                return [
+                    a if a.status != "ok" else replace(a, status="error", detail=why[:1000]) for a in done
+                ], {}
             sink.commit(self._timeout_s)
         except ProduceError as exc:
             self._abort(key, stream, str(exc), fatal=exc.fatal)
             refused = (
-                {} if ack is None or exc.fatal else {f.seq: f.reason for f in ack.failures if f.dead_lettered}
+                {}
+                if exc.fatal
+                else {f.seq: f.reason for a in acks if a is not None for f in a.failures if f.dead_lettered}
             )
-            return _answer(
-                pending.batch, pending.last_seq, "error", f"transaction not committed: {exc}"
-            ), refused
+            return [_answer(i.pending, "error", f"transaction not committed: {exc}") for i in todo], refused
+        except Exception as exc:  # noqa: BLE001 - a batch job failed to start: no transaction stays open
+            self._abort(key, stream, repr(exc))
+            return [_answer(i.pending, "error", f"transaction aborted: {exc!r}"[:1000]) for i in todo], {}
         stream.mark = new_mark
         stream.used = self._clock()
         self._marks.note(key, new_mark)
         self.stats.add(committed=1)
-        return ack, {}
+        return done, {}
 
     def _abort(self, key: MarkKey, stream: _Stream, why: str, *, fatal: bool = False) -> None:
         self.stats.add(aborted=1)
@@ -238,7 +362,13 @@ class ExactlyOnceWriter:
             stream.sink.stop(self._timeout_s)
 
     def stop(self) -> None:
-        """Close every stream's producer (no transaction is open between batches)."""
+        """Answer the batches still waiting (``error``: the edge sends them again), let the
+        transactions under way end (bounded), then close every stream's producer."""
+        with self._lock:
+            self._stopping = True
+            writers = list(self._writers)
+        for thread in writers:
+            thread.join(self._timeout_s + 5)
         with self._lock:
             closing = list(self._streams.values())
             self._streams.clear()
@@ -250,12 +380,13 @@ def _ignore(_delivery: Delivery) -> None:
     """The mark's own delivery report: a mark Kafka did not take fails the commit."""
 
 
-def _answer(batch: Batch, last_seq: int, status: str, detail: str) -> Ack:
+def _answer(pending: Pending, status: str, detail: str) -> Ack:
+    batch = pending.batch
     return Ack(
         edge_id=batch.edge_id,
         stream=batch.stream,
         first_seq=batch.first_seq,
-        last_seq=last_seq,
+        last_seq=pending.last_seq,
         status="ok" if status == "ok" else "error",
         failures=(),
         detail=detail[:1000],
