@@ -52,6 +52,7 @@ from fleetlink.edge.runtime.sender import SenderOptions, WanSender
 from fleetlink.edge.runtime.subscriptions import SubscriptionManager
 from fleetlink.edge.runtime.transport import ZenohTransport
 from fleetlink.edge.runtime.types import TypeStoreCodecs, schema_distro
+from fleetlink.edge.runtime.uplinks import Uplinks
 from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, Spool
 from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
 from fleetlink.roswire.attachment import AttachmentVersion
@@ -126,6 +127,7 @@ class EdgeAgent:
         self._maker: RecordMaker | None = None
         self._processor: Processor | None = None
         self._senders: dict[Delivery, WanSender] = {}
+        self._uplinks: Uplinks | None = None
         self._subscriptions: SubscriptionManager | None = None
         self._source: NativeSource | None = None
         self._registrar: Registrar | None = None
@@ -227,12 +229,14 @@ class EdgeAgent:
         # what each publisher had in the spool when the last run stopped: its first sample now
         # tells what never reached the spool (lost_at_restart, docs/spool.md "Loss before the spool")
         source.seed(self._spool.marks())
-        transport = ZenohTransport(session, ingest_key(config.site, config.edge_id))
+        ingest = ingest_key(config.site, config.edge_id)
+        self._uplinks = Uplinks(session, ingest)
+        transport = ZenohTransport(session, ingest, uplinks=self._uplinks)
         options = SenderOptions.from_wan(config.wan)
         self._senders = {
             delivery: WanSender(
                 buffer,
-                transport,
+                transport.for_stream(delivery),
                 book,
                 site=config.site,
                 edge_id=config.edge_id,
@@ -487,6 +491,8 @@ class EdgeAgent:
             out.update(self._processor.counters())
             out["intake"]["lag_ms"] = self._processor.lag_ns // 1_000_000
         out["memory"] = {"rss_bytes": resident_bytes(), "bound_bytes": self.config.memory_bound()}
+        if self._uplinks is not None:
+            out["uplinks"] = sorted(self._uplinks.live())  # the uplinks the streams are shared among
         if self._subscriptions is not None:
             out["subscriptions"] = self._subscriptions.snapshot()
             out["lost_before_spool"] = lost_before_spool(out["subscriptions"], self.table)

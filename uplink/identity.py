@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 from fleetlink.common.names import key_chunk_problem
 from fleetlink.wire import ROOT, Batch, Record
+from fleetlink.wire.keys import VIA
 from fleetlink.wire.robot_events import EDGE_HEADER, IDENTITY_HEADERS, SITE_HEADER
 
 
@@ -30,8 +31,11 @@ class Source:
 
 
 def source_of(key: str) -> Source | None:
-    """The sender named by an ingest key ``fleetlink/<site>/ingest/<edge_id>`` (None: not one)."""
+    """The sender named by an ingest key ``fleetlink/<site>/ingest/<edge_id>``, or one addressed
+    to an uplink (``.../via/<uplink id>``) (None: not one)."""
     parts = key.split("/")
+    if len(parts) == 6 and parts[4] == VIA and key_chunk_problem(parts[5]) is None:
+        parts = parts[:4]
     if len(parts) != 4 or parts[0] != ROOT or parts[2] != "ingest":
         return None
     site, edge_id = parts[1], parts[3]

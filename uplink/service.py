@@ -2,8 +2,10 @@
 
 Edges send each batch as a Zenoh query on ``fleetlink/<site>/ingest/<edge_id>``; the uplink
 answers with an ``Ack`` only when Kafka has acknowledged (or dead-lettered) every record.
-Several uplinks may serve the same sites: a query reaches one of them. Nothing is kept on
-disk here: an unanswered batch stays in the edge's spool and comes again.
+Several uplinks may serve the same sites: a query reaches one of them, and each also serves the
+keys addressed to it by name (``.../via/<uplink id>``), which edges probe to share the load
+(``edge.runtime.uplinks``). Nothing is kept on disk here: an unanswered batch stays in the
+edge's spool and comes again.
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.topics import ensure_topics
 from fleetlink.wire import Ack, Batch, WireError, decode_batch, decode_batch_head, encode_ack
+from fleetlink.wire.keys import VIA, via_key
 
 log = logging.getLogger(__name__)
 
@@ -165,8 +168,11 @@ class Uplink:
         self._session = zenoh.open(self._zenoh_options.to_config())
         for site in cfg.ingest.sites:
             key = f"fleetlink/{site}/ingest/*"
-            self._queryables.append(self._session.declare_queryable(key, self._on_query, complete=True))
-            log.info("serving edge batches on %s", key)
+            for served in (key, via_key(key, cfg.id)):  # any uplink's, and this one's by name
+                self._queryables.append(
+                    self._session.declare_queryable(served, self._on_query, complete=True)
+                )
+            log.info("serving edge batches on %s and %s", key, via_key(key, cfg.id))
         self._delivery_status.start(self._session)
         if cfg.commands or cfg.services or cfg.actions:
             self._commands = CommandRouter(
@@ -280,7 +286,13 @@ class Uplink:
     def _on_query(self, query: zenoh.Query) -> None:
         """On a Zenoh thread: take the bytes and return. Decoding and producing run on a worker,
         the batches of one edge in arrival order (a robot's records keep their order with
-        several batches in flight); the Zenoh thread never waits for the GIL-heavy part."""
+        several batches in flight); the Zenoh thread never waits for the GIL-heavy part. An
+        edge's probe (``.../via/*``) is answered on this uplink's own key, empty."""
+        key = str(query.key_expr)
+        if key.endswith(f"/{VIA}/*"):
+            query.reply(via_key(key[: -len(f"/{VIA}/*")], self.config.id), b"")
+            query.drop()
+            return
         payload = query.payload
         if payload is None:
             query.reply_err(b"empty query: a batch is expected as the payload")
@@ -296,8 +308,11 @@ class Uplink:
             query.reply_err(b"uplink busy: retry later")
             query.drop()
             return
-        key = str(query.key_expr)
-        serial.submit(key, partial(self._ingest, query, payload.to_bytes(), time.monotonic()))
+        # an edge's batches in order, whichever of its keys they came on
+        serial.submit(
+            key.split(f"/{VIA}/", maxsplit=1)[0],
+            partial(self._ingest, query, payload.to_bytes(), time.monotonic()),
+        )
 
     def _answered(self, batch: Batch, scanned: ScannedBatch | None, ack: Ack, arrived: float) -> None:
         """Count a batch's answer: metrics, the site's delivery figures, a warning on errors."""

@@ -1,9 +1,11 @@
 """The WAN transport: one batch = one Zenoh query; the uplink's reply is the acknowledgement.
 
-``ZenohTransport.send`` puts the batch as the payload of ``session.get(ingest_key, ...)`` with
+``ZenohTransport.send`` puts the batch as the payload of ``session.get(key, ...)`` with
 ``QueryTarget.BEST_MATCHING`` (one uplink instance takes it) and calls ``done(reply, error)``
 exactly once, from a Zenoh thread, when the query is finished: with the first reply's bytes, or
 with ``reply=None`` and the reason (an error reply, no uplink serving the key, or the timeout).
+With ``Uplinks`` the key is the ingest key addressed to the uplink that takes the stream
+(``edge.runtime.uplinks``); an uplink that did not answer is left out from then on.
 """
 
 from __future__ import annotations
@@ -14,6 +16,9 @@ from collections.abc import Callable
 from typing import Protocol
 
 import zenoh
+
+from fleetlink.edge.runtime.uplinks import Uplinks
+from fleetlink.wire.keys import via_key
 
 Done = Callable[[bytes | None, str | None], None]
 
@@ -30,14 +35,25 @@ class Transport(Protocol):
 class ZenohTransport:
     """Sends each batch as the payload of a Zenoh query on the uplink's ingest key."""
 
-    def __init__(self, session: zenoh.Session, key: str) -> None:
+    def __init__(
+        self, session: zenoh.Session, key: str, *, uplinks: Uplinks | None = None, route: str = ""
+    ) -> None:
         self.session = session
         self.key = key
+        self.uplinks = uplinks
+        self.route = route
+
+    def for_stream(self, stream: str) -> ZenohTransport:
+        """The transport of one stream: its batches go to the uplink that takes the stream."""
+        return ZenohTransport(self.session, self.key, uplinks=self.uplinks, route=stream)
 
     def send(self, payload: bytes, timeout_s: float, done: Done) -> None:
-        """Query ``key`` with ``payload`` (one uplink takes it); ``done`` runs once on a Zenoh thread with
+        """Query the key with ``payload`` (one uplink takes it); ``done`` runs once on a Zenoh thread with
         the first reply's bytes, or with ``None`` and the reason (an error reply, no uplink, the timeout)."""
         began = time.monotonic()
+        uplinks = self.uplinks
+        uplink = uplinks.route(self.route) if uplinks is not None else None
+        key = via_key(self.key, uplink) if uplink is not None else self.key
         lock = threading.Lock()
         got: dict[str, bytes | str] = {}
 
@@ -65,12 +81,14 @@ class ZenohTransport:
                 error = (
                     f"no acknowledgement within {timeout_s:g} s"
                     if waited >= timeout_s * 0.9
-                    else f"no uplink answered on {self.key}"
+                    else f"no uplink answered on {key}"
                 )
+                if uplinks is not None and uplink is not None:
+                    uplinks.failed(uplink)  # gone (an uplink that answers, even "busy", stays)
             done(None, error)
 
         self.session.get(
-            self.key,
+            key,
             # run on Zenoh's thread: the default (indirect) starts a Python thread for every
             # query's handler, some 0.2 ms of the edge's CPU a batch; these two only take a lock
             # and put the answer on the sender's queue

@@ -87,6 +87,7 @@ from fleetlink.wire.keys import (
     events_key,
     ingest_key,
     site_prefix,
+    via_key,
 )
 from fleetlink.wire.records import (
     FLAG_SOURCE_SEQ,
@@ -144,5 +145,6 @@ __all__ = [
     "single_object",
     "site_prefix",
     "split_single_object",
+    "via_key",
     "zstd_available",
 ]

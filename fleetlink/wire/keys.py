@@ -35,6 +35,16 @@ def ingest_key(site: str, edge_id: str) -> str:
     return f"{site_prefix(site)}/ingest/{check_key_chunk(edge_id, 'edge_id')}"
 
 
+VIA = "via"
+"""The chunk after an ingest key that names the uplink a batch is for (``.../via/<uplink id>``)."""
+
+
+def via_key(ingest: str, uplink_id: str) -> str:
+    """An ingest key addressed to one uplink: ``fleetlink/<site>/ingest/<edge_id>/via/<uplink id>``
+    (``*``: every uplink serving the key, the edge's probe)."""
+    return f"{ingest}/{VIA}/{uplink_id}"
+
+
 def ack_key(site: str, edge_id: str) -> str:
     """Where acks for one edge go when sent as puts: ``fleetlink/<site>/ack/<edge_id>``."""
     return f"{site_prefix(site)}/ack/{check_key_chunk(edge_id, 'edge_id')}"
