@@ -1,6 +1,7 @@
 """Fleet benchmark: steady fleets of robots -> site router -> edge -> WAN -> uplink -> Kafka.
 
-    .venv/bin/python bench/bench_fleet.py [--shape 200x5x10 ...] [--seconds 30] [--runs 2] [--sites 10]
+    .venv/bin/python bench/bench_fleet.py [--shape 200x5x10 ...] [--seconds 30] [--runs 2]
+        [--sites 10] [--uplinks 2]
 
 Each robot is its own Zenoh session (as an rmw_zenoh process is), publishing real recorded
 messages on five topics (Imu, Odometry, NavSatFix from the Husky bag; LaserScan, JointState from
@@ -14,7 +15,9 @@ Per shape (``ROBOTSxTOPICSxHZ``; ``HZ`` 0 = subscribed and idle), over the stead
 ``--warmup`` seconds): messages offered and delivered to Kafka (%), records/s, latency publish ->
 record read from Kafka (p50/p99/max), CPU of the edge and the uplink in µs per record and in %
 of a core, the edge's threads and RSS over time, samples dropped at the edge's intake and
-sequence gaps (samples lost before the edge saw them).
+sequence gaps (samples lost before the edge saw them). With ``--uplinks N`` the cloud router is
+a process of its own and N uplinks serve the sites (each site's stream goes to one of them):
+each uplink's share of the CPU shows how they split the load.
 """
 
 from __future__ import annotations
@@ -120,6 +123,8 @@ class Result:
     """Robots each site's edge registered."""
     misrouted: int = 0
     """Robots whose records in Kafka name another site than the one they publish at (or several)."""
+    uplink_cpu: list[float] = field(default_factory=list)
+    """CPU seconds of each uplink over the window (with several)."""
     worst_second: tuple[float, float] | None = None
     """The second of the window (from its start) whose records had the highest p99 latency."""
 
@@ -168,6 +173,9 @@ class Result:
             parts.append(f"WAN batches of {self.batch_records / self.batches:.0f} records on average")
         if self.behind:
             parts.append(f"publishers behind schedule {self.behind}")
+        if len(self.uplink_cpu) > 1:
+            shares = " / ".join(f"{100 * c / max(self.window_s, 1e-9):.0f} %" for c in self.uplink_cpu)
+            parts.append(f"uplinks' CPU {shares} of a core")
         if self.sites > 1:
             parts.append(
                 f"robots registered per site {'/'.join(map(str, self.registered))}, "
@@ -310,7 +318,14 @@ def start_process(
 
 
 def run_shape(
-    work: Path, shape: Shape, bootstrap: str, registry: str, seconds: float, warmup: float, sites: int = 1
+    work: Path,
+    shape: Shape,
+    bootstrap: str,
+    registry: str,
+    seconds: float,
+    warmup: float,
+    sites: int = 1,
+    uplinks: int = 1,
 ) -> Result:
     work.mkdir(parents=True)
     suffix = uuid.uuid4().hex[:6]
@@ -322,26 +337,29 @@ def run_shape(
         procs: dict[str, int] = {}
         cloud = f"tcp/127.0.0.1:{cloud_port}"
         zenoh: dict[str, object] = {"mode": "router", "listen": [cloud]}  # the uplink is the cloud router
-        if sites > 1:
+        if sites > 1 or uplinks > 1:
             # a cloud router of its own, from the shipped template: only fleetlink/** crosses it,
             # so each site's robots stay on their site (a router without it would route every
             # site's robot data to every edge subscribing to the same wildcard)
             procs["cloud router"] = start_cloud_router(stack, work, cloud_port)
             zenoh = {"mode": "client", "connect": [cloud]}
-        uplink = {
-            "kafka": {"bootstrap_servers": bootstrap, "linger": "5ms"},
-            "registry": {"url": registry},
-            "zenoh": zenoh,
-        }
-        uplink_log = work / "uplink.log"
-        procs["uplink"] = start_process(
-            stack,
-            work,
-            "uplink",
-            uplink,
-            ["uplink", "run"],
-            lambda: "uplink running" in uplink_log.read_text(),
-        )
+        for n in range(uplinks):
+            name = "uplink" if uplinks == 1 else f"uplink {n}"
+            uplink = {
+                "id": f"bench-uplink-{n}",
+                "kafka": {"bootstrap_servers": bootstrap, "linger": "5ms"},
+                "registry": {"url": registry},
+                "zenoh": zenoh,
+            }
+            uplink_log = work / f"{name}.log"
+            procs[name] = start_process(
+                stack,
+                work,
+                name,
+                uplink,
+                ["uplink", "run"],
+                lambda log=uplink_log: "uplink running" in log.read_text(),
+            )
         mappings = [
             {"name": name, "from": f"/{{robot}}/{name}", "to": topic, "type": typename}
             for (name, typename, _bag_topic, _bag), topic in zip(TOPICS, topic_names, strict=False)
@@ -463,8 +481,11 @@ def run_shape(
     result.cpu_s = {
         "edge": sum(v for k, v in cpu.items() if k.startswith("edge ")),
         "site router": sum(v for k, v in cpu.items() if k.startswith("site router ")),
-        **{k: v for k, v in cpu.items() if not k.startswith(("edge ", "site router "))},
+        **{k: v for k, v in cpu.items() if not k.startswith(("edge ", "site router ", "uplink "))},
     }
+    if uplinks > 1:
+        result.uplink_cpu = [cpu[f"uplink {n}"] for n in range(uplinks)]
+        result.cpu_s["uplink"] = sum(result.uplink_cpu)
     result.samples = samples
     result.misrouted = sum(
         1 for robot, seen in reader.sites.items() if seen != {robot_site.get(robot, "?").encode()}
@@ -534,6 +555,7 @@ def main() -> None:
         default=1,
         help="split the robots over this many sites (a router and an edge each)",
     )
+    ap.add_argument("--uplinks", type=int, default=1, help="uplinks serving the sites")
     args = ap.parse_args()
     shapes = [Shape.parse(s) for s in (args.shape or DEFAULT_SHAPES)]
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-fleet-") as tmp:
@@ -558,6 +580,7 @@ def main() -> None:
                     args.seconds,
                     args.warmup,
                     args.sites,
+                    args.uplinks,
                 )
                 print(f"run {run + 1}: {result.line()}", flush=True)
 
