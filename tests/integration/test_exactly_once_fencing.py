@@ -160,42 +160,32 @@ def test_a_fenced_uplinks_open_transaction_never_shows(
     assert committed_values(kafka_bootstrap, data) == values(range(1, 41))
 
 
-def submit_all(
-    writer: ExactlyOnceWriter,
-    parts: list[tuple[Batch, RunJob]],
-    held_first: tuple[threading.Event, threading.Event] | None = None,
-) -> list[Ack]:
-    """Submit batches one after the other as the uplink does and wait for every answer; with
-    ``held_first`` (started, release): the others once the first batch's job started, then
-    release it."""
+def submit_all(writer: ExactlyOnceWriter, parts: list[tuple[Batch, RunJob]]) -> list[Ack]:
+    """Submit batches one after the other as the uplink does and wait for every answer. The
+    first batch's job waits until the others are submitted: they queue up behind its transaction."""
     answers: dict[int, Ack] = {}
-    all_in = threading.Event()
+    all_in, started, release = threading.Event(), threading.Event(), threading.Event()
 
     def answer(n: int, ack: Ack) -> None:
         answers[n] = ack
         if len(answers) == len(parts):
             all_in.set()
 
-    for n, (part, run) in enumerate(parts):
-        writer.submit(Pending(part, part.last_seq, at_or_below(part)), run, partial(answer, n))
-        if n == 0 and held_first is not None:
-            assert held_first[0].wait(30)  # the first batch's transaction is under way
-    if held_first is not None:
-        held_first[1].set()
-    assert all_in.wait(60)
-    return [answers[n] for n in range(len(parts))]
-
-
-def held(part: Batch, started: threading.Event, release: threading.Event) -> RunJob:
-    """A batch job that says it started and waits for ``release`` before it produces: the
-    batches after it queue up."""
-
-    def run(sink: TxnSink, after: int, dead: dict[int, str], done: Callable[[Ack], None]) -> None:
+    def held(
+        run: RunJob, sink: TxnSink, after: int, dead: dict[int, str], done: Callable[[Ack], None]
+    ) -> None:
         started.set()
         assert release.wait(30)
-        produce_all(part)(sink, after, dead, done)
+        run(sink, after, dead, done)
 
-    return run
+    for n, (part, run) in enumerate(parts):
+        job = partial(held, run) if n == 0 else run
+        writer.submit(Pending(part, part.last_seq, at_or_below(part)), job, partial(answer, n))
+        if n == 0:
+            assert started.wait(30)  # the first batch's transaction is under way
+    release.set()
+    assert all_in.wait(60)
+    return [answers[n] for n in range(len(parts))]
 
 
 def test_batches_waiting_for_a_transaction_share_the_next_one(
@@ -203,12 +193,8 @@ def test_batches_waiting_for_a_transaction_share_the_next_one(
 ) -> None:
     data, _marks = topics
     a, _b = writers
-    started, release = threading.Event(), threading.Event()
-    first = batch(data, range(1, 11))
-    later = [batch(data, range(s, s + 10)) for s in (11, 21, 31)]
-    answers = submit_all(
-        a, [(first, held(first, started, release))] + [(p, produce_all(p)) for p in later], (started, release)
-    )
+    parts = [batch(data, range(s, s + 10)) for s in (1, 11, 21, 31)]
+    answers = submit_all(a, [(p, produce_all(p)) for p in parts])
     assert [(x.status, x.first_seq, x.last_seq) for x in answers] == [
         ("ok", 1, 10),
         ("ok", 11, 20),
@@ -224,18 +210,13 @@ def test_a_failed_batch_fails_its_whole_group_and_nothing_of_it_shows(
 ) -> None:
     data, _marks = topics
     a, _b = writers
-    started, release = threading.Event(), threading.Event()
     first = batch(data, range(1, 11))
     good, bad = batch(data, range(11, 21)), batch(data, range(21, 31))
 
     def refused(_sink: TxnSink, _after: int, _dead: dict[int, str], done: Callable[[Ack], None]) -> None:
         done(Ack(bad.edge_id, bad.stream, bad.first_seq, bad.last_seq, "error", (), "registry down"))
 
-    answers = submit_all(
-        a,
-        [(first, held(first, started, release)), (good, produce_all(good)), (bad, refused)],
-        (started, release),
-    )
+    answers = submit_all(a, [(first, produce_all(first)), (good, produce_all(good)), (bad, refused)])
     assert [x.status for x in answers] == ["ok", "error", "error"]
     assert "registry down" in answers[1].detail  # the good batch says why it was not written
     assert committed_values(kafka_bootstrap, data) == values(range(1, 11))
