@@ -237,22 +237,12 @@ def start_site(
     """One site: its router and its edge (a client of it). Returns (router port, router pid, edge
     pid, the edge's stats file)."""
     site_port = free_port()
-    router = subprocess.Popen(
-        [
-            sys.executable,
-            str(ROOT / "bench" / "fleet_router.py"),
-            str(site_port),
-            f"tcp/127.0.0.1:{cloud_port}",
-        ],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
+    router_pid = start_router(
+        stack,
+        work / f"site-router-{site}.json5",
+        ["edge-router-dev.json5", "--site", f"site-{site:02d}", "-e", f"tcp/127.0.0.1:{cloud_port}"],
+        site_port,
     )
-    stack.callback(router.wait, 30)
-    stack.callback(router.stdin.close)  # type: ignore[union-attr]
-    if router.stdout is None or router.stdout.readline().strip() != "ready":
-        raise SystemExit("site router did not start")
     name = "fleet" if sites == 1 else f"site-{site:02d}"
     edge = {
         "site": name,
@@ -270,15 +260,30 @@ def start_site(
         ["edge", "run", "--stats-file", str(stats_path), "--stats-interval", "5"],
         stats_path.exists,
     )
-    return site_port, router.pid, pid, stats_path
+    return site_port, router_pid, pid, stats_path
 
 
-def start_cloud_router(stack: ExitStack, work: Path, port: int) -> int:
-    config = work / "cloud-router.json5"
+def start_router(stack: ExitStack, config: Path, render: list[str], port: int) -> int:
+    """A router from a shipped template (``render``: the template's name in deploy/zenoh and
+    ``fleetlink zenoh render`` options), listening on ``port``; returns its pid once it listens."""
     fleetlink = [sys.executable, "-m", "fleetlink", "zenoh"]
-    template = str(ROOT / "deploy" / "zenoh" / "cloud-router-dev.json5")
+    template, *options = render
     listen = f"tcp/127.0.0.1:{port}"
-    subprocess.run([*fleetlink, "render", template, "-l", listen, "-o", str(config)], check=True, cwd=ROOT)
+    subprocess.run(
+        [
+            *fleetlink,
+            "render",
+            str(ROOT / "deploy" / "zenoh" / template),
+            *options,
+            "-l",
+            listen,
+            "-o",
+            str(config),
+        ],
+        check=True,
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+    )
     router = subprocess.Popen(
         [*fleetlink, "router", "-c", str(config)],
         cwd=ROOT,
@@ -294,7 +299,7 @@ def start_cloud_router(stack: ExitStack, work: Path, port: int) -> int:
             return router.pid
         except OSError:
             if time.monotonic() > deadline or router.poll() is not None:
-                raise SystemExit("the cloud router did not start") from None
+                raise SystemExit(f"the router of {config.name} did not start") from None
             time.sleep(0.1)
 
 
@@ -341,7 +346,9 @@ def run_shape(
             # a cloud router of its own, from the shipped template: only fleetlink/** crosses it,
             # so each site's robots stay on their site (a router without it would route every
             # site's robot data to every edge subscribing to the same wildcard)
-            procs["cloud router"] = start_cloud_router(stack, work, cloud_port)
+            procs["cloud router"] = start_router(
+                stack, work / "cloud-router.json5", ["cloud-router-dev.json5"], cloud_port
+            )
             zenoh = {"mode": "client", "connect": [cloud]}
         for n in range(uplinks):
             name = "uplink" if uplinks == 1 else f"uplink {n}"
