@@ -232,7 +232,13 @@ class Reader(threading.Thread):
 
 
 def start_site(
-    stack: ExitStack, work: Path, site: int, sites: int, cloud_port: int, mappings: list[dict[str, str]]
+    stack: ExitStack,
+    work: Path,
+    site: int,
+    sites: int,
+    cloud_port: int,
+    mappings: list[dict[str, str]],
+    coalesce: str | None = None,
 ) -> tuple[int, int, int, Path]:
     """One site: its router and its edge (a client of it). Returns (router port, router pid, edge
     pid, the edge's stats file)."""
@@ -251,6 +257,8 @@ def start_site(
         "robot_types": {"bench": {"match": "/r*", "mappings": mappings}},
         "spool": {"dir": str(work / f"spool-{site}"), "max_bytes": "1GiB"},
     }
+    if coalesce is not None:
+        edge["intake"] = {"coalesce": coalesce}
     stats_path = work / f"edge-{site}.stats"
     pid = start_process(
         stack,
@@ -331,6 +339,7 @@ def run_shape(
     warmup: float,
     sites: int = 1,
     uplinks: int = 1,
+    coalesce: str | None = None,
 ) -> Result:
     work.mkdir(parents=True)
     suffix = uuid.uuid4().hex[:6]
@@ -376,7 +385,7 @@ def run_shape(
         edges: list[int] = []
         for site in range(sites):
             port, router_pid, edge_pid, stats_path = start_site(
-                stack, work, site, sites, cloud_port, mappings
+                stack, work, site, sites, cloud_port, mappings, coalesce
             )
             site_ports.append(port)
             stats_paths.append(stats_path)
@@ -563,6 +572,11 @@ def main() -> None:
         help="split the robots over this many sites (a router and an edge each)",
     )
     ap.add_argument("--uplinks", type=int, default=1, help="uplinks serving the sites")
+    ap.add_argument(
+        "--coalesce",
+        metavar="DURATION",
+        help="the edges' intake.coalesce (default: the edge's default; 0s turns it off)",
+    )
     args = ap.parse_args()
     shapes = [Shape.parse(s) for s in (args.shape or DEFAULT_SHAPES)]
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-fleet-") as tmp:
@@ -588,6 +602,7 @@ def main() -> None:
                     args.warmup,
                     args.sites,
                     args.uplinks,
+                    args.coalesce,
                 )
                 print(f"run {run + 1}: {result.line()}", flush=True)
 

@@ -224,6 +224,7 @@ class EdgeAgent:
             max_value_bytes=self._maker.fast_value_limit,
             group_records=group_records,
             group_bytes=group_bytes,
+            coalesce_s=config.intake.coalesce / 1e9,
         )
         limit.on_change(self._apply_record_limit)
         # what each publisher had in the spool when the last run stopped: its first sample now

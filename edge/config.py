@@ -252,6 +252,11 @@ class IntakeSection(Section):
     max_bytes: ByteSize = ByteSize(64 << 20)
     lag_alarm: DurationNs = 2 * _NS
     """Health turns ``degraded`` while samples wait longer than this between receipt and spool."""
+    coalesce: DurationNs = Field(default=1_000_000, ge=0, le=100_000_000)
+    """A sample that finds the receive thread idle makes it wait this long before reading on, so
+    the samples arriving meanwhile are read from the socket together: at steady fleet rates one
+    wake-up for many samples instead of one each. Adds at most this much latency; ``0s`` turns it
+    off. A burst never waits (docs/edge.md, "Receiving")."""
 
 
 class WanSection(Section):

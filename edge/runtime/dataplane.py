@@ -150,6 +150,7 @@ class NativeSource:
         max_value_bytes: int,
         group_records: int = 2000,
         group_bytes: int = 1 << 20,
+        coalesce_s: float = 0.0,
     ) -> None:
         config = dataplane_config(python_config)
         try:
@@ -157,7 +158,11 @@ class NativeSource:
                 "ZENOH_RUNTIME", os.environ.get("FLEETLINK_DATAPLANE_RUNTIME", DATAPLANE_RUNTIME)
             ):
                 self.plane = DataPlane(
-                    None, [(key, json.dumps(value)) for key, value in config.items()], max_items, max_bytes
+                    None,
+                    [(key, json.dumps(value)) for key, value in config.items()],
+                    max_items,
+                    max_bytes,
+                    coalesce_s=coalesce_s,
                 )
         except (ValueError, RuntimeError) as exc:
             raise RuntimeSetupError(f"zenoh: the edge's receive path cannot start: {exc}") from None
@@ -302,6 +307,7 @@ class NativeSource:
         return {
             "offered": offered,
             "taken": int(stats["taken"]),
+            "coalesced": int(stats["coalesced"]),
             "dropped": int(stats["dropped"]),
             "dropped_bytes": int(stats["dropped_bytes"]),
             "queued": int(stats["queued"]),

@@ -81,6 +81,7 @@ def test_minimal_config_and_defaults(tmp_path: Path) -> None:
     assert config.registration.grace_period == 5_000_000_000
     assert config.spool.options().policy == "block"
     assert config.wan.codec == "zstd"
+    assert config.intake.coalesce == 1_000_000
     assert config.admin is None
     assert config.mapping_table().list() == []
 
@@ -226,6 +227,7 @@ BAD: list[tuple[str, str, str]] = [
         f"registration.topic (line 10): {VE}'register' is not an absolute ROS topic name",
     ),
     ("bad distro", BASE + "ros: {distro: foxy}\n", "ros.distro (line 10): Input should be 'humble'"),
+    ("coalesce too long", BASE + "intake: {coalesce: 1s}\n", "intake.coalesce (line 10): Input should be"),
     (
         "linger too long",
         BASE + "        linger: 2m\n",
