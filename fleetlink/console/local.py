@@ -7,7 +7,7 @@ console gets over Zenoh, without a network hop.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import zenoh
@@ -56,9 +56,9 @@ class LocalSite:
         """This edge's site, summarised from its health."""
         return [site_summary(self.site, self.ask(self.site, "health"))]
 
-    def read(self, site: str) -> dict[str, Envelope]:
-        """The site's admin collections, plus this edge's ``status`` counters."""
-        out = {name: self.ask(site, name) for name in _READS}
+    def read(self, site: str, names: Sequence[str] | None = None) -> dict[str, Envelope]:
+        """The site's admin collections (those in ``names``), plus this edge's ``status`` counters."""
+        out = {name: self.ask(site, name) for name in (_READS if names is None else names)}
         if site == self.site:
             out["status"] = Envelope(status=200, site=site, edge_id=self.edge_id, body=self._status())
         return out

@@ -14,7 +14,7 @@ as such, never waited on forever.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import zenoh
@@ -111,18 +111,19 @@ class ZenohSites:
                 found[site] = site_summary(site, env)
         return [found[s] for s in sorted(found)]
 
-    def read(self, site: str) -> dict[str, Envelope]:
-        """The site's admin collections and console counters as its edge answered them (400 for a bad
-        site name, 504 when no edge answered)."""
+    def read(self, site: str, names: Sequence[str] | None = None) -> dict[str, Envelope]:
+        """The site's admin collections (those in ``names``) and console counters as its edge
+        answered them (400 for a bad site name, 504 when no edge answered)."""
         if site_problem(site) is not None:
             return {"health": failure(400, f"not a site name: {site!r}", site=site)}
-        admin = self._get(f"fleetlink/{site}/admin/*")
-        status = self._get(status_key(site))
         prefix = f"fleetlink/{site}/admin/"
+        admin = [self._get(prefix + name) for name in (["*"] if names is None else names)]
+        status = self._get(status_key(site))
         out: dict[str, Envelope] = {}
-        for key, env in self._replies(admin):
-            if key.startswith(prefix):
-                out.setdefault(key[len(prefix) :], env)
+        for replies in admin:
+            for key, env in self._replies(replies):
+                if key.startswith(prefix):
+                    out.setdefault(key[len(prefix) :], env)
         for key, env in self._replies(status):
             if key == status_key(site):
                 out.setdefault("status", env)

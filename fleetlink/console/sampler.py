@@ -18,9 +18,14 @@ from fleetlink.common.worker import Worker
 from fleetlink.console.history import History, Key
 from fleetlink.console.rates import RateBoard
 from fleetlink.console.sources import Sites
-from fleetlink.console.views import site_view
+from fleetlink.console.views import site_figures
 
 log = logging.getLogger(__name__)
+
+FIGURES = ("mappings",)
+"""What the sampler reads of a site besides its ``status``: reading its robots and topics too (as a
+page does) cost an edge of 1,000 robots some 5 % of a core and, holding the interpreter for tens of
+milliseconds every 10 s, its records' latency (bench/bench_fleet.py)."""
 
 
 def _sum(values: list[float | None]) -> float | None:
@@ -83,9 +88,8 @@ class HistorySampler(Worker):
         for summary in self.sites.sites():
             site = str(summary.get("site"))
             now = self._clock()
-            view = site_view(
-                site, self.sites.read(site), self._board, now=now, delivery=self.sites.delivery(site)
-            )
+            parts = self.sites.read(site, FIGURES)
+            view = site_figures(site, parts, self._board, now=now, delivery=self.sites.delivery(site))
             for key, values in site_points(view).items():
                 self.history.add(key, values, now)
         self.samples += 1

@@ -8,6 +8,7 @@ space's envelopes, so pages and tests do not care where a site runs.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Literal, Protocol
 
 from fleetlink.console.envelope import Envelope
@@ -27,9 +28,10 @@ class Sites(Protocol):
         """One summary per site that answers (``views.site_summary``)."""
         ...
 
-    def read(self, site: str) -> dict[str, Envelope]:
-        """The site's ``robots``, ``topics``, ``mappings``, ``robot_types``, ``health`` and
-        ``status`` answers (a part may be missing or an error)."""
+    def read(self, site: str, names: Sequence[str] | None = None) -> dict[str, Envelope]:
+        """The site's ``robots``, ``topics``, ``mappings``, ``robot_types``, ``health`` (or only
+        the admin collections in ``names``) and ``status`` answers (a part may be missing or an
+        error)."""
         ...
 
     def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:

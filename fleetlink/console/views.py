@@ -94,6 +94,32 @@ def backlog(status: Any) -> dict[str, Any] | None:
     }
 
 
+def site_figures(
+    site: str,
+    parts: Mapping[str, Envelope],
+    board: RateBoard,
+    *,
+    now: float,
+    delivery: list[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """What the history keeps of a site, from its ``mappings`` and ``status`` alone: the mappings
+    with their rates, the backlog (as ``graph.backlog``) and what the uplinks delivered. The part
+    of ``site_view`` that does not grow with the fleet (no robots, topics or graph)."""
+    errors: dict[str, str] = {}
+    mappings = _list(_body(parts, "mappings", errors))
+    rates = mapping_rates(board, site, mappings, now)
+    kafka = delivery_view(board, delivery or [], now=now)
+    board.forget_idle(now)
+    for mapping in mappings:
+        mapping["rates"] = rates.get(str(mapping.get("name")), {})
+    return {
+        "site": site,
+        "mappings": mappings,
+        "graph": {"backlog": backlog(_body(parts, "status", errors))},
+        "delivery": kafka if delivery is not None else None,
+    }
+
+
 def site_view(
     site: str,
     parts: Mapping[str, Envelope],

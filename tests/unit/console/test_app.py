@@ -5,6 +5,7 @@ in for the fleet (the Zenoh source is tested on real routers in tests/integratio
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -339,7 +340,7 @@ class FixedFleet:
     def sites(self) -> list[dict[str, Any]]:
         return [{"site": "a", "state": "ok"}, {"site": "b", "state": None, "error": "timeout"}]
 
-    def read(self, site: str) -> dict[str, Envelope]:
+    def read(self, site: str, names: Sequence[str] | None = None) -> dict[str, Envelope]:
         return {"health": Envelope(status=200, site=site, edge_id="e", body={"state": "ok"})}
 
     def ask(self, site: str, path: str, *, op: str | None = None, body: Any = None) -> Envelope:

@@ -10,12 +10,15 @@ from pydantic import SecretStr
 
 from fleetlink.console.audit import MemoryAudit, audit_entry
 from fleetlink.console.auth import TOKEN_USER, Authenticator, Identity
+from fleetlink.console.envelope import Envelope
 from fleetlink.console.errors import ConsoleConfigError
 from fleetlink.console.history import History
 from fleetlink.console.kafka_ops import fill_datum
 from fleetlink.console.operations import CommandRefusedError
+from fleetlink.console.rates import RateBoard
 from fleetlink.console.sampler import site_points
 from fleetlink.console.users import User, hash_password, parse_users, role_at_least, verify_password
+from fleetlink.console.views import site_figures, site_view
 
 pytestmark = pytest.mark.unit
 
@@ -144,6 +147,32 @@ def test_a_site_view_gives_a_site_point_and_one_per_mapping() -> None:
     assert points[("site", "a")]["emitted"] == 2.0
     assert (points[("site", "a")]["acked"], points[("site", "a")]["backlog"]) == (2.0, 12)
     assert points[("mapping", "a", "imu")]["emitted"] is None
+
+
+def _parts(received: int, depth: int) -> dict[str, Envelope]:
+    mapping = {"name": "imu", "counters": {"received": received, "emitted": received // 2, "dropped": 1}}
+    streams = [{"stream": "durable", "depth": depth, "bytes": 10 * depth, "oldest_age_s": 2.5}]
+    robots = [{"robot": f"/r{n}", "robot_type": "tb4"} for n in range(50)]
+    return {
+        "mappings": Envelope(status=200, site="a", edge_id="e", body=[mapping]),
+        "status": Envelope(status=200, site="a", edge_id="e", body={"streams": streams}),
+        "robots": Envelope(status=200, site="a", edge_id="e", body=robots),
+    }
+
+
+def test_the_history_figures_are_those_of_the_site_page() -> None:
+    """The sampler reads a site's mappings and status only (its robots and topics grow with the
+    fleet): its points are those a full site view gives."""
+    cheap, full = RateBoard(window_s=25, min_span_s=5), RateBoard(window_s=25, min_span_s=5)
+    delivery = [{"uplink": "u", "topics": {}}]
+    for now, received, depth in ((0.0, 100, 7), (10.0, 600, 9)):
+        parts = _parts(received, depth)
+        figures = site_points(site_figures("a", parts, cheap, now=now, delivery=delivery))
+        view = site_points(site_view("a", _parts(received, depth), full, now=now, delivery=delivery))
+        assert figures == view
+    assert figures[("site", "a")]["received"] == 50.0
+    assert figures[("site", "a")]["backlog"] == 9
+    assert figures[("mapping", "a", "imu")]["emitted"] == 25.0
 
 
 LED = {
