@@ -94,6 +94,20 @@ def backlog(status: Any) -> dict[str, Any] | None:
     }
 
 
+def _rate(
+    board: RateBoard,
+    site: str,
+    mappings: list[dict[str, Any]],
+    delivery: list[dict[str, Any]] | None,
+    now: float,
+) -> tuple[dict[str, dict[str, float | None]], dict[str, Any]]:
+    """Each mapping's rates (also set as its ``rates``) and the uplinks' delivery view."""
+    rates = mapping_rates(board, site, mappings, now)
+    for mapping in mappings:
+        mapping["rates"] = rates.get(str(mapping.get("name")), {})
+    return rates, delivery_view(board, delivery or [], now=now)
+
+
 def site_figures(
     site: str,
     parts: Mapping[str, Envelope],
@@ -107,11 +121,8 @@ def site_figures(
     of ``site_view`` that does not grow with the fleet (no robots, topics or graph)."""
     errors: dict[str, str] = {}
     mappings = _list(_body(parts, "mappings", errors))
-    rates = mapping_rates(board, site, mappings, now)
-    kafka = delivery_view(board, delivery or [], now=now)
+    _rates, kafka = _rate(board, site, mappings, delivery, now)
     board.forget_idle(now)
-    for mapping in mappings:
-        mapping["rates"] = rates.get(str(mapping.get("name")), {})
     return {
         "site": site,
         "mappings": mappings,
@@ -138,12 +149,9 @@ def site_view(
     robot_types = [str(t["name"]) for t in robot_types_body if "name" in t]
     health = _body(parts, "health", errors)
     status = _body(parts, "status", errors)
-    rates = mapping_rates(board, site, mappings, now)
     per_topic = topic_rates(board, site, status, now)
-    kafka = delivery_view(board, delivery or [], now=now)
+    rates, kafka = _rate(board, site, mappings, delivery, now)
     board.forget_idle(now)
-    for mapping in mappings:
-        mapping["rates"] = rates.get(str(mapping.get("name")), {})
     edge_ids = sorted({e.edge_id for e in parts.values() if e.edge_id})
     kafka_rates = None
     if delivery is not None:
