@@ -32,13 +32,15 @@ class DataPlane:
         group_records: int = 2000,
         group_bytes: int = 1048576,
         collect_s: float = 0.0,
+        busy: int = 0,
+        busy_collect_s: float = 0.0,
     ) -> tuple[
         list[tuple[int, bytes]],
         list[tuple[int, str, bytes, bytes | None, int]],
         list[tuple[int, int, int]],
         int,
         int,
-        list[tuple[bytes, int]],
+        bytes,
     ]: ...
     def stats(self) -> dict[str, int]: ...
     def sub_stats(self) -> dict[int, tuple[int, int]]: ...

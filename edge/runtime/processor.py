@@ -33,6 +33,7 @@ from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
 from fleetlink.edge.runtime.records import RecordMaker
 from fleetlink.edge.spool import RecordBuffer
+from fleetlink.edge.spool.marks import decode_marks, encode_marks, merge_marks
 from fleetlink.roswire.errors import RoswireError
 from fleetlink.roswire.subscriber import RosSample
 from fleetlink.wire.groups import group_count
@@ -81,8 +82,9 @@ class Taken:
     count: int = 0
     oldest_received_ns: int = 0
     """When the oldest sample of this take arrived (0: none): the lag behind the robots."""
-    marks: list[tuple[bytes, int]] = field(default_factory=list)
-    """The last ``(publisher GID, seq)`` of each publisher whose samples the groups hold."""
+    marks: bytes = b""
+    """A marks block (``fleetlink.edge.spool.marks``): the last ``(publisher GID, seq)`` of each
+    publisher whose samples the groups hold or that came for the general path."""
 
 
 class SampleSource(Protocol):
@@ -118,6 +120,9 @@ class ProcessorStats:
     spool_refused: int = 0
     """Not taken because the ``block`` policy timed out, or the record exceeds the buffer's limit."""
     errors: int = 0
+    takes: int = 0
+    """Chunks taken from the data plane with a sample in them (``samples / takes``: how many come
+    together)."""
 
     def as_dict(self) -> dict[str, int]:
         """The counters by field name."""
@@ -219,6 +224,8 @@ class Processor:
             if not items and not taken.count and self._stop.is_set():
                 return
             now = self._clock_ns()
+            if taken.count:
+                self.stats.takes += 1
             if taken.oldest_received_ns:
                 self.lag_ns = max(0, now - taken.oldest_received_ns)
             try:
@@ -302,11 +309,14 @@ class Processor:
                 del self._held[gid]
         self._released.append(held)
 
-    def _marks(self, items: Sequence[Item], taken: Taken) -> list[tuple[bytes, int]]:
-        """The chunk's marks (``_marks_of``), those of the claim-checked records it spools, and
-        none past a sample whose record still waits for its upload: a crash loses that record,
-        so the restart must count it (``lost_at_restart``)."""
-        found = dict(_marks_of(items, taken))
+    def _marks(self, items: Sequence[Item], taken: Taken) -> bytes:
+        """The chunk's marks block (``_marks_of``), with those of the claim-checked records it
+        spools, and none past a sample whose record still waits for its upload: a crash loses
+        that record, so the restart must count it (``lost_at_restart``)."""
+        block = _marks_of(items, taken)
+        if not self._released and not self._held:
+            return block
+        found = dict(decode_marks(block)) if block else {}
         for gid, seq in self._released:
             known = found.get(gid)
             if known is None or seq > known:
@@ -319,9 +329,9 @@ class Processor:
                     found[gid] = min(seqs) - 1
                 else:
                     del found[gid]
-        return list(found.items())
+        return encode_marks(found.items()) if found else b""
 
-    def _append(self, out: list[Outgoing], taken: Taken, marks: list[tuple[bytes, int]]) -> None:
+    def _append(self, out: list[Outgoing], taken: Taken, marks: bytes) -> None:
         payloads: dict[Delivery, list[bytes]] = {}
         lingers: dict[Delivery, float] = {}  # per buffer, the shortest linger of what it got
         default = self.default_linger_s
@@ -343,12 +353,12 @@ class Processor:
             for n, group in enumerate(groups):
                 if marks and buffer is durable and records is None and n == len(groups) - 1:
                     buffer.note_marks(marks)  # written with this last group
-                    marks = []
+                    marks = b""
                 self._append_group(delivery, buffer, group)
             if records is not None:
                 if marks and buffer is durable:
                     buffer.note_marks(marks)
-                    marks = []
+                    marks = b""
                 self.stats.records += len(records)
                 self._append_to(delivery, buffer, records)
             self._on_appended(delivery, lingers.get(delivery, default))
@@ -412,16 +422,18 @@ class Processor:
         stats.spool_dropped += len(results) - taken
 
 
-def _marks_of(items: Sequence[Item], taken: Taken) -> list[tuple[bytes, int]]:
-    """The last ``(publisher GID, seq)`` of each publisher in a chunk: the data plane's marks
-    and those of the samples on the general path."""
-    found = dict(taken.marks)
-    for sample in (*items, *taken.samples):
+def _marks_of(items: Sequence[Item], taken: Taken) -> bytes:
+    """The chunk's marks block: the data plane's (its records and the samples it handed to the
+    general path) and those of the samples that came through the intake (without a data plane)."""
+    found: dict[bytes, int] = {}
+    for sample in items:
         if isinstance(sample, RosSample) and sample.gid is not None and sample.seq is not None:
             known = found.get(sample.gid)
             if known is None or sample.seq > known:
                 found[sample.gid] = sample.seq
-    return list(found.items())
+    if not found:
+        return taken.marks
+    return merge_marks(taken.marks, encode_marks(found.items()))
 
 
 def _nothing(_delivery: Delivery, _linger_s: float) -> None:

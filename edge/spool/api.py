@@ -208,10 +208,10 @@ class RecordBuffer(Protocol):
         """Everything in flight must be sent again (e.g. after a reconnect); returns batches."""
         ...
 
-    def note_marks(self, marks: Sequence[tuple[bytes, int]]) -> None:
-        """The last ``(publisher GID, seq)`` of samples whose records are appended next (or that
-        made none for this buffer): the durable spool writes them with the last group of its
-        next append call (``edge.spool.marks``); the memory buffer keeps nothing."""
+    def note_marks(self, marks: bytes) -> None:
+        """A marks block (``edge.spool.marks``): the last ``(publisher GID, seq)`` of samples whose
+        records are appended next (or that made none for this buffer); the durable spool writes it
+        with the last group of its next append call, the memory buffer keeps nothing."""
         ...
 
     def stats(self) -> SpoolStats:

@@ -25,7 +25,10 @@ from __future__ import annotations
 import logging
 import struct
 import zlib
+from collections import deque
 from collections.abc import Iterable
+from itertools import repeat
+from operator import itemgetter
 from pathlib import Path
 
 from fleetlink.common.durable import write_atomically
@@ -42,6 +45,7 @@ SNAPSHOT_NAME = "marks"
 SNAPSHOT_MAGIC = b"FLMARKS1"
 
 Mark = tuple[bytes, int]
+_GID = itemgetter(0)
 
 
 class MarksError(ValueError):
@@ -53,6 +57,18 @@ def encode_marks(marks: Iterable[Mark]) -> bytes:
     pack = _ENTRY.pack
     body = [pack(gid, seq) for gid, seq in marks if len(gid) == GID_SIZE]
     return b"".join(body) + _COUNT.pack(len(body))
+
+
+def merge_marks(*blocks: bytes) -> bytes:
+    """One marks block of ``blocks`` (empty ones welcome): the highest seq per GID; ``b""`` when
+    there is none."""
+    found: dict[bytes, int] = {}
+    for block in blocks:
+        if block:
+            for gid, seq in decode_marks(block):
+                known = found.get(gid)
+                found[gid] = seq if known is None or seq > known else known
+    return encode_marks(found.items()) if found else b""
 
 
 def marks_block_size(data: bytes | memoryview, end: int | None = None) -> int:
@@ -73,7 +89,7 @@ def decode_marks(block: bytes | memoryview) -> list[Mark]:
     size = marks_block_size(block)
     if size != len(block):
         raise MarksError(f"{len(block) - size} bytes before a marks block")
-    return [(bytes(gid), int(seq)) for gid, seq in _ENTRY.iter_unpack(block[: size - _COUNT.size])]
+    return list(_ENTRY.iter_unpack(memoryview(block)[: size - _COUNT.size]))
 
 
 class MarkBook:
@@ -92,6 +108,20 @@ class MarkBook:
             known = book.pop(gid, None)
             book[gid] = seq if known is None else max(known, seq)
             self.changed = True
+        while len(book) > self.limit:
+            del book[next(iter(book))]
+
+    def add_block(self, block: bytes) -> None:
+        """``update`` with a marks block (the spool's hot path: a block per write, with a mark per
+        publisher in it). A later mark of a GID replaces the one known: the data plane's marks of
+        a publisher only grow (a duplicate never lowers one)."""
+        if not block:
+            return
+        entries = decode_marks(block)
+        book = self._marks
+        deque(map(book.pop, map(_GID, entries), repeat(None)), maxlen=0)  # most recently updated last
+        book.update(entries)
+        self.changed = True
         while len(book) > self.limit:
             del book[next(iter(book))]
 

@@ -200,7 +200,7 @@ class MemoryBuffer:
             self._in_flight.clear()
             return count
 
-    def note_marks(self, marks: Sequence[tuple[bytes, int]]) -> None:
+    def note_marks(self, marks: bytes) -> None:
         """Nothing survives a restart here: marks are not kept."""
 
     def unsent(self) -> int:

@@ -40,7 +40,7 @@ from fleetlink.edge.spool.marks import (
     MarkBook,
     MarksError,
     decode_marks,
-    encode_marks,
+    merge_marks,
     read_snapshot,
     write_snapshot,
 )
@@ -105,7 +105,8 @@ class Spool:
         self._ledger = Ledger(self.directory)
         self._report = DamageReport(self.directory)
         self._marks = MarkBook()
-        self._pending_marks: dict[bytes, int] = {}
+        self._pending_marks = b""
+        """The marks block of what was processed since the last write (``note_marks``)."""
         self._writer = SegmentWriter(self.directory)
         self._lock_fd = -1
         self._segments: list[Segment] = []
@@ -232,8 +233,8 @@ class Spool:
             self._flusher.join()
         with self._appending, self._lock:
             self._seal()
-            self._marks.update(self._pending_marks.items())  # processed, and nothing more comes
-            self._pending_marks.clear()
+            self._marks.add_block(self._pending_marks)  # processed, and nothing more comes
+            self._pending_marks = b""
             self._save_marks()
             self._ledger.record_ack(self._tracker.mark(), sync=False)
             self._ledger.record_clean(self._next_seq)
@@ -317,8 +318,8 @@ class Spool:
                     results.extend(range(first, first + count))
                 self._write_chunk(chunk, results)
                 if marks and results and results[-1] is not None:
-                    self._marks.update(self._pending_marks.items())
-                    self._pending_marks.clear()
+                    self._marks.add_block(self._pending_marks)
+                    self._pending_marks = b""
             finally:
                 if self.options.fsync == "always" or (
                     self.options.fsync == "batch" and self._writer.unsynced >= self.options.fsync_batch
@@ -327,19 +328,16 @@ class Spool:
 
     def _marks_for(self, last_group: bytes) -> bytes:
         """The marks block the frame of ``last_group`` carries (the pending marks), if it fits."""
-        if not self._pending_marks:
-            return b""
-        marks = encode_marks(self._pending_marks.items())
+        marks = self._pending_marks
         return marks if len(last_group) + len(marks) <= self._max_len else b""
 
-    def note_marks(self, marks: Sequence[Mark]) -> None:
-        """The last ``(publisher GID, seq)`` of samples whose records are appended next (or that
-        made none for this spool): written with the last group of the next append call."""
+    def note_marks(self, marks: bytes) -> None:
+        """A marks block: the last ``(publisher GID, seq)`` of samples whose records are appended
+        next (or that made none for this spool), written with the last group of the next append
+        call."""
         with self._lock:
             pending = self._pending_marks
-            for gid, seq in marks:
-                known = pending.get(gid)
-                pending[gid] = seq if known is None or seq > known else known
+            self._pending_marks = merge_marks(pending, marks) if pending else marks
 
     def marks(self) -> list[Mark]:
         """The last ``(publisher GID, seq)`` of every publisher whose samples reached the spool

@@ -218,6 +218,32 @@ impl Grouper {
     }
 }
 
+impl Taken {
+    /// `seq` of publisher `gid` made records (or went to the Python path): its mark, unless an
+    /// earlier one of this take is higher.
+    fn mark(&mut self, gid: [u8; 16], seq: i64) {
+        let known = self.marks.entry(gid).or_insert(seq);
+        if seq > *known {
+            *known = seq;
+        }
+    }
+
+    /// The marks as a marks block (`fleetlink.edge.spool.marks`): `{gid | seq i64}* | count u32`;
+    /// empty when there are none.
+    fn marks_block(&self) -> Vec<u8> {
+        if self.marks.is_empty() {
+            return Vec::new();
+        }
+        let mut block = Vec::with_capacity(self.marks.len() * 24 + 4);
+        for (gid, seq) in &self.marks {
+            block.extend_from_slice(gid);
+            block.extend_from_slice(&seq.to_le_bytes());
+        }
+        block.extend_from_slice(&(self.marks.len() as u32).to_le_bytes());
+        block
+    }
+}
+
 /// What one `take()` made, before it becomes Python objects.
 struct Taken {
     marks: HashMap<[u8; 16], i64>,
@@ -411,14 +437,17 @@ impl DataPlane {
     }
 
     /// Up to `max_samples` samples, waiting at most `timeout_s` for the first and then up to
-    /// `collect_s` for more. Returns
+    /// `collect_s` for more, and up to `busy_collect_s` in all when `busy` samples came by then
+    /// (`wait_and_drain`). Returns
     /// `(groups, slow, lanes, samples, oldest_received_ns, marks)`: `groups` a list of
     /// `(delivery, group)` (`fleetlink.wire.groups`; at most `group_records` records and, beyond
     /// one, `group_bytes` bytes each), `slow` the raw samples for the Python path
     /// `(sub_id, key, payload, attachment | None, received_ns)`, `lanes` the
-    /// `(lane_id, received, emitted)` counts of this call, `marks` the last `(gid, seq)` of each
-    /// publisher whose samples became records here.
-    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576, collect_s=0.0))]
+    /// `(lane_id, received, emitted)` counts of this call, `marks` a marks block
+    /// (`fleetlink.edge.spool.marks`, empty when none): the last `(gid, seq)` of each
+    /// publisher whose samples became records here or went to the Python path (a duplicate never
+    /// lowers a mark).
+    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576, collect_s=0.0, busy=0, busy_collect_s=0.0))]
     fn take<'py>(
         &self,
         py: Python<'py>,
@@ -428,11 +457,14 @@ impl DataPlane {
         group_records: u32,
         group_bytes: usize,
         collect_s: f64,
+        busy: usize,
+        busy_collect_s: f64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let mut taken = py.detach(|| {
-            let raws = self.wait_and_drain(max_samples.max(1), timeout_s, collect_s);
+            let raws = self.wait_and_drain(max_samples.max(1), timeout_s, collect_s, busy, busy_collect_s);
             self.process(raws, max_value_bytes, group_records, group_bytes)
         });
+        let marks = PyBytes::new(py, &taken.marks_block());
         let mut groups: Vec<(u8, Bound<'py, PyBytes>)> = Vec::new();
         for (delivery, grouper) in taken.groups.iter_mut().enumerate() {
             grouper.close();
@@ -454,8 +486,6 @@ impl DataPlane {
             })
             .collect();
         let lanes: Vec<(u32, u64, u64)> = taken.lanes.into_iter().map(|(id, (r, e))| (id, r, e)).collect();
-        let marks: Vec<(Bound<'py, PyBytes>, i64)> =
-            taken.marks.iter().map(|(gid, seq)| (PyBytes::new(py, gid), *seq)).collect();
         (groups, slow, lanes, taken.samples, taken.oldest_ns, marks).into_pyobject(py).map(|t| t.into_any())
     }
 
@@ -536,8 +566,10 @@ impl DataPlane {
 impl DataPlane {
     /// Wait up to `timeout_s` for a first sample, then up to `collect_s` more for company (so that
     /// a steady trickle is taken a few ms' worth at a time, not one sample at a time), and take
-    /// at most `max`.
-    fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64) -> Vec<Raw> {
+    /// at most `max`. When `busy` samples (or more) came by then, the rate is high enough that
+    /// a take's fixed cost (waking the threads that handle what it spools) outweighs a few ms of
+    /// latency: collect on until `busy_collect_s` after the first sample.
+    fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64, busy: usize, busy_collect_s: f64) -> Vec<Raw> {
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
         let mut q = self.shared.queue.lock().unwrap();
         while q.items.is_empty() && !q.woken {
@@ -548,13 +580,22 @@ impl DataPlane {
             q = self.shared.ready.wait_timeout(q, deadline - now).unwrap().0;
         }
         if !q.items.is_empty() && !q.woken && collect_s > 0.0 {
-            let until = Instant::now() + Duration::from_secs_f64(collect_s);
-            while q.items.len() < max && !q.woken {
-                let now = Instant::now();
-                if now >= until {
+            let start = Instant::now();
+            let mut until = start + Duration::from_secs_f64(collect_s);
+            let mut extended = false;
+            loop {
+                while q.items.len() < max && !q.woken {
+                    let now = Instant::now();
+                    if now >= until {
+                        break;
+                    }
+                    q = self.shared.ready.wait_timeout(q, until - now).unwrap().0;
+                }
+                if extended || q.woken || q.items.len() >= max || busy == 0 || q.items.len() < busy || busy_collect_s <= collect_s {
                     break;
                 }
-                q = self.shared.ready.wait_timeout(q, until - now).unwrap().0;
+                extended = true;
+                until = start + Duration::from_secs_f64(busy_collect_s);
             }
         }
         q.woken = false;
@@ -579,7 +620,9 @@ impl DataPlane {
         let mut state = self.state.lock().unwrap();
         let mut bodies: Vec<Vec<u8>> = Vec::new();
         for raw in raws {
-            let counts = if state.keys.len() < MAX_KEYS || state.keys.contains_key(&raw.key) {
+            let counts = if let Some(counts) = state.keys.get_mut(&raw.key) {
+                counts
+            } else if state.keys.len() < MAX_KEYS {
                 state.keys.entry(raw.key.clone()).or_default()
             } else {
                 state.keys.entry(OTHER_KEYS.to_owned()).or_default()
@@ -591,6 +634,7 @@ impl DataPlane {
                 continue;
             };
             let seen = state.seqs.observe(&att.gid, att.seq);
+            let fresh = att.seq >= 0 && !matches!(seen, Seen::Duplicate);
             if !matches!(seen, Seen::First | Seen::Next) {
                 let key = if state.keys.contains_key(&raw.key) { raw.key.as_str() } else { OTHER_KEYS };
                 let counts = state.keys.get_mut(key).expect("counted above");
@@ -605,15 +649,21 @@ impl DataPlane {
                 }
             }
             let Some(plan) = state.plans.get(&raw.key).cloned() else {
+                if fresh {
+                    taken.mark(att.gid, att.seq);
+                }
                 taken.slow.push(raw);
                 continue;
             };
             if att.seq < 0 || !convert_all(&plan, &raw.payload, max_value_bytes, &mut bodies) {
+                if fresh {
+                    taken.mark(att.gid, att.seq);
+                }
                 taken.slow.push(raw);
                 continue;
             }
-            if plan.lanes.iter().any(|l| l.program.is_some()) {
-                taken.marks.insert(att.gid, att.seq); // samples of one publisher come in order
+            if fresh && plan.lanes.iter().any(|l| l.program.is_some()) {
+                taken.mark(att.gid, att.seq);
             }
             let stamp = if att.source_ts_ns != 0 { att.source_ts_ns } else { raw.received_ns };
             let ts_ms = stamp.div_euclid(1_000_000);

@@ -15,6 +15,7 @@ from fleetlink.edge.spool.marks import (
     MarksError,
     decode_marks,
     encode_marks,
+    merge_marks,
     read_snapshot,
     write_snapshot,
 )
@@ -70,9 +71,26 @@ def test_the_book_keeps_the_highest_seq_and_forgets_the_least_recent() -> None:
     assert dict(book.items()) == {G1: 5, G3: 1}
 
 
+def test_a_block_replaces_the_marks_it_names_and_refreshes_them() -> None:
+    book = MarkBook(limit=2)
+    book.update([(G1, 5), (G2, 7)])
+    book.add_block(encode_marks([(G1, 6)]))  # G1 updated last: G2 is the least recent now
+    book.add_block(b"")  # no marks
+    book.add_block(encode_marks([(G3, 1)]))
+    assert book.items() == [(G1, 6), (G3, 1)]
+    with pytest.raises(MarksError):
+        book.add_block(encode_marks([(G1, 9)])[1:])
+
+
+def test_merged_blocks_keep_the_highest_seq_of_each_publisher() -> None:
+    merged = merge_marks(encode_marks([(G1, 5), (G2, 7)]), b"", encode_marks([(G1, 3), (G3, 1)]))
+    assert sorted(decode_marks(merged)) == [(G1, 5), (G2, 7), (G3, 1)]
+    assert merge_marks(b"", b"") == b""
+
+
 def test_marks_go_with_the_last_group_of_the_next_append_and_come_back_at_open(tmp_path: Path) -> None:
     with Spool(tmp_path, OPTIONS) as spool:
-        spool.note_marks([(G1, 10), (G2, 4)])
+        spool.note_marks(encode_marks([(G1, 10), (G2, 4)]))
         seqs = spool.append_many([RECORD] * 25)  # three groups: 10, 10, 5
         assert spool.marks() == [(G1, 10), (G2, 4)]
     marked = [f for f in frames(tmp_path) if f.marks]
@@ -84,7 +102,7 @@ def test_marks_go_with_the_last_group_of_the_next_append_and_come_back_at_open(t
 def test_sent_groups_never_carry_the_marks(tmp_path: Path) -> None:
     group = encode_group([RECORD] * 3)
     with Spool(tmp_path, OPTIONS) as spool:
-        spool.note_marks([(G1, 10)])
+        spool.note_marks(encode_marks([(G1, 10)]))
         spool.append_group(group)
         batch = spool.read_unacked(100, 1 << 20)  # from memory, as written
         assert batch is not None
@@ -104,7 +122,7 @@ def test_sent_groups_never_carry_the_marks(tmp_path: Path) -> None:
 def test_marks_outlive_the_segments_that_held_them(tmp_path: Path) -> None:
     with Spool(tmp_path, OPTIONS) as spool:
         for n in range(1, 6):
-            spool.note_marks([(G1, n * 100), (bytes([n + 10]) * 16, n)])
+            spool.note_marks(encode_marks([(G1, n * 100), (bytes([n + 10]) * 16, n)]))
             spool.append_many([RECORD] * 30)
         while (batch := spool.read_unacked(1000, 1 << 20)) is not None:
             spool.ack(batch.first_seq)
@@ -117,11 +135,11 @@ def test_marks_outlive_the_segments_that_held_them(tmp_path: Path) -> None:
 
 def test_after_a_crash_the_marks_say_exactly_what_reached_the_spool(tmp_path: Path) -> None:
     spool = Spool(tmp_path, OPTIONS).open()
-    spool.note_marks([(G1, 10)])
+    spool.note_marks(encode_marks([(G1, 10)]))
     spool.append_many([RECORD] * 3)
-    spool.note_marks([(G1, 20), (G2, 7)])
+    spool.note_marks(encode_marks([(G1, 20), (G2, 7)]))
     spool.append_many([RECORD] * 3)
-    spool.note_marks([(G1, 30)])  # a chunk that made no record for the spool: not written yet
+    spool.note_marks(encode_marks([(G1, 30)]))  # a chunk that made no record for the spool: not written yet
     crash(spool)
     segment = next(tmp_path.glob("*.seg"))
     with segment.open("r+b") as handle:  # the second write was cut short by the crash
@@ -136,7 +154,7 @@ def test_marks_wait_for_a_write_that_takes_their_group(tmp_path: Path) -> None:
     with Spool(tmp_path, options) as spool:
         while spool.append(RECORD * 10) is not None:
             pass  # full
-        spool.note_marks([(G1, 99)])
+        spool.note_marks(encode_marks([(G1, 99)]))
         assert spool.append_many([RECORD * 10]) == [None]  # refused: the marks stay pending
         assert spool.marks() == []
         while (batch := spool.read_unacked(100, 1 << 20)) is not None:
@@ -147,6 +165,6 @@ def test_marks_wait_for_a_write_that_takes_their_group(tmp_path: Path) -> None:
 
 def test_pending_marks_are_kept_by_a_clean_close(tmp_path: Path) -> None:
     with Spool(tmp_path, OPTIONS) as spool:
-        spool.note_marks([(G3, 42)])  # samples that made no durable record, then a clean stop
+        spool.note_marks(encode_marks([(G3, 42)]))  # samples that made no durable record, then a clean stop
     with Spool(tmp_path, OPTIONS) as spool:
         assert spool.marks() == [(G3, 42)]
