@@ -32,7 +32,7 @@ class DataPlane:
         group_records: int = 2000,
         group_bytes: int = 1048576,
         collect_s: float = 0.0,
-        busy: int = 0,
+        busy_rate: float = 0.0,
         busy_collect_s: float = 0.0,
     ) -> tuple[
         list[tuple[int, bytes]],

@@ -48,10 +48,10 @@ log = logging.getLogger(__name__)
 COLLECT_S = 0.002
 """After a first sample, how long ``take`` waits for more (a sample waits at most this long), so
 that a steady flow is taken a few ms' worth at a time and the per-take work is shared."""
-BUSY = 8
+BUSY_RATE = 4000.0
 BUSY_COLLECT_S = 0.008
-"""When ``BUSY`` samples or more came within ``COLLECT_S`` (4,000 samples/s and up), ``take``
-waits until this long after the first: a take costs some 250 µs of the edge's CPU whatever it
+"""While samples arrive at ``BUSY_RATE`` a second or more (over the last 100 ms), ``take`` waits
+until this long after the first: a take costs some 250 µs of the edge's CPU whatever it
 holds (the spool write, waking the WAN sender, the threads taking turns on the GIL), a third of
 the edge at 10,000 samples/s when it is taken every 3 ms (bench/bench_fleet.py). Below that rate
 the latency is worth more (p99 ≤ 20 ms at 1,000 samples/s)."""
@@ -222,7 +222,7 @@ class NativeSource:
             self.group_records,
             self.group_bytes,
             COLLECT_S,
-            BUSY,
+            BUSY_RATE,
             BUSY_COLLECT_S,
         )
         taken = Taken(count=count, oldest_received_ns=oldest, marks=marks)

@@ -154,6 +154,25 @@ struct Lane {
     delivery: u8,
 }
 
+/// The rate samples are taken at, over windows of some 100 ms (`wait_and_drain`).
+struct Pace {
+    since: Instant,
+    count: usize,
+    rate: f64,
+}
+
+impl Pace {
+    fn note(&mut self, taken: usize) {
+        self.count += taken;
+        let elapsed = self.since.elapsed().as_secs_f64();
+        if elapsed >= 0.1 {
+            self.rate = self.count as f64 / elapsed;
+            self.count = 0;
+            self.since = Instant::now();
+        }
+    }
+}
+
 struct Plan {
     lanes: Vec<Lane>,
 }
@@ -260,6 +279,7 @@ pub struct DataPlane {
     shared: Arc<Shared>,
     subscribers: Mutex<HashMap<u32, Subscriber<()>>>,
     state: Mutex<State>,
+    pace: Mutex<Pace>,
 }
 
 #[pymethods]
@@ -320,6 +340,7 @@ impl DataPlane {
                 subs: HashMap::new(),
                 topics: HashMap::new(),
             }),
+            pace: Mutex::new(Pace { since: Instant::now(), count: 0, rate: 0.0 }),
         })
     }
 
@@ -437,8 +458,8 @@ impl DataPlane {
     }
 
     /// Up to `max_samples` samples, waiting at most `timeout_s` for the first and then up to
-    /// `collect_s` for more, and up to `busy_collect_s` in all when `busy` samples came by then
-    /// (`wait_and_drain`). Returns
+    /// `collect_s` for more, and up to `busy_collect_s` in all while samples arrive at `busy_rate`
+    /// a second or more (`wait_and_drain`). Returns
     /// `(groups, slow, lanes, samples, oldest_received_ns, marks)`: `groups` a list of
     /// `(delivery, group)` (`fleetlink.wire.groups`; at most `group_records` records and, beyond
     /// one, `group_bytes` bytes each), `slow` the raw samples for the Python path
@@ -447,7 +468,7 @@ impl DataPlane {
     /// (`fleetlink.edge.spool.marks`, empty when none): the last `(gid, seq)` of each
     /// publisher whose samples became records here or went to the Python path (a duplicate never
     /// lowers a mark).
-    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576, collect_s=0.0, busy=0, busy_collect_s=0.0))]
+    #[pyo3(signature = (max_samples, timeout_s, max_value_bytes, group_records=2000, group_bytes=1048576, collect_s=0.0, busy_rate=0.0, busy_collect_s=0.0))]
     fn take<'py>(
         &self,
         py: Python<'py>,
@@ -457,11 +478,11 @@ impl DataPlane {
         group_records: u32,
         group_bytes: usize,
         collect_s: f64,
-        busy: usize,
+        busy_rate: f64,
         busy_collect_s: f64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let mut taken = py.detach(|| {
-            let raws = self.wait_and_drain(max_samples.max(1), timeout_s, collect_s, busy, busy_collect_s);
+            let raws = self.wait_and_drain(max_samples.max(1), timeout_s, collect_s, busy_rate, busy_collect_s);
             self.process(raws, max_value_bytes, group_records, group_bytes)
         });
         let marks = PyBytes::new(py, &taken.marks_block());
@@ -566,10 +587,12 @@ impl DataPlane {
 impl DataPlane {
     /// Wait up to `timeout_s` for a first sample, then up to `collect_s` more for company (so that
     /// a steady trickle is taken a few ms' worth at a time, not one sample at a time), and take
-    /// at most `max`. When `busy` samples (or more) came by then, the rate is high enough that
-    /// a take's fixed cost (waking the threads that handle what it spools) outweighs a few ms of
-    /// latency: collect on until `busy_collect_s` after the first sample.
-    fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64, busy: usize, busy_collect_s: f64) -> Vec<Raw> {
+    /// at most `max`. While samples arrive at `busy_rate` a second or more (measured over the
+    /// takes of the last 100 ms or so, so a burst at a low rate does not count), a take's fixed
+    /// cost (waking the threads that handle what it spools) outweighs a few ms of latency:
+    /// collect until `busy_collect_s` after the first sample.
+    fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64, busy_rate: f64, busy_collect_s: f64) -> Vec<Raw> {
+        let busy = busy_rate > 0.0 && self.pace.lock().unwrap().rate >= busy_rate;
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
         let mut q = self.shared.queue.lock().unwrap();
         while q.items.is_empty() && !q.woken {
@@ -580,22 +603,14 @@ impl DataPlane {
             q = self.shared.ready.wait_timeout(q, deadline - now).unwrap().0;
         }
         if !q.items.is_empty() && !q.woken && collect_s > 0.0 {
-            let start = Instant::now();
-            let mut until = start + Duration::from_secs_f64(collect_s);
-            let mut extended = false;
-            loop {
-                while q.items.len() < max && !q.woken {
-                    let now = Instant::now();
-                    if now >= until {
-                        break;
-                    }
-                    q = self.shared.ready.wait_timeout(q, until - now).unwrap().0;
-                }
-                if extended || q.woken || q.items.len() >= max || busy == 0 || q.items.len() < busy || busy_collect_s <= collect_s {
+            let window = if busy { collect_s.max(busy_collect_s) } else { collect_s };
+            let until = Instant::now() + Duration::from_secs_f64(window);
+            while q.items.len() < max && !q.woken {
+                let now = Instant::now();
+                if now >= until {
                     break;
                 }
-                extended = true;
-                until = start + Duration::from_secs_f64(busy_collect_s);
+                q = self.shared.ready.wait_timeout(q, until - now).unwrap().0;
             }
         }
         q.woken = false;
@@ -605,6 +620,7 @@ impl DataPlane {
         q.bytes -= freed;
         drop(q);
         self.shared.taken.fetch_add(raws.len() as u64, Ordering::Relaxed);
+        self.pace.lock().unwrap().note(raws.len());
         raws
     }
 
