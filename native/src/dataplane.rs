@@ -13,7 +13,7 @@
 //! same record or the dead letter.
 
 use std::collections::{HashMap, VecDeque};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -97,6 +97,8 @@ struct Shared {
     started: Instant,
     /// Waits made: each one a wake-up of the receive thread shared by the samples that followed.
     coalesced: AtomicU64,
+    /// Samples arrive at the busy rate (`wait_and_drain`): each wait is twice `coalesce`.
+    busy: AtomicBool,
 }
 
 /// A sample this long after the one before found the receive thread idle: it woke for it.
@@ -105,9 +107,10 @@ const IDLE_GAP_NS: u64 = 50_000;
 impl Shared {
     /// Called for each sample on the session's receive thread. When the sample ends an idle
     /// spell (at steady rates each sample comes on its own: a wake-up, a socket read and a
-    /// thread switch a sample), wait `coalesce` before reading on, so that the samples arriving
-    /// meanwhile are read together from the socket. Back to back (a burst, or the samples that
-    /// arrived during a wait) never waits. Adds at most `coalesce` to a sample's latency.
+    /// thread switch a sample), wait `coalesce` (twice that while `busy`) before reading on, so
+    /// that the samples arriving meanwhile are read together from the socket. Back to back (a
+    /// burst, or the samples that arrived during a wait) never waits. Adds at most the wait to a
+    /// sample's latency.
     fn coalesce(&self) {
         if self.coalesce.is_zero() {
             return;
@@ -115,7 +118,8 @@ impl Shared {
         let now = self.started.elapsed().as_nanos() as u64;
         let last = self.last_ns.swap(now, Ordering::Relaxed);
         if now.saturating_sub(last) > IDLE_GAP_NS {
-            std::thread::sleep(self.coalesce);
+            let busy = self.busy.load(Ordering::Relaxed);
+            std::thread::sleep(if busy { self.coalesce * 2 } else { self.coalesce });
             self.coalesced.fetch_add(1, Ordering::Relaxed);
             self.last_ns.store(self.started.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
@@ -330,6 +334,7 @@ impl DataPlane {
                 last_ns: AtomicU64::new(0),
                 started: Instant::now(),
                 coalesced: AtomicU64::new(0),
+                busy: AtomicBool::new(false),
             }),
             subscribers: Mutex::new(HashMap::new()),
             state: Mutex::new(State {
@@ -593,6 +598,7 @@ impl DataPlane {
     /// collect until `busy_collect_s` after the first sample.
     fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64, busy_rate: f64, busy_collect_s: f64) -> Vec<Raw> {
         let busy = busy_rate > 0.0 && self.pace.lock().unwrap().rate >= busy_rate;
+        self.shared.busy.store(busy, Ordering::Relaxed);
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
         let mut q = self.shared.queue.lock().unwrap();
         while q.items.is_empty() && !q.woken {
