@@ -75,7 +75,7 @@ class Shape:
         return self.robots * self.topics * self.hz
 
 
-DEFAULT_SHAPES = ("200x5x10", "1000x5x2", "20x5x100", "8x1x625", "200x5x0")
+DEFAULT_SHAPES = ("200x5x10", "1000x5x2", "20x5x100", "8x1x625", "200x5x2", "200x5x0")
 
 
 def proc_status(pid: int) -> dict[str, str]:

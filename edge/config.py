@@ -255,7 +255,7 @@ class IntakeSection(Section):
     coalesce: DurationNs = Field(default=1_000_000, ge=0, le=100_000_000)
     """A sample that finds the receive thread idle makes it wait this long before reading on, so
     the samples arriving meanwhile are read from the socket together: at steady fleet rates one
-    wake-up for many samples instead of one each. While samples arrive at 4,000 a second or more
+    wake-up for many samples instead of one each. While samples arrive at 1,500 a second or more
     the wait is twice this. Adds at most that much latency; ``0s`` turns it off. A burst never
     waits (docs/edge.md, "Receiving")."""
 
