@@ -28,6 +28,7 @@ import queue
 import random
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
@@ -141,7 +142,9 @@ class WanSender:
         self.options = options or SenderOptions()
         self._clock = clock
         self._backoff = Backoff(self.options.backoff_min_s, self.options.backoff_max_s, rng=rng)
-        self._events: queue.SimpleQueue[tuple[int, bytes | None, str | None] | None] = queue.SimpleQueue()
+        self._wakes: queue.SimpleQueue[None] = queue.SimpleQueue()
+        self._replies: deque[tuple[int, bytes | None, str | None, float]] = deque()
+        """Answers not handled yet: ``(first_seq, reply, error, arrived)`` (``_reply``)."""
         self._in_flight: dict[int, _Flight] = {}
         self._retry_at = 0.0
         self._healthy = True
@@ -199,7 +202,7 @@ class WanSender:
 
     def wake(self) -> None:
         """New records were appended (or something changed): look again now."""
-        self._events.put(None)
+        self._wakes.put(None)
 
     def pump(self, linger_s: float | None = None) -> None:
         """Send the full batches that can go now, from the calling thread (the processing thread,
@@ -218,6 +221,7 @@ class WanSender:
             due = current
         if self._mutex.acquire(blocking=False):  # else the sender's thread is at it
             try:
+                self._handle_replies()
                 while (
                     not self._closed
                     and self._clock() >= self._retry_at
@@ -280,6 +284,7 @@ class WanSender:
         idle = max(0.05, self.options.linger_s)
         while True:
             with self._mutex:
+                self._handle_replies()
                 now = self._clock()
                 if self._stopping.is_set() and (
                     now >= self._stop_deadline or (not self._in_flight and not self._unsent())
@@ -293,6 +298,10 @@ class WanSender:
                     if batch is not None:
                         self._send(batch)
                         continue
+                if wait_until is None and now < self._last_send + self.options.linger_s:
+                    # Records appended from now on are due then: at a steady rate they are there
+                    # by that time, and ``pump`` need not wake this thread for them.
+                    wait_until = self._last_send + self.options.linger_s
                 timeout = idle if wait_until is None else max(0.0, wait_until - now)
                 if self._stopping.is_set():
                     timeout = min(timeout, max(0.0, self._stop_deadline - now))
@@ -322,19 +331,37 @@ class WanSender:
         return batch, None
 
     def _wait(self, timeout: float) -> None:
-        """Handle completions (and wake-ups) for up to ``timeout`` seconds; returns after the first."""
+        """Sleep up to ``timeout`` seconds or until woken (every wake-up pending is taken)."""
         try:
-            event = self._events.get(timeout=timeout) if timeout > 0 else self._events.get_nowait()
+            self._wakes.get(timeout=timeout) if timeout > 0 else self._wakes.get_nowait()
         except queue.Empty:
             return
-        while True:
-            if event is not None:
-                with self._mutex:
-                    self._complete(*event)
-            try:
-                event = self._events.get_nowait()
-            except queue.Empty:
-                return
+        with contextlib.suppress(queue.Empty):
+            while True:
+                self._wakes.get_nowait()
+
+    def _reply(self, first_seq: int, reply: bytes | None, error: str | None) -> None:
+        """An answer (or a failure) for the batch ``first_seq``, on the transport's thread. It waits
+        in ``_replies`` for the sender's thread when that thread wakes within ``linger`` anyway
+        (at a steady rate it sleeps until the next batch is due) and the window has room: one
+        thread switch a batch, not two. An error, a full window, a long sleep or a stop wake it."""
+        arrived = self._clock()
+        self._replies.append((first_seq, reply, error, arrived))
+        until = self._asleep_until
+        if (
+            error is not None
+            or until is None
+            or until > arrived + self.options.linger_s
+            or len(self._in_flight) >= self._window()
+            or self._stopping.is_set()
+        ):
+            self._wakes.put(None)
+
+    def _handle_replies(self) -> None:
+        """Apply the answers that came (the mutex held)."""
+        replies = self._replies
+        while replies:
+            self._complete(*replies.popleft())
 
     # -- one batch -------------------------------------------------------------------------------
     def _send(self, batch: SpoolBatch) -> None:
@@ -388,25 +415,25 @@ class WanSender:
         first = batch.first_seq
 
         def done(reply: bytes | None, error: str | None) -> None:
-            self._events.put((first, reply, error))
+            self._reply(first, reply, error)
 
         try:
             self.transport.send(data, self.options.ack_timeout_s, done)
         except Exception as exc:  # noqa: BLE001 - a closed session or a Zenoh error: retry later
             done(None, f"send failed: {exc}")
 
-    def _complete(self, first_seq: int, reply: bytes | None, error: str | None) -> None:
+    def _complete(self, first_seq: int, reply: bytes | None, error: str | None, arrived: float) -> None:
         flight = self._in_flight.pop(first_seq, None)
         self.stats.in_flight = len(self._in_flight)
         if flight is None:
             return
         if reply is not None:
-            error = self._accept(flight, reply)
+            error = self._accept(flight, reply, arrived)
         if error is not None:
             self.buffer.release(first_seq)
             self._failed(error)
 
-    def _accept(self, flight: _Flight, reply: bytes) -> str | None:
+    def _accept(self, flight: _Flight, reply: bytes, arrived: float) -> str | None:
         """Apply an acknowledgement; returns why the batch must be sent again, if it must."""
         try:
             ack = decode_ack(reply)
@@ -434,7 +461,7 @@ class WanSender:
         stats = self.stats
         stats.batches_acked += 1
         stats.records_acked += flight.records
-        self.ack_latency.observe(self._clock() - flight.sent_at)
+        self.ack_latency.observe(arrived - flight.sent_at)
         dead = sum(1 for f in ack.failures if f.dead_lettered)
         if dead:
             stats.records_dead_lettered += dead
