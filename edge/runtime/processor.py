@@ -348,13 +348,13 @@ class Processor:
         durable = self.buffers.get("at_least_once")
         for delivery in {*taken.groups, *payloads}:
             buffer = self.buffers[delivery]
-            groups = taken.groups.get(delivery, ())
+            groups = taken.groups.get(delivery)
             records = payloads.get(delivery)
-            for n, group in enumerate(groups):
-                if marks and buffer is durable and records is None and n == len(groups) - 1:
-                    buffer.note_marks(marks)  # written with this last group
+            if groups:
+                if marks and buffer is durable and records is None:
+                    buffer.note_marks(marks)  # written with the last group
                     marks = b""
-                self._append_group(delivery, buffer, group)
+                self._append_groups(delivery, buffer, groups)
             if records is not None:
                 if marks and buffer is durable:
                     buffer.note_marks(marks)
@@ -365,12 +365,12 @@ class Processor:
         if marks and durable is not None:  # nothing durable this time: written with the next append
             durable.note_marks(marks)
 
-    def _append_group(self, delivery: Delivery, buffer: RecordBuffer, group: bytes) -> None:
+    def _append_groups(self, delivery: Delivery, buffer: RecordBuffer, groups: Sequence[bytes]) -> None:
         stats = self.stats
-        count = group_count(group)
+        count = sum(group_count(group) for group in groups)
         stats.records += count
         try:
-            taken = buffer.append_group(group)
+            taken = buffer.append_groups(groups)
         except SpoolFullError as exc:
             stats.appended += exc.taken
             stats.spool_refused += count - exc.taken

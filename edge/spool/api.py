@@ -184,6 +184,10 @@ class RecordBuffer(Protocol):
         limits is split."""
         ...
 
+    def append_groups(self, groups: Sequence[bytes]) -> int:
+        """``append_group`` for several groups at once, in order (one write, one fsync)."""
+        ...
+
     def unsent(self) -> int:
         """Records held and not in flight: what the sender may still send (cheap: no stats)."""
         ...

@@ -98,13 +98,20 @@ class MemoryBuffer:
     def append_group(self, group: bytes) -> int:
         """Take a group made elsewhere (split to the buffer's group limits); returns the records taken, the
         rest dropped (counted)."""
+        return self.append_groups((group,))
+
+    def append_groups(self, groups: Sequence[bytes]) -> int:
+        """``append_group`` for several groups, in order."""
         taken = 0
-        for part in split_group(group, self._group_records, self._group_bytes):
-            if len(part) > self._max_bytes:
-                raise SpoolError(f"group of {len(part)} bytes exceeds the buffer ({self._max_bytes} bytes)")
-            count = group_count(part)
-            if self._take(part, count) is not None:
-                taken += count
+        for group in groups:
+            for part in split_group(group, self._group_records, self._group_bytes):
+                if len(part) > self._max_bytes:
+                    raise SpoolError(
+                        f"group of {len(part)} bytes exceeds the buffer ({self._max_bytes} bytes)"
+                    )
+                count = group_count(part)
+                if self._take(part, count) is not None:
+                    taken += count
         return taken
 
     def _take(self, group: bytes, count: int) -> int | None:

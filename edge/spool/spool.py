@@ -273,9 +273,12 @@ class Spool:
     def append_group(self, group: bytes) -> int:
         """Take a group made elsewhere (split when above the group limits); returns the records
         taken. Under ``block`` a timeout raises ``SpoolFullError`` with ``taken`` set."""
-        groups = [
-            (g, group_count(g)) for g in split_group(group, self.options.group_records, self._group_bytes)
-        ]
+        return self.append_groups((group,))
+
+    def append_groups(self, made: Sequence[bytes]) -> int:
+        """``append_group`` for several groups, in order: one write (and one fsync when due)."""
+        limit, size = self.options.group_records, self._group_bytes
+        groups = [(g, group_count(g)) for group in made for g in split_group(group, limit, size)]
         for g, _count in groups:
             if len(g) > self._max_len:
                 raise SpoolError(f"record of {len(g)} bytes exceeds the {self._max_len}-byte record limit")

@@ -40,6 +40,15 @@ def encode_group(payloads: Sequence[bytes]) -> bytes:
 
 def group_head(group: bytes | memoryview) -> tuple[int, tuple[bytes, ...], int]:
     """``(count, fingerprints, offset of the first record)``; raises ``WireError``."""
+    count, start = _count_and_start(group)
+    at = range(HEAD_SIZE, start, 8)
+    if isinstance(group, bytes):
+        return count, tuple([group[i : i + 8] for i in at]), start
+    return count, tuple([bytes(group[i : i + 8]) for i in at]), start
+
+
+def _count_and_start(group: bytes | memoryview) -> tuple[int, int]:
+    """``(count, offset of the first record)``; raises ``WireError``."""
     if len(group) < HEAD_SIZE:
         raise WireError(f"a group has at least {HEAD_SIZE} bytes, got {len(group)}")
     count, n_fps = _HEAD.unpack_from(group, 0)
@@ -48,8 +57,7 @@ def group_head(group: bytes | memoryview) -> tuple[int, tuple[bytes, ...], int]:
         raise WireError("a group holds at least one record")
     if start > len(group):
         raise WireError(f"group of {len(group)} bytes is too short for {n_fps} fingerprints")
-    fingerprints = tuple(bytes(group[HEAD_SIZE + 8 * i : HEAD_SIZE + 8 * i + 8]) for i in range(n_fps))
-    return count, fingerprints, start
+    return count, start
 
 
 def group_count(group: bytes | memoryview) -> int:
@@ -85,7 +93,7 @@ def group_payloads(group: bytes) -> list[bytes]:
 def split_group(group: bytes, max_records: int, max_bytes: int) -> list[bytes]:
     """``group`` as groups of at most ``max_records`` records and, beyond one record each,
     ``max_bytes`` of payload (a group that fits is returned as it is)."""
-    count, _fps, start = group_head(group)
+    count, start = _count_and_start(group)
     if count <= max_records and len(group) - start <= max_bytes:
         return [group]
     out: list[bytes] = []

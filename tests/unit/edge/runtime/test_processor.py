@@ -198,9 +198,9 @@ class CallLog(MemoryBuffer):
     def note_marks(self, marks: bytes) -> None:
         self.calls.append(("marks", sorted(decode_marks(marks))))
 
-    def append_group(self, group: bytes) -> int:
-        self.calls.append("group")
-        return super().append_group(group)
+    def append_groups(self, groups: Sequence[bytes]) -> int:
+        self.calls.append(("groups", len(groups)))
+        return super().append_groups(groups)
 
     def append_many(self, payloads: Sequence[bytes]) -> list[int | None]:
         self.calls.append("records")
@@ -257,10 +257,10 @@ def test_marks_go_to_the_spool_just_before_its_last_append_of_the_chunk(general:
     with processor:
         wait_until(lambda: processor.stats.appended == (4 if general else 3), 5)
     if general:
-        assert durable.calls == ["group", "group", ("marks", [(G1, 41), (G2, 9)]), "records"]
-    else:
-        assert durable.calls == ["group", ("marks", [(G1, 41)]), "group"]
-    assert memory.calls == ["group"]  # best-effort records are not what the marks describe
+        assert durable.calls == [("groups", 2), ("marks", [(G1, 41), (G2, 9)]), "records"]
+    else:  # one append of both groups: the marks go with its last group
+        assert durable.calls == [("marks", [(G1, 41)]), ("groups", 2)]
+    assert memory.calls == [("groups", 1)]  # best-effort records are not what the marks describe
 
 
 def test_marks_of_a_chunk_with_nothing_durable_wait_for_the_next_append() -> None:

@@ -11,6 +11,7 @@ import pytest
 from fleetlink.edge.errors import SpoolFullError
 from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, Spool, SpoolOptions
 from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
+from fleetlink.edge.spool.writer import SegmentWriter
 from fleetlink.wire.groups import encode_group, group_payloads
 
 GROUPED = SpoolOptions(segment_bytes=1 << 20, max_bytes=8 << 20, group_records=100, group_bytes=1 << 20)
@@ -53,6 +54,42 @@ def test_a_group_above_the_limits_is_split(tmp_path: Path) -> None:
         assert batch is not None
         assert [g.records for g in batch.groups] == [100, 100, 50]
         assert [p for g in batch.groups for p in group_payloads(g.group)] == payloads(250)
+
+
+@pytest.mark.parametrize("kind", ["spool", "memory"])
+def test_several_groups_are_taken_in_one_call_in_order(kind: str, tmp_path: Path) -> None:
+    buffer: RecordBuffer
+    if kind == "spool":
+        buffer = Spool(tmp_path, GROUPED).open()
+    else:
+        buffer = MemoryBuffer(first_seq=1, group_records=100)
+    try:
+        made = [encode_group(payloads(3)), encode_group(payloads(150, 3)), encode_group(payloads(1, 153))]
+        assert buffer.append_groups(made) == 154
+        batch = buffer.read_unacked(10_000, 1 << 30)
+        assert batch is not None
+        assert [g.records for g in batch.groups] == [3, 100, 50, 1]  # the middle one split
+        assert [r.seq for r in batch.records] == list(range(1, 155))
+        assert [r.payload for r in batch.records] == payloads(154)
+    finally:
+        buffer.close()
+
+
+def test_groups_taken_together_are_one_write(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    writes: list[int] = []
+    real = SegmentWriter.write
+
+    def counting(self: SegmentWriter, data: bytes, frames: list[tuple[int, int, int, int]]) -> None:
+        writes.append(len(frames))
+        real(self, data, frames)
+
+    monkeypatch.setattr(SegmentWriter, "write", counting)
+    with Spool(tmp_path, GROUPED) as spool:
+        spool.append_groups(
+            [encode_group(payloads(2)), encode_group(payloads(2, 2)), encode_group(payloads(1, 4))]
+        )
+        assert spool.stats().depth == 5
+    assert writes == [3]  # three frames, one write
 
 
 def test_damage_in_a_group_loses_its_records_counted_exactly(
