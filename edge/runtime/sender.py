@@ -113,6 +113,25 @@ class _Flight:
     """Fingerprints the batch used without their text."""
 
 
+def answer_wakes(
+    *,
+    failed: bool,
+    asleep_until: float | None,
+    arrived: float,
+    linger_s: float,
+    window_full: bool,
+    stopping: bool,
+) -> bool:
+    """Whether an answer that ``arrived`` must wake the sender's thread, or may wait for the wake-up
+    it has planned (``asleep_until``; ``None``: it is awake, or about to decide how long to sleep).
+    It may wait only for a planned wake-up within ``linger_s`` while nothing else needs it: not a
+    failure (retries and backoff start at once), not a full window (the answer frees a place), not
+    a stop (it waits for the answers in flight)."""
+    if failed or window_full or stopping or asleep_until is None:
+        return True
+    return asleep_until > arrived + linger_s
+
+
 class WanSender:
     """Sends one buffer's records to the uplink. ``start()`` / ``stop()``; thread-safe ``wake()``."""
 
@@ -347,13 +366,13 @@ class WanSender:
         thread switch a batch, not two. An error, a full window, a long sleep or a stop wake it."""
         arrived = self._clock()
         self._replies.append((first_seq, reply, error, arrived))
-        until = self._asleep_until
-        if (
-            error is not None
-            or until is None
-            or until > arrived + self.options.linger_s
-            or len(self._in_flight) >= self._window()
-            or self._stopping.is_set()
+        if answer_wakes(
+            failed=error is not None,
+            asleep_until=self._asleep_until,
+            arrived=arrived,
+            linger_s=self.options.linger_s,
+            window_full=len(self._in_flight) >= self._window(),
+            stopping=self._stopping.is_set(),
         ):
             self._wakes.put(None)
 

@@ -11,7 +11,7 @@ import pytest
 
 from fleetlink.edge.runtime.encoding import identity_of
 from fleetlink.edge.runtime.schema_book import SchemaBook
-from fleetlink.edge.runtime.sender import SenderOptions, WanSender
+from fleetlink.edge.runtime.sender import SenderOptions, WanSender, answer_wakes
 from fleetlink.edge.runtime.transport import Done
 from fleetlink.edge.spool import MemoryBuffer
 from fleetlink.wire import (
@@ -410,3 +410,51 @@ def test_records_may_bring_their_own_linger_and_the_shortest_waiting_one_counts(
     finally:
         sender.stop(timeout_s=5.0)
     assert [len(b.records) for b in uplink.batches] == [1, 4]
+
+
+@pytest.mark.parametrize(
+    ("case", "asleep_until", "failed", "window_full", "stopping", "wakes"),
+    [
+        ("asleep until the next batch, within the linger", 10.015, False, False, False, False),
+        ("asleep for longer than the linger (nothing was due)", 10.050, False, False, False, True),
+        ("awake, or about to choose its sleep", None, False, False, False, True),
+        ("a failure: the retry starts now", 10.015, True, False, False, True),
+        ("the window is full: the answer frees a place", 10.015, False, True, False, True),
+        ("stopping: waits for the answers in flight", 10.015, False, False, True, True),
+    ],
+)
+def test_an_answer_waits_for_the_planned_wake_up_only_when_nothing_needs_it(
+    case: str, asleep_until: float | None, failed: bool, window_full: bool, stopping: bool, wakes: bool
+) -> None:
+    got = answer_wakes(
+        failed=failed,
+        asleep_until=asleep_until,
+        arrived=10.0,
+        linger_s=0.02,
+        window_full=window_full,
+        stopping=stopping,
+    )
+    assert got is wakes, case
+
+
+def batches_sent(uplink: ScriptedUplink, n: int) -> Callable[[], bool]:
+    return lambda: len(uplink.batches) >= n
+
+
+def test_answers_that_wait_are_applied_at_the_next_batch() -> None:
+    """With a linger the sender sleeps until the next batch may leave; the answers that came
+    meanwhile are applied then (or by ``pump``): nothing stays in flight."""
+    options = SenderOptions(
+        batch_max_records=5, linger_s=0.05, ack_timeout_s=1.0, max_in_flight=4, codec="zlib"
+    )
+    buffer = MemoryBuffer(first_seq=1, group_records=5)
+    uplink = ScriptedUplink(lambda batch, attempt: None)  # answers held, released below
+    with running(uplink, buffer, options) as sender:
+        for i in range(3):
+            buffer.append_many([payload(10 * i + k) for k in range(3)])
+            sender.pump()
+            wait_until(batches_sent(uplink, i + 1), 5, message="batch sent")
+            uplink.release_held(ok)
+        wait_until(drained(buffer), 5, message="every answer applied")
+        assert (sender.stats.batches_acked, sender.stats.in_flight) == (3, 0)
+        assert sender.ack_latency.totals().count == 3
