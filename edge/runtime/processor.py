@@ -383,6 +383,17 @@ class Processor:
                 exc,
             )
             return
+        except SpoolError as exc:  # a group above the buffer's size limit (none taken): one at a time
+            if len(groups) > 1:
+                stats.records -= count
+                for group in groups:
+                    self._append_groups(delivery, buffer, (group,))
+                return
+            stats.spool_refused += count
+            self._limiter.log(
+                logging.WARNING, f"refused-{delivery}", "%s buffer refused a group: %s", delivery, exc
+            )
+            return
         stats.appended += taken
         stats.spool_dropped += count - taken
 

@@ -125,8 +125,8 @@ def answer_wakes(
     """Whether an answer that ``arrived`` must wake the sender's thread, or may wait for the wake-up
     it has planned (``asleep_until``; ``None``: it is awake, or about to decide how long to sleep).
     It may wait only for a planned wake-up within ``linger_s`` while nothing else needs it: not a
-    failure (retries and backoff start at once), not a full window (the answer frees a place), not
-    a stop (it waits for the answers in flight)."""
+    ``failed`` batch without an answer (its retry and backoff start at once), not a full window
+    (the answer frees a place), not a stop (it waits for the answers in flight)."""
     if failed or window_full or stopping or asleep_until is None:
         return True
     return asleep_until > arrived + linger_s
@@ -256,6 +256,7 @@ class WanSender:
                         break
                     self._last_send = self._clock()
                     self._send(batch)
+                    self._handle_replies()  # a send that failed at once sets the backoff now
             except SpoolError as exc:  # closed under us: the sender's thread winds down
                 log.debug("sender %s: pump stops: %s", self.stream, exc)
             finally:
@@ -363,7 +364,9 @@ class WanSender:
         """An answer (or a failure) for the batch ``first_seq``, on the transport's thread. It waits
         in ``_replies`` for the sender's thread when that thread wakes within ``linger`` anyway
         (at a steady rate it sleeps until the next batch is due) and the window has room: one
-        thread switch a batch, not two. An error, a full window, a long sleep or a stop wake it."""
+        thread switch a batch, not two. No answer (a timeout, a send that failed), a full window,
+        a long sleep or a stop wake it; an answer that refuses the batch is read (and the batch
+        released for its retry) at that wake-up, at most ``linger`` later."""
         arrived = self._clock()
         self._replies.append((first_seq, reply, error, arrived))
         if answer_wakes(

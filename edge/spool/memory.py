@@ -101,17 +101,19 @@ class MemoryBuffer:
         return self.append_groups((group,))
 
     def append_groups(self, groups: Sequence[bytes]) -> int:
-        """``append_group`` for several groups, in order."""
+        """``append_group`` for several groups, in order; raises ``SpoolError`` (nothing taken) when
+        one is larger than the buffer."""
+        parts = [
+            part for group in groups for part in split_group(group, self._group_records, self._group_bytes)
+        ]
+        for part in parts:
+            if len(part) > self._max_bytes:
+                raise SpoolError(f"group of {len(part)} bytes exceeds the buffer ({self._max_bytes} bytes)")
         taken = 0
-        for group in groups:
-            for part in split_group(group, self._group_records, self._group_bytes):
-                if len(part) > self._max_bytes:
-                    raise SpoolError(
-                        f"group of {len(part)} bytes exceeds the buffer ({self._max_bytes} bytes)"
-                    )
-                count = group_count(part)
-                if self._take(part, count) is not None:
-                    taken += count
+        for part in parts:
+            count = group_count(part)
+            if self._take(part, count) is not None:
+                taken += count
         return taken
 
     def _take(self, group: bytes, count: int) -> int | None:

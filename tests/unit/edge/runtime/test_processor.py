@@ -308,3 +308,17 @@ def test_a_record_waiting_for_its_upload_holds_back_its_publishers_mark() -> Non
         processor.post(Claimed(uploader.jobs[1], error="refused"))
         wait_until(lambda: ("marks", [(G1, 4)]) in durable.calls, 5)
     assert all(m[1][0][1] <= 4 for m in durable.calls if isinstance(m, tuple))
+
+
+def test_a_group_above_the_buffer_limit_is_refused_alone_and_counted() -> None:
+    small, huge = native_group(b"s"), native_group(b"h" * 4096)
+    taken = Taken(groups={"at_least_once": [small, huge, native_group(b"t")]}, count=3)
+    durable = MemoryBuffer(stream="durable", first_seq=1, max_bytes=1024)
+    processor = Processor(Intake(), maker(), {"at_least_once": durable}, source=OneTake(taken))
+    with processor:
+        wait_until(lambda: processor.stats.appended + processor.stats.spool_refused == 3, 5)
+    assert (processor.stats.records, processor.stats.appended, processor.stats.spool_refused) == (3, 2, 1)
+    batch = durable.read_unacked(10, 1 << 20)
+    assert batch is not None
+    assert [g.records for g in batch.groups] == [1, 1]
+    assert processor.stats.errors == 0
