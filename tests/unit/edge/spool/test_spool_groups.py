@@ -29,13 +29,16 @@ def drain(buffer: RecordBuffer, max_records: int) -> list[list[bytes]]:
     return batches
 
 
+def open_buffer(kind: str, tmp_path: Path) -> RecordBuffer:
+    """The durable spool or the memory buffer, both with groups of at most 100 records."""
+    if kind == "spool":
+        return Spool(tmp_path, GROUPED).open()
+    return MemoryBuffer(first_seq=1, group_records=100)
+
+
 @pytest.mark.parametrize("kind", ["spool", "memory"])
 def test_appended_groups_come_back_whole_within_the_batch_limit(kind: str, tmp_path: Path) -> None:
-    buffer: RecordBuffer
-    if kind == "spool":
-        buffer = Spool(tmp_path, GROUPED).open()
-    else:
-        buffer = MemoryBuffer(first_seq=1, group_records=100)
+    buffer = open_buffer(kind, tmp_path)
     try:
         buffer.append_many(payloads(250))  # groups of 100, 100, 50
         assert buffer.append_group(encode_group(payloads(30, 250))) == 30
@@ -58,11 +61,7 @@ def test_a_group_above_the_limits_is_split(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("kind", ["spool", "memory"])
 def test_several_groups_are_taken_in_one_call_in_order(kind: str, tmp_path: Path) -> None:
-    buffer: RecordBuffer
-    if kind == "spool":
-        buffer = Spool(tmp_path, GROUPED).open()
-    else:
-        buffer = MemoryBuffer(first_seq=1, group_records=100)
+    buffer = open_buffer(kind, tmp_path)
     try:
         made = [encode_group(payloads(3)), encode_group(payloads(150, 3)), encode_group(payloads(1, 153))]
         assert buffer.append_groups(made) == 154
