@@ -388,6 +388,14 @@ class Generator:
     def wait_subscribed(self, timeout: float = 30.0) -> None:
         wait_until(self.publisher.has_subscribers, timeout, message="the edge subscribed to the generator")
 
+    def wait_unsubscribed(self, timeout: float = 30.0) -> None:
+        """Until no subscriber matches: after a ``kill -9`` the router drops the dead edge's
+        subscription only when it sees the connection close, and until then a match would
+        not mean that the next edge listens."""
+        wait_until(
+            lambda: not self.publisher.has_subscribers(), timeout, message="the router dropped the edge"
+        )
+
     def start(self) -> Generator:
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, daemon=True)

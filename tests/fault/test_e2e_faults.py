@@ -180,6 +180,7 @@ def test_edge_killed_with_unacknowledged_records(
         assert unacked >= 900
         assert b.edge is not None
         b.edge.kill()
+        gen.wait_unsubscribed()
         b.relay.set_mode("pass")
         b.start_edge()
         b.wait(

@@ -229,6 +229,7 @@ def test_row38_a_deleted_ledger_keeps_duplicates_within_the_window(
             b.wait_drained(first, 60)
             assert b.edge is not None
             assert b.edge.terminate(15)[0] == 0  # a clean stop: everything acknowledged
+            gen.wait_unsubscribed()
             (spool_dir(b) / "ledger").unlink()
             b.start_edge()
             gen.wait_subscribed()
@@ -241,6 +242,7 @@ def test_row38_a_deleted_ledger_keeps_duplicates_within_the_window(
             paused = gen.pause()
             assert b.edge is not None
             b.edge.kill()  # now with batches in flight (and maybe samples not spooled yet)
+            gen.wait_unsubscribed()
             (spool_dir(b) / "ledger").unlink()
             b.start_edge()
             gen.wait_subscribed()
