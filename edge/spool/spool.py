@@ -298,6 +298,7 @@ class Spool:
             chunk: list[Item] = []
             size_in_chunk = 0
             marks = self._marks_for(groups[-1][0]) if groups else b""
+            self._roll_for(sum(HEADER_SIZE + len(g) for g, _count in groups) + len(marks))
             try:
                 for n, ((group, count), crc) in enumerate(zip(groups, crcs, strict=True)):
                     extra = marks if n == len(groups) - 1 else b""
@@ -348,11 +349,23 @@ class Spool:
         with self._lock:
             return self._marks.items()
 
+    def _roll_for(self, size: int) -> None:
+        """Seal the active segment when an append of ``size`` bytes would cross its end: the
+        append is then one write, into a new segment (one larger than ``segment_bytes`` when the
+        append is), and the marks it carries land with every record they describe. Split over
+        two writes, a crash between them would leave records spooled that no mark covers, and
+        the restart would count them lost."""
+        active = self._writer.segment
+        if active is not None and active.count and active.size + size > self.options.segment_bytes:
+            self._seal()
+
     def _fits(self, size: int) -> bool:
+        """Whether ``size`` more bytes go in this write: within the active segment or as the first
+        write of a segment (``_roll_for``), and within ``max_bytes``."""
         active = self._writer.segment
         header = 0 if active is not None else SEGMENT_HEADER_SIZE
         used = active.size if active is not None else SEGMENT_HEADER_SIZE
-        within_segment = used + size <= self.options.segment_bytes
+        within_segment = used + size <= self.options.segment_bytes or used == SEGMENT_HEADER_SIZE
         return within_segment and self._bytes + header + size <= self.options.max_bytes
 
     def _take_seqs(self, count: int) -> int:

@@ -19,7 +19,8 @@ OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)
 def edge_spool(spool_dir: Path, records: int = 200, acked: int = 0) -> list[Path]:
     """A stopped edge's ``spool.dir``: the durable stream under ``durable/``."""
     with Spool(spool_dir / "durable", OPTIONS) as spool:
-        spool.append_many([b"x" * 100] * records)
+        for _ in range(records):  # one append at a time: they fill several segments
+            spool.append(b"x" * 100)
         if acked:
             batch = spool.read_unacked(acked, 1 << 20)
             assert batch is not None

@@ -16,9 +16,11 @@ FRAME = HEADER_SIZE + GROUP_OVERHEAD + len(RECORD)  # a group of one record per 
 
 
 def fill(directory: Path, count: int, *, ack_first: int = 0) -> list[Path]:
-    """Append ``count`` records (acknowledging the first ``ack_first``); the segment files."""
+    """Append ``count`` records one at a time (acknowledging the first ``ack_first``); the
+    segment files. (An append is one write in one segment: one at a time, they fill segments.)"""
     with Spool(directory, OPTIONS) as spool:
-        spool.append_many([RECORD] * count)
+        for _ in range(count):
+            spool.append(RECORD)
         if ack_first:
             batch = spool.read_unacked(ack_first, 1 << 20)
             assert batch is not None

@@ -124,7 +124,8 @@ def test_the_newest_segment_of_a_crashed_run_deleted_counts_what_was_synced(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     spool = Spool(tmp_path, OPTIONS).open()
-    spool.append_many([RECORD] * 80)
+    for _ in range(80):
+        spool.append(RECORD)
     spool.flush()  # the ledger learns how far the active segment is on disk
     crash(spool)
     newest = sorted(tmp_path.glob("*.seg"))[-1]

@@ -19,6 +19,7 @@ from fleetlink.edge.spool.marks import (
     read_snapshot,
     write_snapshot,
 )
+from fleetlink.edge.spool.writer import SegmentWriter
 from fleetlink.wire.groups import encode_group, group_payloads
 
 G1, G2, G3 = b"\x01" * 16, b"\x02" * 16, b"\x03" * 16
@@ -147,6 +148,57 @@ def test_after_a_crash_the_marks_say_exactly_what_reached_the_spool(tmp_path: Pa
     with Spool(tmp_path, OPTIONS) as spool:
         assert spool.marks() == [(G1, 10)]
         assert spool.stats().corrupt_skipped == 3  # the torn group's records, never taken
+
+
+def test_an_append_that_would_cross_a_segment_boundary_is_one_write_in_a_new_segment(
+    tmp_path: Path,
+) -> None:
+    # split over two writes (the groups that fit to the old segment, the rest with the marks to
+    # a new one), a crash between them would leave records spooled that no mark covers: the
+    # restart would count them lost although they reach Kafka
+    with Spool(tmp_path, OPTIONS) as spool:
+        spool.note_marks(encode_marks([(G1, 40)]))
+        spool.append_many([RECORD] * 40)  # about 4.4 KB of the 8 KiB segment
+        before = {p.name: p.stat().st_size for p in tmp_path.glob("*.seg")}
+        spool.note_marks(encode_marks([(G1, 80)]))
+        seqs = spool.append_many([RECORD] * 40)  # four groups: they do not all fit what is left
+        assert spool.marks() == [(G1, 80)]
+    (old,) = before
+    assert (tmp_path / old).stat().st_size == before[old]  # nothing of the second append in it
+    first = seqs[0]
+    assert first is not None
+    second = [f for f in frames(tmp_path) if f.seq >= first]
+    assert [(f.seq, f.count) for f in second] == [(seqs[n], 10) for n in range(0, 40, 10)]
+    assert [bool(f.marks) for f in second] == [False, False, False, True]
+    assert len(list(tmp_path.glob("*.seg"))) == 2
+
+
+def test_an_append_larger_than_a_segment_is_one_write_in_a_segment_of_its_own(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    writes: list[int] = []
+    real = SegmentWriter.write
+
+    def counting(self: SegmentWriter, data: bytes, items: list[tuple[int, int, int, int]]) -> None:
+        writes.append(len(items))
+        real(self, data, items)
+
+    monkeypatch.setattr(SegmentWriter, "write", counting)
+    with Spool(tmp_path, OPTIONS) as spool:
+        spool.append_many([RECORD] * 5)
+        spool.note_marks(encode_marks([(G1, 100)]))
+        seqs = spool.append_many([RECORD] * 100)  # about 11 KB: more than one 8 KiB segment
+        spool.append_many([RECORD] * 5)
+        assert writes == [1, 10, 1]
+    assert len(list(tmp_path.glob("*.seg"))) == 3
+    with Spool(tmp_path, OPTIONS) as spool:
+        assert spool.marks() == [(G1, 100)]
+        got: list[int] = []
+        while (batch := spool.read_unacked(1000, 1 << 20)) is not None:
+            got.extend(r.seq for r in batch.records)
+            spool.ack(batch.first_seq)
+    assert got[5:105] == seqs
+    assert len(got) == 110
 
 
 def test_marks_wait_for_a_write_that_takes_their_group(tmp_path: Path) -> None:
