@@ -8,6 +8,7 @@ run); ``FLEETLINK_SCREENSHOTS`` puts them elsewhere.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -26,7 +27,6 @@ ARGS = [
     "--disable-sync",
 ]
 ROOT = Path(__file__).resolve().parents[2]
-_saved: list[Path] = []
 
 
 def screenshot_dir() -> Path:
@@ -36,17 +36,24 @@ def screenshot_dir() -> Path:
 
 
 def shoot(page: Page, name: str) -> Path:
-    """Save a full-page screenshot named ``name`` and remember it for the summary."""
+    """Save a full-page screenshot named ``name`` (listed in the summary)."""
     path = screenshot_dir() / f"{name}.png"
     page.screenshot(path=str(path), full_page=True)
-    _saved.append(path)
     return path
 
 
+_began = time.time()
+
+
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
-    if _saved:
+    # the screenshots of this run, whichever process took them (pytest-xdist workers included)
+    where = Path(os.environ.get("FLEETLINK_SCREENSHOTS", ROOT / "var" / "screenshots"))
+    taken = sorted(
+        (p for p in where.glob("*.png") if p.stat().st_mtime >= _began), key=lambda p: p.stat().st_mtime
+    )
+    if taken:
         terminalreporter.write_sep("-", "console screenshots")
-        for path in _saved:
+        for path in taken:
             terminalreporter.write_line(str(path))
 
 

@@ -2,7 +2,7 @@
 fleetlink first: an import cycle that only works in one order fails here (docs/architecture.md).
 
 One child process per module, forked from a parent that loaded the third-party libraries once
-(so each child pays only for fleetlink's own modules).
+(so each child pays only for fleetlink's own modules), as many at once as there are cores.
 """
 
 from __future__ import annotations
@@ -27,6 +27,16 @@ CHILD = textwrap.dedent(
             pass
     assert not [m for m in sys.modules if m == "fleetlink" or m.startswith("fleetlink.")]
     failures = {}
+    running = []
+    def collect():
+        module, pid, read = running.pop(0)
+        out = b""
+        while chunk := os.read(read, 65536):
+            out += chunk
+        os.close(read)
+        os.waitpid(pid, 0)
+        if out:
+            failures[module] = out.decode()
     for module in json.loads(sys.stdin.read()):
         read, write = os.pipe()
         pid = os.fork()
@@ -40,13 +50,11 @@ CHILD = textwrap.dedent(
             os.write(write, message)
             os._exit(0)
         os.close(write)
-        out = b""
-        while chunk := os.read(read, 65536):
-            out += chunk
-        os.close(read)
-        os.waitpid(pid, 0)
-        if out:
-            failures[module] = out.decode()
+        running.append((module, pid, read))
+        if len(running) >= max(2, os.cpu_count() or 1):
+            collect()
+    while running:
+        collect()
     print(json.dumps(failures))
     """
 )

@@ -31,6 +31,7 @@ def test_a_signed_envelope_passes_at_its_site_and_for_every_site() -> None:
         # a signature for site-b made to look like one for site-a
         (sign_envelope(ENVELOPE, "site-b", KEY)[:-6] + b"site-a", "bad_signature"),
     ],
+    ids=["none", "empty", "bearer", "other_site", "unknown_key", "bad_signature", "site_renamed"],
 )
 def test_forgeries_are_refused(attachment: bytes | None, kind: str) -> None:
     with pytest.raises(CommandAuthError) as caught:
