@@ -11,8 +11,8 @@ import pytest
 from fleetlink.edge.errors import SpoolFullError
 from fleetlink.edge.spool import MemoryBuffer, RecordBuffer, Spool, SpoolOptions
 from fleetlink.edge.spool.frames import HEADER_SIZE, SEGMENT_HEADER_SIZE
-from fleetlink.edge.spool.writer import SegmentWriter
 from fleetlink.wire.groups import encode_group, group_payloads
+from tests.unit.edge.spool.writes import count_writes
 
 GROUPED = SpoolOptions(segment_bytes=1 << 20, max_bytes=8 << 20, group_records=100, group_bytes=1 << 20)
 
@@ -75,14 +75,7 @@ def test_several_groups_are_taken_in_one_call_in_order(kind: str, tmp_path: Path
 
 
 def test_groups_taken_together_are_one_write(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    writes: list[int] = []
-    real = SegmentWriter.write
-
-    def counting(self: SegmentWriter, data: bytes, frames: list[tuple[int, int, int, int]]) -> None:
-        writes.append(len(frames))
-        real(self, data, frames)
-
-    monkeypatch.setattr(SegmentWriter, "write", counting)
+    writes = count_writes(monkeypatch)
     with Spool(tmp_path, GROUPED) as spool:
         spool.append_groups(
             [encode_group(payloads(2)), encode_group(payloads(2, 2)), encode_group(payloads(1, 4))]

@@ -19,8 +19,8 @@ from fleetlink.edge.spool.marks import (
     read_snapshot,
     write_snapshot,
 )
-from fleetlink.edge.spool.writer import SegmentWriter
 from fleetlink.wire.groups import encode_group, group_payloads
+from tests.unit.edge.spool.writes import count_writes
 
 G1, G2, G3 = b"\x01" * 16, b"\x02" * 16, b"\x03" * 16
 OPTIONS = SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=10)
@@ -176,14 +176,7 @@ def test_an_append_that_would_cross_a_segment_boundary_is_one_write_in_a_new_seg
 def test_an_append_larger_than_a_segment_is_one_write_in_a_segment_of_its_own(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    writes: list[int] = []
-    real = SegmentWriter.write
-
-    def counting(self: SegmentWriter, data: bytes, items: list[tuple[int, int, int, int]]) -> None:
-        writes.append(len(items))
-        real(self, data, items)
-
-    monkeypatch.setattr(SegmentWriter, "write", counting)
+    writes = count_writes(monkeypatch)
     with Spool(tmp_path, OPTIONS) as spool:
         spool.append_many([RECORD] * 5)
         spool.note_marks(encode_marks([(G1, 100)]))
