@@ -48,6 +48,20 @@ def recorded(limit: int = 200) -> dict[str, list[bytes]]:
     return out
 
 
+def subscribed(publishers: list[RosPublisher], timeout_s: float) -> bool:
+    """Whether a subscriber matches every publisher within ``timeout_s`` (samples published before
+    the router knows the subscriber would be lost on the way)."""
+    deadline = time.monotonic() + timeout_s
+    waiting = list(publishers)
+    while waiting:
+        waiting = [pub for pub in waiting if not pub.has_subscribers()]
+        if waiting and time.monotonic() > deadline:
+            return False
+        if waiting:
+            time.sleep(0.01)
+    return True
+
+
 def main() -> int:
     parser = argparse.ArgumentParser()
     parser.add_argument("--connect", required=True)
@@ -58,6 +72,13 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, required=True)
     parser.add_argument(
         "--block", action="store_true", help="reliable and blocking publishers: nothing dropped on the way"
+    )
+    parser.add_argument(
+        "--wait-subscribed",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="after 'go', wait up to this long until a subscriber matches every publisher (exit 3 if not)",
     )
     args = parser.parse_args()
 
@@ -78,6 +99,10 @@ def main() -> int:
     gc.freeze()
     print("ready", flush=True)
     sys.stdin.readline()
+    if args.wait_subscribed > 0 and not subscribed([pub for pub, _msgs in pubs], args.wait_subscribed):
+        unmatched = sum(not pub.has_subscribers() for pub, _msgs in pubs)
+        print(f"unmatched {unmatched} publisher(s) after {args.wait_subscribed} s", flush=True)
+        return 3
     published = behind = 0
     if args.hz > 0:
         interval = 1.0 / (args.hz * len(pubs))  # every publisher once per period, evenly spread

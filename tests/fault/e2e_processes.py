@@ -37,6 +37,7 @@ from fleetlink.roswire import cdr
 from fleetlink.roswire.node import RosNode
 from fleetlink.roswire.publisher import RosPublisher
 from fleetlink.schemas.typestore import load_typestore
+from tests.fault.stats_file import read_stats
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import TopicReader
 
@@ -175,7 +176,10 @@ class Bed:
     processes: list[Process] = field(default_factory=list)
 
     def start_edge(self) -> Process:
+        """Start an edge. A previous edge's stats file goes first: a killed edge's last write would
+        otherwise answer for the new one until it writes its own."""
         n = sum(p.name == "edge" for p in self.processes)
+        self.stats_file.unlink(missing_ok=True)
         self.edge = Process(
             "edge",
             [
@@ -207,11 +211,7 @@ class Bed:
         return uplink
 
     def stats(self) -> dict[str, Any]:
-        try:
-            data: dict[str, Any] = json.loads(self.stats_file.read_text())
-        except (OSError, ValueError):
-            return {}
-        return data
+        return read_stats(self.stats_file)[1]
 
     def durable(self) -> dict[str, Any]:
         stream: dict[str, Any] = self.stats().get("streams", {}).get("durable", {})

@@ -37,6 +37,7 @@ from fleetlink.repeater.config import RepeaterConfig
 from fleetlink.repeater.service import Repeater
 from fleetlink.roswire.sim.fleet import Fleet
 from tests.fault.e2e_processes import ROOT, Count, Generator, Process, count, read_all
+from tests.fault.stats_file import read_stats
 from tests.helpers import free_port, wait_until
 from tests.integration.e2e_stack import TopicReader, headers
 from tests.integration.test_commands_harness import (
@@ -173,11 +174,7 @@ class SecurityBed:
     # -- the honest site -----------------------------------------------------------------------
 
     def stats(self) -> dict[str, Any]:
-        try:
-            data: dict[str, Any] = json.loads(self.stats_file.read_text())
-        except (OSError, ValueError):
-            return {}
-        return data
+        return read_stats(self.stats_file)[1]
 
     def honest_site_kept_flowing(self) -> Count:
         """Pause site A's generator, wait until its edge drained, count what reached Kafka: every

@@ -11,7 +11,6 @@ tests/fault/test_memory_soak.py, tests/fault/test_receive_under_load.py and benc
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import time
@@ -26,6 +25,8 @@ from bench.fleet_publisher import TOPICS
 from fleetlink.localstack.relay import TcpRelay
 from fleetlink.localstack.zenoh_router import ZenohRouter
 from tests.fault.e2e_processes import Process
+from tests.fault.stats_file import Settled, read_stats
+from tests.helpers import wait_until
 from tests.paths import ROOT
 
 
@@ -157,6 +158,7 @@ def run_fleet(
         stack.callback(edge.terminate, 10)
         argv = [sys.executable, "-m", "bench.fleet_publisher", "--connect", site.endpoint]
         argv += ["--robots", str(robots), "--topics", str(topics), "--hz", str(hz), "--seconds", str(seconds)]
+        argv += ["--wait-subscribed", "30"]
         pub = subprocess.Popen(
             [*argv, *(["--block"] if block else [])],
             stdin=subprocess.PIPE,
@@ -170,11 +172,7 @@ def run_fleet(
         assert pub.stdout.readline().strip() == "ready", "the robots did not start"
 
         def stats() -> dict[str, Any]:
-            try:
-                data: dict[str, Any] = json.loads(stats_file.read_text())
-            except (OSError, ValueError):
-                return {}
-            return data
+            return read_stats(stats_file)[1]
 
         deadline = time.monotonic() + 60
         while (
@@ -183,7 +181,6 @@ def run_fleet(
             if time.monotonic() > deadline or edge.proc is None or edge.proc.poll() is not None:
                 raise AssertionError(f"the edge did not take the {robots} robots:\n{edge.tail()}")
             time.sleep(0.2)
-        time.sleep(0.5)
         result.registrations = robots
         began = time.monotonic()
         pub.stdin.write("go\n")
@@ -194,18 +191,16 @@ def run_fleet(
             result.rss_mb.append(_rss_mb(edge.proc.pid))
             time.sleep(0.5)
         done = pub.stdout.readline().split()
+        assert done[:1] == ["done"], f"the robots did not publish: {' '.join(done)}"
         result.published = int(done[1])
 
-        def settled() -> bool:
-            data = stats()
-            return bool(data) and data.get("intake", {}).get("queued", 1) == 0
+        def processed(data: dict[str, Any]) -> bool:  # whatever the edge took, it has processed
+            intake, processor = data.get("intake", {}), data.get("processor", {})
+            return bool(intake.get("queued") == 0 and intake.get("taken") == processor.get("samples"))
 
-        deadline = time.monotonic() + 30
-        time.sleep(1.0)
-        while not settled() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        time.sleep(0.6)  # one more stats write after the last take
-        result.stats = stats()
+        settled = Settled(stats_file, lambda data: data.get("intake", {}).get("offered"), processed)
+        wait_until(settled.check, 30, interval=0.05, message="the edge took and processed every sample")
+        result.stats = settled.stats
         pub.stdin.write("bye\n")
         pub.stdin.flush()
     return result

@@ -36,6 +36,7 @@ from fleetlink.roswire.node import RosNode
 from fleetlink.roswire.publisher import RosPublisher
 from fleetlink.schemas.typestore import load_typestore
 from tests.fault.e2e_processes import STRING, Bed, Generator, bed, count, generate, read_to_end
+from tests.fault.stats_file import Settled
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import TopicReader
 
@@ -170,19 +171,13 @@ def test_row37_kill9_in_a_burst_every_record_is_in_kafka_or_counted_lost_before_
         published = {r.name: r.sent for r in fleet}
         total = sum(published.values())
 
-        last_seen: list[int] = [-1]
-
-        def drained() -> bool:
-            stats = b.stats()
-            samples = int(stats.get("processor", {}).get("samples", 0))
+        def empty(stats: dict[str, Any]) -> bool:
             queued = stats.get("intake", {}).get("queued")
             depth = stats.get("streams", {}).get("durable", {}).get("buffer", {}).get("depth")
-            settled = samples == last_seen[0]
-            last_seen[0] = samples
-            time.sleep(0.5)  # (stats are written every 0.2 s: settled means unchanged across writes)
-            return bool(settled and queued == 0 and depth == 0)
+            return bool(queued == 0 and depth == 0)
 
-        b.wait(drained, 120, "the restarted edge drained its spool")
+        drained = Settled(b.stats_file, lambda stats: stats.get("processor", {}).get("samples"), empty)
+        b.wait(drained.check, 120, "the restarted edge drained its spool")
         stats = b.stats()
         print(f"\npublished {published}, edge stats: {json.dumps(stats['subscriptions'])}")
         messages = read_to_end(reader, b.topic, 120)  # the spool is drained: Kafka has it all
