@@ -255,8 +255,12 @@ class KafkaSink:
     # -- transactions (a sink made with ``transactional_id``) ------------------------------
 
     def begin(self) -> None:
-        """Open a transaction: what is produced until ``commit`` is written all or nothing."""
-        self._transactional().begin_transaction()
+        """Open a transaction: what is produced until ``commit`` is written all or nothing. Raises
+        ``ProduceError`` (``fatal`` when the producer was fenced)."""
+        try:
+            self._transactional().begin_transaction()
+        except KafkaException as exc:
+            raise _exception_error(exc) from None
 
     def commit(self, timeout_s: float) -> None:
         """Deliver what the transaction holds and commit it; raises ``ProduceError`` (``fatal``

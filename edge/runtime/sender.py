@@ -408,6 +408,7 @@ class WanSender:
                 edge_id=self.edge_id,
                 stream=self.stream,
                 origin=self.origin,
+                acked=batch.acked,
                 groups=[(g.first_seq, g.group) for g in batch.groups],
                 schemas=schemas,
                 elided=elided,

@@ -65,6 +65,9 @@ class SpoolBatch:
     first_seq: int
     last_seq: int
     groups: tuple[SpoolGroup, ...]
+    acked: int = 0
+    """The buffer's ack mark when it handed the batch out: every record at or below this seq was
+    acknowledged or dropped (it travels in the batch's head: ``fleetlink.wire.Batch.acked``)."""
 
     @property
     def count(self) -> int:

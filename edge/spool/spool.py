@@ -582,6 +582,7 @@ class Spool:
                         first_seq=head.first_seq,
                         last_seq=tail.last_seq,
                         groups=tuple(groups),
+                        acked=self._tracker.mark(),
                     )
                 found = read_frames(
                     segment,
@@ -625,7 +626,11 @@ class Spool:
     def _batch(self, piece: Slice, frames: Sequence[Frame]) -> SpoolBatch:
         groups = tuple(SpoolGroup(f.seq, f.count, f.timestamp_ms, f.group()) for f in frames)
         return SpoolBatch(
-            stream=self._stream, first_seq=piece.first_seq, last_seq=piece.last_seq, groups=groups
+            stream=self._stream,
+            first_seq=piece.first_seq,
+            last_seq=piece.last_seq,
+            groups=groups,
+            acked=self._tracker.mark(),
         )
 
     def ack(self, first_seq: int) -> bool:

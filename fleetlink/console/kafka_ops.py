@@ -209,7 +209,8 @@ class KafkaDeadLetters:
 class StatusBook:
     """Status records by command id, the newest ``keep`` commands (fed by a ``KafkaTail``). A book
     of call outcomes (replies, goal results) keys them by ``id_field`` (``correlation_id``,
-    ``goal_id``) instead."""
+    ``goal_id``) instead. Status records are at-least-once (docs/commands.md): a second record of
+    the same ``(command id, status, site, robot)`` is the first sent again, and is kept once."""
 
     def __init__(
         self, decode: Callable[[bytes], dict[str, Any]], *, keep: int = 2000, id_field: str = "command_id"
@@ -232,8 +233,11 @@ class StatusBook:
             "at_ms": datum.get("at") if isinstance(datum.get("at"), int) else record.timestamp_ms,
             "robot": str(datum.get("robot", "")),
         }
+        same = (entry["status"], entry["site"], entry["robot"])
         with self._lock:
-            self._by_id.setdefault(command_id, []).append(entry)
+            entries = self._by_id.setdefault(command_id, [])
+            if not any((e["status"], e["site"], e["robot"]) == same for e in entries):
+                entries.append(entry)  # status records are at-least-once: a record sent again is shown once
             self._by_id.move_to_end(command_id)
             while len(self._by_id) > self.keep:
                 self._by_id.popitem(last=False)

@@ -31,8 +31,8 @@ _CODECS: dict[str, int] = {"none": 0, "zlib": 1, "zstd": 2}
 _CODEC_NAMES = {v: k for k, v in _CODECS.items()}
 
 BATCH_MAGIC = b"FLB"
-BATCH_VERSION = 5
-"""The only version written and read (fleetlink 0.1.0 is the first release; others are refused)."""
+BATCH_VERSION = 6
+"""The only version written and read (6 added ``acked`` to the head; others are refused)."""
 _ELIDED = 0xFFFFFFFF
 """A schema entry's length that says "text left out" (``Batch.elided``)."""
 MAX_BATCH_BYTES = 64 * 1024 * 1024
@@ -65,6 +65,11 @@ class Batch:
     """Non-zero: the stream is delivered exactly once, and this is its origin, the random id of
     the spool its seqs come from (a new spool starts its seqs again under a new origin). Zero:
     at-least-once."""
+    acked: int = 0
+    """The edge's ack mark when it sent the batch: every record of the stream at or below this seq
+    was acknowledged or dropped and will not be sent again (below ``first_seq``). An exactly-once
+    uplink writes a batch only when no record the edge may still send lies between the stream's
+    mark and the batch (docs/exactly-once.md)."""
 
     @property
     def last_seq(self) -> int:
@@ -93,9 +98,10 @@ def encode_batch_groups(
     codec: Codec = "zlib",
     level: int | None = None,
     origin: int = 0,
+    acked: int = 0,
 ) -> bytes:
     """A batch from record groups ``(first_seq, group)`` as the spool keeps them (no per-record
-    work); ``elided``: fingerprints used without their text; ``origin``: see ``Batch``."""
+    work); ``elided``: fingerprints used without their text; ``origin``, ``acked``: see ``Batch``."""
     if not groups:
         raise WireError("a batch needs at least one record")
     if codec not in _CODECS:
@@ -104,12 +110,14 @@ def encode_batch_groups(
         raise WireError(f"{len(schemas) + len(elided)} schemas do not fit a 16-bit count")
     if not 0 <= origin < 1 << 64:
         raise WireError(f"origin {origin} does not fit a u64")
+    _check_acked(acked, groups[0][0])
     parts = [
         str16(site),
         str16(edge_id),
         str16(stream),
         U64.pack(origin),
         U64.pack(groups[0][0]),
+        U64.pack(acked),
         U16.pack(len(schemas) + len(elided)),
     ]
     for fingerprint in elided:
@@ -147,6 +155,7 @@ def encode_batch_payloads(
     codec: Codec = "zlib",
     level: int | None = None,
     origin: int = 0,
+    acked: int = 0,
 ) -> bytes:
     """A batch from record payloads ``(seq, payload)``: runs of consecutive seqs become groups."""
     groups: list[tuple[int, bytes]] = []
@@ -174,6 +183,7 @@ def encode_batch_payloads(
         codec=codec,
         level=level,
         origin=origin,
+        acked=acked,
     )
 
 
@@ -191,7 +201,13 @@ def encode_batch(batch: Batch, *, codec: Codec = "zlib", level: int | None = Non
         codec=codec,
         level=level,
         origin=batch.origin,
+        acked=batch.acked,
     )
+
+
+def _check_acked(acked: int, first_seq: int) -> None:
+    if not 0 <= acked < max(first_seq, 1):
+        raise WireError(f"acked {acked} must be below the first seq {first_seq} (and not negative)")
 
 
 def _decompress(codec: int, data: memoryview, size: int) -> bytes:
@@ -281,6 +297,8 @@ def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch
     site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
     (origin,) = r.unpack(U64, "origin")
     (first_seq,) = r.unpack(U64, "first_seq")
+    (acked,) = r.unpack(U64, "acked")
+    _check_acked(acked, first_seq)
     schemas, elided = _read_schemas(r)
     head = Batch(
         site=site,
@@ -291,6 +309,7 @@ def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch
         schemas=schemas,
         elided=elided,
         origin=origin,
+        acked=acked,
     )
     return BatchBody(head, body, r.pos)
 

@@ -93,6 +93,9 @@ class ExactlyOnceStats:
     aborted: int = 0
     skipped_records: int = 0
     """Records of batches sent again that were already in Kafka (at or below their mark)."""
+    out_of_order: int = 0
+    """Batches answered ``error`` unwritten: records the edge may still send lay between the
+    stream's mark and them (an earlier batch failed, or is still on its way elsewhere)."""
     takeovers: int = 0
     fenced: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
@@ -104,11 +107,24 @@ class ExactlyOnceStats:
                 setattr(self, name, getattr(self, name) + n)
 
 
+def unsettled_gap(mark_seq: int, batch: Batch) -> tuple[int, int] | None:
+    """The seqs between the stream's mark and ``batch`` that the edge may still send, if any: then
+    writing the batch would move the mark past records not in Kafka, and a later batch holding
+    them would be taken for one sent again and skipped. The edge's ack mark (``batch.acked``)
+    says which of them are done (acknowledged, or dropped at the edge: evicted, corrupt, seqs a
+    restart skipped). Pure."""
+    if batch.first_seq <= mark_seq + 1 or batch.acked >= batch.first_seq - 1:
+        return None
+    return max(mark_seq, batch.acked) + 1, batch.first_seq - 1
+
+
 @dataclass
 class _Stream:
     sink: TxnSink
     mark: Mark
     used: float
+    fresh: bool = True
+    """Taken over for the group being written: its mark is the last one any owner committed."""
 
 
 @dataclass
@@ -223,12 +239,40 @@ class ExactlyOnceWriter:
                 _answer(i.pending, "error", f"exactly-once producer for {key.stream} not ready: {exc}")
                 for i in group
             ]
+        first = group[0]
+        if not stream.fresh and unsettled_gap(self._after(stream.mark, first), first.pending.batch):
+            # another uplink may have written the stream since this one's last commit (the edge
+            # moved it there and back): take it over again, to read the mark it left
+            self._drop(key, stream)
+            try:
+                stream = self._stream(key)
+            except ProduceError as exc:
+                return [
+                    _answer(i.pending, "error", f"exactly-once producer for {key.stream} not ready: {exc}")
+                    for i in group
+                ]
+        stream.fresh = False
         answers: dict[int, Ack] = {}
         todo: list[_Item] = []
         mark = stream.mark
         for n, item in enumerate(group):
             pending = item.pending
-            item.after = mark.seq if mark.origin == pending.batch.origin else 0  # another spool: all of it
+            item.after = self._after(mark, item)
+            gap = unsettled_gap(item.after, pending.batch)
+            if gap is not None:
+                self.stats.add(out_of_order=1)
+                self._limiter.log(
+                    logging.INFO,
+                    f"order-{key.stream}",
+                    "exactly-once %s: batch %d.. waits for seqs %d..%d (not written yet)",
+                    key,
+                    pending.batch.first_seq,
+                    *gap,
+                )
+                answers[n] = _answer(
+                    pending, "error", f"out of order: seqs {gap[0]}..{gap[1]} not written yet"
+                )
+                continue
             skipped = pending.at_or_below(item.after) if item.after else 0
             if skipped:
                 self.stats.add(skipped_records=skipped)
@@ -310,6 +354,18 @@ class ExactlyOnceWriter:
         self.stats.add(committed=1)
         return done, {}
 
+    @staticmethod
+    def _after(mark: Mark, item: _Item) -> int:
+        """The seq above which ``item``'s records are not in Kafka (another spool: all of them)."""
+        return mark.seq if mark.origin == item.pending.batch.origin else 0
+
+    def _drop(self, key: MarkKey, stream: _Stream) -> None:
+        """Forget the stream's producer; the next batch takes the stream over again."""
+        with self._lock:
+            if self._streams.get(key) is stream:
+                del self._streams[key]
+        stream.sink.stop(0)
+
     def _abort(self, key: MarkKey, stream: _Stream, why: str, *, fatal: bool = False) -> None:
         self.stats.add(aborted=1)
         if not fatal:
@@ -328,10 +384,7 @@ class ExactlyOnceWriter:
         # fenced (another uplink owns the stream now) or broken: the next batch takes it over
         self.stats.add(fenced=1)
         log.warning("exactly-once %s: producer given up (%s); the next batch takes the stream over", key, why)
-        with self._lock:
-            if self._streams.get(key) is stream:
-                del self._streams[key]
-        stream.sink.stop(0)
+        self._drop(key, stream)
 
     def _stream(self, key: MarkKey) -> _Stream:
         with self._lock:

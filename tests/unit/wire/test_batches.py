@@ -159,7 +159,7 @@ def test_template_refuses_a_source_seq_beyond_u64(source_seq: int) -> None:
 
 def test_version_5_is_the_only_one_written_and_read() -> None:
     record = rec(1)
-    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 5
+    assert encode_batch(batch((record,)))[3] == BATCH_VERSION == 6
     assert decode_batch(_raw(_body([(1, encode_payload(record))]))).records == (record,)
     for version in (1, 2, 3, 4):
         with pytest.raises(WireError, match=f"unsupported batch version {version}"):
@@ -176,6 +176,17 @@ def test_the_origin_of_an_exactly_once_stream_travels_in_the_head() -> None:
     assert decode_batch_head(encode_batch(dataclasses.replace(sent, origin=42))).head.origin == 42
     with pytest.raises(WireError, match="does not fit a u64"):
         encode_batch(dataclasses.replace(sent, origin=2**64))
+
+
+def test_the_edges_ack_mark_travels_in_the_head_below_the_first_seq() -> None:
+    sent = batch((rec(7), rec(8)))
+    assert decode_batch(encode_batch(sent)).acked == 0
+    assert decode_batch_head(encode_batch(dataclasses.replace(sent, acked=6))).head.acked == 6
+    with pytest.raises(WireError, match="acked 7 must be below the first seq 7"):
+        encode_batch(dataclasses.replace(sent, acked=7))
+    forged = _raw(_body([(7, GOOD)]).replace(struct.pack("<QQQ", 0, 7, 0), struct.pack("<QQQ", 0, 7, 9)))
+    with pytest.raises(WireError, match="acked 9 must be below the first seq 7"):
+        decode_batch(forged)
 
 
 def test_records_sharing_a_tail_keep_their_own_key_value_and_seq() -> None:
@@ -210,7 +221,7 @@ def test_single_object_helpers() -> None:
 
 
 def _raw(
-    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 5
+    body: bytes, *, codec: int = 0, size: int | None = None, magic: bytes = b"FLB", version: int = 6
 ) -> bytes:
     header = struct.pack("<3sBBI", magic, version, codec, len(body) if size is None else size)
     return header + (zlib.compress(body) if codec == 1 else body)
@@ -218,7 +229,7 @@ def _raw(
 
 def _body(records: list[tuple[int, bytes]], first_seq: int | None = None, trailing: bytes = b"") -> bytes:
     first = records[0][0] if first_seq is None else first_seq
-    out = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QQH", 0, first, 0)
+    out = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QQQH", 0, first, 0, 0)
     out += struct.pack("<I", len(records))
     for seq, payload in records:  # each record a group of its own
         group = struct.pack("<IHI", 1, 0, len(payload)) + payload
@@ -241,7 +252,7 @@ BAD_BATCHES: list[tuple[bytes, str]] = [
     (_raw(_body([(1, GOOD)], trailing=b"x")), "1 unexpected trailing bytes after the batch"),
     (_raw(_body([(2, GOOD), (2, GOOD)])), "seqs must increase: a group starts at 2, below 3"),
     (_raw(_body([(1, GOOD)], first_seq=0)), "first_seq 0 is not the first record's seq 1"),
-    (_raw(b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QQHI", 0, 1, 0, 0)), "at least one record"),
+    (_raw(b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QQQHI", 0, 1, 0, 0, 0)), "at least one record"),
     (_raw(_body([(1, GOOD[:-1])])), "truncated"),
     (_raw(_body([(1, GOOD + b"!")])), "trailing bytes after the record"),
     (_raw(_body([(1, b"\x80" + GOOD[1:])])), "unknown record flags 0x80"),
@@ -339,8 +350,8 @@ def test_a_batch_lists_left_out_schemas_by_fingerprint_alone() -> None:
         )
 
     def body(entries: int) -> bytes:
-        head = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QQH", 0, 1, entries)
-        return head + (FP + b"\xff\xff\xff\xff") * entries + _body([(1, encode_payload(rec(1)))])[27:]
+        head = b"\x01\x00s\x01\x00e\x01\x00d" + struct.pack("<QQQH", 0, 1, 0, entries)
+        return head + (FP + b"\xff\xff\xff\xff") * entries + _body([(1, encode_payload(rec(1)))])[35:]
 
     assert decode_batch(_raw(body(1))).elided == frozenset({FP})
     with pytest.raises(WireError, match="listed twice"):

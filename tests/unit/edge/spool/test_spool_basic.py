@@ -117,6 +117,25 @@ def test_out_of_order_acks_and_release_resend_exactly_the_same_batch(spool: Spoo
     assert spool.read_unacked(10, 1 << 20) == a
 
 
+def test_a_batch_carries_the_ack_mark_it_was_handed_out_under(spool: Spool) -> None:
+    """``acked``: every record at or below it is done; what lies between it and the batch may still
+    be sent (an exactly-once uplink must not write past it: docs/exactly-once.md)."""
+    spool.append_many([payload(i) for i in range(30)])
+    a, b = spool.read_unacked(10, 1 << 20), spool.read_unacked(10, 1 << 20)
+    assert a is not None
+    assert b is not None
+    assert (a.acked, b.acked) == (0, 0)  # a still in flight when b left
+    assert spool.release(a.first_seq)
+    again = spool.read_unacked(10, 1 << 20)
+    assert again is not None
+    assert again.acked == 0
+    assert spool.ack(a.first_seq)
+    assert spool.ack(b.first_seq)
+    c = spool.read_unacked(10, 1 << 20)
+    assert c is not None
+    assert c.acked == c.first_seq - 1 == 20  # everything before it acknowledged
+
+
 def test_a_late_ack_for_a_released_batch_is_accepted(spool: Spool) -> None:
     spool.append_many([payload(i) for i in range(5)])
     batch = spool.read_unacked(10, 1 << 20)
