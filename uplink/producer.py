@@ -123,7 +123,13 @@ class KafkaSink:
         producer = self._producer
         if producer is None:
             return 0
-        remaining: int = producer.flush(flush_timeout)
+        try:
+            remaining: int = producer.flush(flush_timeout)
+        except KafkaException as exc:  # failed for good (fenced): nothing more will be delivered
+            remaining = len(producer)
+            self._limiter.log(
+                logging.WARNING, "stop", "Kafka producer stopped undelivered: %s", _exception_error(exc)
+            )
         self._stopping.set()
         if self._poller is not None:
             self._poller.join(5)
@@ -177,8 +183,11 @@ class KafkaSink:
             )
 
         deadline = began + self._queue_wait_s
+        full = False
         while True:
             try:
+                if full:  # serve delivery reports to make room (a fatal error surfaces here too)
+                    producer.poll(0.05)
                 producer.produce(
                     topic,
                     value=value,
@@ -189,13 +198,8 @@ class KafkaSink:
                 )
                 return
             except BufferError:
-                if time.monotonic() > deadline:
-                    raise ProduceError(
-                        f"librdkafka queue stayed full for {self._queue_wait_s:.0f} s",
-                        code="_QUEUE_FULL",
-                        retriable=True,
-                    ) from None
-                producer.poll(0.05)
+                full = True
+                self._check_room(deadline)
             except KafkaException as exc:
                 on_delivery(Delivery(topic, -1, -1, _exception_error(exc), time.monotonic() - began))
                 return
@@ -223,30 +227,30 @@ class KafkaSink:
             raise ProduceError("producer not started", code="_NOT_STARTED", retriable=True)
         if self._fatal is not None:
             raise self._fatal
-        try:
-            producer.produce(topic, value, key, headers=headers, timestamp=timestamp_ms, on_delivery=callback)
-            return
-        except BufferError:
-            pass
-        except KafkaException as exc:
-            raise _exception_error(exc) from None
         deadline = time.monotonic() + self._queue_wait_s
+        full = False
         while True:
-            producer.poll(0.05)
             try:
+                if full:
+                    producer.poll(0.05)
                 producer.produce(
                     topic, value, key, headers=headers, timestamp=timestamp_ms, on_delivery=callback
                 )
                 return
             except BufferError:
-                if time.monotonic() > deadline:
-                    raise ProduceError(
-                        f"librdkafka queue stayed full for {self._queue_wait_s:.0f} s",
-                        code="_QUEUE_FULL",
-                        retriable=True,
-                    ) from None
+                full = True
+                self._check_room(deadline)
             except KafkaException as exc:
                 raise _exception_error(exc) from None
+
+    def _check_room(self, deadline: float) -> None:
+        """librdkafka's queue is full: raise once it stayed full past ``deadline``."""
+        if time.monotonic() > deadline:
+            raise ProduceError(
+                f"librdkafka queue stayed full for {self._queue_wait_s:.0f} s",
+                code="_QUEUE_FULL",
+                retriable=True,
+            )
 
     def in_flight(self) -> int:
         """Records handed to librdkafka and not yet delivered."""

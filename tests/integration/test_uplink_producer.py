@@ -5,6 +5,9 @@ from __future__ import annotations
 import threading
 import uuid
 
+import pytest
+
+from fleetlink.uplink.errors import ProduceError
 from fleetlink.uplink.kafka_settings import KafkaSection
 from fleetlink.uplink.producer import Delivery, KafkaSink
 
@@ -52,3 +55,22 @@ def test_oversized_record_is_reported_not_raised(kafka_bootstrap: str) -> None:
     assert error is not None
     assert error.code == "MSG_SIZE_TOO_LARGE"
     assert not error.retriable
+
+
+def test_a_fenced_transactional_producer_stops_without_raising(kafka_bootstrap: str) -> None:
+    """A producer another one fenced has failed for good: its commit says so, and stopping it
+    (the uplink drops it and takes the stream over) reports what stayed undelivered, not raises."""
+    topic = f"fleetlink.uplink.producer.fenced.{uuid.uuid4().hex[:8]}"
+    settings = KafkaSection(bootstrap_servers=kafka_bootstrap)
+    txn_id = f"fenced-{uuid.uuid4().hex[:8]}"
+    stale = KafkaSink(settings, transactional_id=txn_id, transaction_timeout_s=20).start()
+    stale.begin()
+    stale.produce(topic, b"k", b"stale", on_delivery=lambda _d: None)
+    newer = KafkaSink(settings, transactional_id=txn_id, transaction_timeout_s=20).start()
+    try:
+        with pytest.raises(ProduceError) as failed:
+            stale.commit(20)
+        assert failed.value.fatal
+        assert stale.stop(0) >= 0
+    finally:
+        newer.stop(0)
