@@ -232,25 +232,19 @@ class ExactlyOnceWriter:
                 self._writers.discard(threading.current_thread())
 
     def _write_group(self, key: MarkKey, group: list[_Item]) -> list[Ack]:
+        first = group[0]
         try:
             stream = self._stream(key)
+            if not stream.fresh and unsettled_gap(self._after(stream.mark, first), first.pending.batch):
+                # another uplink may have written the stream since this one's last commit (the
+                # edge moved it there and back): take it over again, to read the mark it left
+                self._drop(key, stream)
+                stream = self._stream(key)
         except ProduceError as exc:
             return [
                 _answer(i.pending, "error", f"exactly-once producer for {key.stream} not ready: {exc}")
                 for i in group
             ]
-        first = group[0]
-        if not stream.fresh and unsettled_gap(self._after(stream.mark, first), first.pending.batch):
-            # another uplink may have written the stream since this one's last commit (the edge
-            # moved it there and back): take it over again, to read the mark it left
-            self._drop(key, stream)
-            try:
-                stream = self._stream(key)
-            except ProduceError as exc:
-                return [
-                    _answer(i.pending, "error", f"exactly-once producer for {key.stream} not ready: {exc}")
-                    for i in group
-                ]
         stream.fresh = False
         answers: dict[int, Ack] = {}
         todo: list[_Item] = []
