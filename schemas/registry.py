@@ -17,7 +17,8 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar
 from urllib.parse import quote
 
 import httpx
@@ -32,6 +33,11 @@ _CONFLICT = 409
 _NOT_FOUND = 404
 _SERVER_ERROR = 500
 _CONTENT_TYPE = "application/vnd.schemaregistry.v1+json"
+_ATTEMPTS = 3
+# the connection under a request failed (not a timeout, not an HTTP answer): a new one may not
+_CONNECTION_ERRORS = (httpx.NetworkError, httpx.RemoteProtocolError, OSError)
+
+T = TypeVar("T")
 
 
 class RegistryUnavailableError(RegistryError):
@@ -41,6 +47,22 @@ class RegistryUnavailableError(RegistryError):
 def subject_for_topic(topic: str) -> str:
     """TopicNameStrategy: the value schema of ``topic`` lives under ``<topic>-value``."""
     return f"{topic}-value"
+
+
+def on_a_live_connection(call: Callable[[], T], attempts: int = _ATTEMPTS) -> T:
+    """``call()``, made again at once (up to ``attempts`` in all) when the connection under it
+    failed. The HTTP client reuses kept-alive connections, and one may die under a request: the
+    registry closed it, or the pool closed it while another thread had it (``[Errno 9] Bad file
+    descriptor``, a reset). The next try opens a new one. Timeouts and the registry's answers
+    are not tried again; every call made through here is idempotent at the registry."""
+    for _ in range(attempts - 1):
+        try:
+            return call()
+        except TimeoutError:
+            raise
+        except _CONNECTION_ERRORS:
+            continue
+    return call()
 
 
 class SchemaRegistry(StartStop):
@@ -91,7 +113,9 @@ class SchemaRegistry(StartStop):
         if cached is not None:
             return cached
         try:
-            schema_id: int = self._sr().register_schema(subject, Schema(text, "AVRO"))
+            schema_id: int = on_a_live_connection(
+                lambda: self._sr().register_schema(subject, Schema(text, "AVRO"))
+            )
         except SchemaRegistryError as exc:
             if exc.http_status_code == _CONFLICT:
                 raise IncompatibleSchemaError(
@@ -118,7 +142,7 @@ class SchemaRegistry(StartStop):
             raise IncompatibleSchemaError(subject, version, "; ".join(str(m) for m in messages))
         # The registry gave no reasons: its refusal of the registration states them.
         try:
-            self._sr().register_schema(subject, Schema(body["schema"], "AVRO"))
+            on_a_live_connection(lambda: self._sr().register_schema(subject, Schema(body["schema"], "AVRO")))
         except SchemaRegistryError as exc:
             raise IncompatibleSchemaError(subject, version, exc.error_message) from exc
         except (httpx.HTTPError, OSError) as exc:
@@ -132,7 +156,7 @@ class SchemaRegistry(StartStop):
         if cached is not None:
             return cached
         try:
-            text = self._sr().get_schema(schema_id).schema_str
+            text = on_a_live_connection(lambda: self._sr().get_schema(schema_id)).schema_str
         except SchemaRegistryError as exc:
             raise self._error(f"id {schema_id}", exc) from exc
         except (httpx.HTTPError, OSError) as exc:
@@ -145,7 +169,7 @@ class SchemaRegistry(StartStop):
     def latest(self, subject: str) -> tuple[int, int, dict[str, Any]]:
         """(schema id, version, schema) of the newest version registered under ``subject``."""
         try:
-            registered = self._sr().get_latest_version(subject)
+            registered = on_a_live_connection(lambda: self._sr().get_latest_version(subject))
         except SchemaRegistryError as exc:
             if exc.http_status_code == _NOT_FOUND:
                 raise RegistryError(subject, "no schema registered under this subject") from exc
@@ -161,7 +185,7 @@ class SchemaRegistry(StartStop):
     def set_compatibility(self, subject: str, level: str) -> None:
         """Set the compatibility level (``BACKWARD``, ``FULL``, ``NONE`` ...) of ``subject``."""
         try:
-            self._sr().set_compatibility(subject, level)
+            on_a_live_connection(lambda: self._sr().set_compatibility(subject, level))
         except SchemaRegistryError as exc:
             raise self._error(subject, exc) from exc
         except (httpx.HTTPError, OSError) as exc:
@@ -170,7 +194,7 @@ class SchemaRegistry(StartStop):
     # --- helpers ---------------------------------------------------------------------------
     def _latest_version(self, subject: str) -> int | str:
         try:
-            version = self._sr().get_latest_version(subject).version
+            version = on_a_live_connection(lambda: self._sr().get_latest_version(subject)).version
         except (SchemaRegistryError, httpx.HTTPError, OSError):
             return "latest"
         return version if isinstance(version, int) else "latest"
@@ -181,7 +205,9 @@ class SchemaRegistry(StartStop):
         if http is None:
             raise RegistryError(subject, "client stopped")
         try:
-            response = http.post(path, json=body, params=params, headers={"Content-Type": _CONTENT_TYPE})
+            response = on_a_live_connection(
+                lambda: http.post(path, json=body, params=params, headers={"Content-Type": _CONTENT_TYPE})
+            )
         except httpx.HTTPError as exc:
             raise RegistryUnavailableError(subject, f"cannot reach {self.url}: {exc}") from exc
         if response.status_code == _NOT_FOUND:

@@ -9,13 +9,16 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import httpx
 from confluent_kafka import Consumer, ConsumerGroupTopicPartitions, KafkaException, Message
 from confluent_kafka.admin import AdminClient
 from confluent_kafka.schema_registry import SchemaRegistryClient
 from confluent_kafka.schema_registry.avro import AvroDeserializer
+from confluent_kafka.schema_registry.error import SchemaRegistryError
 from confluent_kafka.serialization import MessageField, SerializationContext
 
 from fleetlink.common.worker import Worker
+from fleetlink.schemas.registry import on_a_live_connection
 
 Handler = Callable[[str, bytes | None, dict[str, Any] | None, Message], None]
 
@@ -61,14 +64,21 @@ class TopicWatcher(Worker):
                 self.counts[topic] += 1
                 value = None
                 if self._deserializer is not None and msg.value():
-                    try:
-                        context = SerializationContext(topic, MessageField.VALUE)
-                        value = self._deserializer(msg.value(), context)
-                    except (KafkaException, ValueError, TypeError):
-                        value = None
+                    value = self._decode(self._deserializer, topic, msg.value())
                 self._on_record(topic, msg.key(), value, msg)
         finally:
             consumer.close()
+
+    @staticmethod
+    def _decode(deserializer: AvroDeserializer, topic: str, raw: bytes | None) -> dict[str, Any] | None:
+        """The value decoded, or None when it cannot be (not Avro, or the registry unreachable:
+        the record is still counted and handed on)."""
+        context = SerializationContext(topic, MessageField.VALUE)
+        try:
+            value: dict[str, Any] | None = on_a_live_connection(lambda: deserializer(raw, context))
+        except (KafkaException, SchemaRegistryError, httpx.HTTPError, OSError, ValueError, TypeError):
+            return None
+        return value
 
 
 def app_has_committed(bootstrap: str, group: str, topics: Sequence[str]) -> bool:

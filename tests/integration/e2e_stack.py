@@ -27,6 +27,7 @@ from fleetlink.edge.agent import EdgeAgent
 from fleetlink.edge.config import EdgeConfig
 from fleetlink.localstack.zenoh_router import ZenohRouter
 from fleetlink.roswire.replay import BagReplayer
+from fleetlink.schemas.registry import on_a_live_connection
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.service import Uplink
 from tests.helpers import wait_until, zenoh_peer_config
@@ -237,7 +238,8 @@ class TopicReader:
         topic = msg.topic()
         if topic is None:
             raise AssertionError("a record without a topic")
-        return self.deserializer(msg.value(), SerializationContext(topic, MessageField.VALUE))
+        context = SerializationContext(topic, MessageField.VALUE)
+        return on_a_live_connection(lambda: self.deserializer(msg.value(), context))
 
 
 def headers(msg: Message) -> dict[str, str]:

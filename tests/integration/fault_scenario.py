@@ -15,6 +15,7 @@ import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from confluent_kafka import Consumer, KafkaError, KafkaException, Producer, TopicPartition
@@ -28,6 +29,7 @@ from fleetlink.examples.fault_detection.rules import HAZARD_WHEEL_DROP
 from fleetlink.examples.fault_detection.settings import Topics
 from fleetlink.schemas.bundled import BUNDLED
 from fleetlink.schemas.codec import get_codec
+from fleetlink.schemas.registry import on_a_live_connection
 from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until
 
@@ -243,6 +245,7 @@ def read_commands(bootstrap: str, registry_url: str, topic: str) -> list[Command
         consumer.assign([TopicPartition(topic, p, 0) for p in partitions])
         got: list[Command] = []
         seen = dict.fromkeys(partitions, 0)
+        context = SerializationContext(topic, MessageField.VALUE)
         deadline = time.monotonic() + 20
         while any(seen[p] < ends[p] for p in partitions) and time.monotonic() < deadline:
             msg = consumer.poll(0.2)
@@ -253,7 +256,7 @@ def read_commands(bootstrap: str, registry_url: str, topic: str) -> list[Command
             got.append(
                 Command(
                     key=msg.key().decode(),
-                    value=deserializer(msg.value(), SerializationContext(topic, MessageField.VALUE)),
+                    value=on_a_live_connection(partial(deserializer, msg.value(), context)),
                     command_id=headers[COMMAND_ID_HEADER].decode(),
                     timestamp=msg.timestamp()[1],
                 )

@@ -40,6 +40,7 @@ from fleetlink.repeater.service import Repeater
 from fleetlink.roswire.sim.fleet import Fleet
 from fleetlink.roswire.sim.model import LedState
 from fleetlink.schemas.avro_schema import avro_schema
+from fleetlink.schemas.registry import on_a_live_connection
 from fleetlink.schemas.typestore import load_typestore
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.service import Uplink
@@ -275,11 +276,7 @@ class TopicLog:
             if msg is None or msg.error():
                 continue
             raw = msg.value()
-            value = (
-                raw
-                if self._deserializer is None
-                else self._deserializer(raw, SerializationContext(self.topic, MessageField.VALUE))
-            )
+            value = raw if self._deserializer is None else self._decode(self._deserializer, raw)
             entry = {
                 "key": msg.key(),
                 "value": value,
@@ -288,6 +285,10 @@ class TopicLog:
             }
             with self._lock:
                 self.records.append(entry)
+
+    def _decode(self, deserializer: AvroDeserializer, raw: bytes | None) -> Any:
+        context = SerializationContext(self.topic, MessageField.VALUE)
+        return on_a_live_connection(lambda: deserializer(raw, context))
 
     def values(self) -> list[Any]:
         with self._lock:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,9 +41,12 @@ class FakeClient:
     status: int = 0  # when set, every call fails with this HTTP status
     registered: dict[str, int] = field(default_factory=dict)
     calls: list[str] = field(default_factory=list)
+    broken: list[Exception] = field(default_factory=list)  # raised by the next calls, one each
 
     def register_schema(self, subject: str, schema: Schema) -> int:
         self.calls.append("register")
+        if self.broken:
+            raise self.broken.pop(0)
         if self.status:
             raise SchemaRegistryError(self.status, self.status * 100, "boom")
         if schema.schema_str in self.refuse:
@@ -51,6 +55,8 @@ class FakeClient:
 
     def get_schema(self, schema_id: int) -> Schema:
         self.calls.append("get_schema")
+        if self.broken:
+            raise self.broken.pop(0)
         for text, known in self.registered.items():
             if known == schema_id:
                 return Schema(text, "AVRO")
@@ -154,3 +160,53 @@ def test_set_compatibility_is_passed_through() -> None:
     client = FakeClient()
     _registry(client, httpx.Response(200, json={})).set_compatibility("t-value", "BACKWARD")
     assert client.calls == ["compat t-value BACKWARD"]
+
+
+def _bad_fd() -> OSError:
+    return OSError(errno.EBADF, "Bad file descriptor")
+
+
+def test_a_connection_that_died_under_a_call_is_replaced() -> None:
+    """A kept-alive connection the pool reused died under the request: the call is made again."""
+    client = FakeClient(broken=[_bad_fd(), httpx.RemoteProtocolError("Server disconnected")])
+    reg = _registry(client, httpx.Response(200, json={}))
+    assert reg.register("t-value", V1) == 1
+    assert client.calls == ["register"] * 3
+    client.broken = [httpx.ReadError("connection reset")]
+    reg._schemas.clear()
+    assert reg.schema_by_id(1) == V1
+    assert client.calls[3:] == ["get_schema"] * 2
+
+
+def test_connections_that_keep_dying_make_the_registry_unavailable() -> None:
+    client = FakeClient(broken=[_bad_fd() for _ in range(3)])
+    reg = _registry(client, httpx.Response(200, json={}))
+    with pytest.raises(RegistryUnavailableError, match="Bad file descriptor"):
+        reg.register("t-value", V1)
+    assert client.calls == ["register"] * 3
+
+
+@pytest.mark.parametrize("timeout", [httpx.ReadTimeout("read timed out"), TimeoutError("timed out")])
+def test_a_timeout_is_not_tried_again(timeout: Exception) -> None:
+    """Waiting the whole timeout again, twice, would only delay the caller's own retry."""
+    client = FakeClient(broken=[timeout])
+    reg = _registry(client, httpx.Response(200, json={}))
+    with pytest.raises(RegistryUnavailableError):
+        reg.register("t-value", V1)
+    assert client.calls == ["register"]
+
+
+def test_the_compatibility_check_replaces_a_dead_connection() -> None:
+    failures = [httpx.ReadError("Bad file descriptor")]
+    sent: list[str] = []
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        sent.append(request.url.path)
+        if failures:
+            raise failures.pop(0)
+        return httpx.Response(200, json={"is_compatible": True})
+
+    reg = _registry(FakeClient(), httpx.Response(200))
+    reg._http = httpx.Client(base_url=reg.url, transport=httpx.MockTransport(answer))
+    reg.check_compatible("t-value", V1)
+    assert len(sent) == 2
