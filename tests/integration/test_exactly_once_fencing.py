@@ -282,3 +282,45 @@ def test_seqs_the_edge_settled_are_no_gap(
     assert write(a, batch(data, range(500, 510), acked=499)).status == "ok"
     assert committed_values(kafka_bootstrap, data) == values(range(1, 11)) + values(range(500, 510))
     assert a.stats.out_of_order == 0
+
+
+def test_a_batch_sent_again_shares_the_fate_of_the_batch_it_repeats(
+    kafka_bootstrap: str, topics: tuple[str, str], writers: list[ExactlyOnceWriter]
+) -> None:
+    """The edge sent 11..20 again (its first answer was late) while the first copy waited in the
+    same group: the copy is answered as the transaction writing the first one ends, never ok
+    while its records are not in Kafka."""
+    data, _marks = topics
+    a, _b = writers
+    first = batch(data, range(1, 11))
+    second = batch(data, range(11, 21), acked=10)
+    answers = submit_all(
+        a, [(first, produce_all(first)), (second, failing(second)), (second, produce_all(second))]
+    )
+    assert [x.status for x in answers] == ["ok", "error", "error"]
+    assert committed_values(kafka_bootstrap, data) == values(range(1, 11))
+    third = batch(data, range(21, 31), acked=20)
+    answers = submit_all(
+        a, [(second, produce_all(second)), (third, produce_all(third)), (third, produce_all(third))]
+    )
+    assert [x.status for x in answers] == ["ok", "ok", "ok"]
+    assert committed_values(kafka_bootstrap, data) == values(range(1, 31))
+
+
+def test_an_answer_that_fails_does_not_stop_the_stream(
+    topics: tuple[str, str], writers: list[ExactlyOnceWriter]
+) -> None:
+    """The edge's query was gone when its answer came: the batches behind it are still answered."""
+    data, _marks = topics
+    a, _b = writers
+    answered = threading.Event()
+
+    def gone(_ack: Ack) -> None:
+        answered.set()
+        raise RuntimeError("the query was dropped")
+
+    part = batch(data, range(1, 11))
+    a.submit(Pending(part, part.last_seq, at_or_below(part)), produce_all(part), gone)
+    assert answered.wait(30)
+    later = batch(data, range(11, 21))
+    assert write(a, later).status == "ok", "the stream's writer stopped at the failed answer"

@@ -137,6 +137,18 @@ class _Item:
 
 
 @dataclass
+class _Plan:
+    """A group planned: what one transaction writes, and the answers known before it."""
+
+    mark: Mark
+    """The stream's mark once the transaction commits."""
+    answers: dict[int, Ack] = field(default_factory=dict)
+    todo: list[_Item] = field(default_factory=list)
+    riders: list[int] = field(default_factory=list)
+    """Batches sent again whose records an earlier batch of the group writes: they share its fate."""
+
+
+@dataclass
 class _Queue:
     items: list[_Item] = field(default_factory=list)
     writing: bool = False
@@ -166,6 +178,8 @@ class ExactlyOnceWriter:
         self._streams: dict[MarkKey, _Stream] = {}
         self._queues: dict[MarkKey, _Queue] = {}
         self._writers: set[threading.Thread] = set()
+        self._active: set[MarkKey] = set()
+        """Streams a group is being written to: never closed as idle."""
         self._stopping = False
         self._lock = threading.Lock()
         self._limiter = LogLimiter(log)
@@ -224,14 +238,35 @@ class ExactlyOnceWriter:
                     log.exception("exactly-once %s: batches not written", key)
                     answers = [_answer(i.pending, "error", repr(exc)[:200]) for i in group]
                 for item, ack in zip(group, answers, strict=True):
-                    item.answer(ack)
+                    self._deliver(key, item, ack)
             for item in group + left:
-                item.answer(_answer(item.pending, "error", "uplink stopping"))
+                self._deliver(key, item, _answer(item.pending, "error", "uplink stopping"))
         finally:
             with self._lock:
                 self._writers.discard(threading.current_thread())
 
+    @staticmethod
+    def _deliver(key: MarkKey, item: _Item, ack: Ack) -> None:
+        """Answer one batch; an answer that fails (the edge's query gone) must not stop the
+        stream's writer, or the batches behind it would never be answered."""
+        try:
+            item.answer(ack)
+        except Exception:  # logged; the edge sends the batch again
+            log.exception("exactly-once %s: answering batch %d.. failed", key, item.pending.batch.first_seq)
+
     def _write_group(self, key: MarkKey, group: list[_Item]) -> list[Ack]:
+        with self._lock:
+            self._active.add(key)
+        try:
+            return self._write_active_group(key, group)
+        finally:
+            with self._lock:
+                self._active.discard(key)
+                stream = self._streams.get(key)
+                if stream is not None:
+                    stream.used = self._clock()
+
+    def _write_active_group(self, key: MarkKey, group: list[_Item]) -> list[Ack]:
         first = group[0]
         try:
             stream = self._stream(key)
@@ -246,12 +281,41 @@ class ExactlyOnceWriter:
                 for i in group
             ]
         stream.fresh = False
-        answers: dict[int, Ack] = {}
-        todo: list[_Item] = []
-        mark = stream.mark
+        plan = self._plan(key, stream, group)
+        answers, todo = plan.answers, plan.todo
+        if todo:
+            dead: dict[int, str] = {}
+            while True:
+                acks, refused = self._transaction(key, stream, todo, plan.mark, dead)
+                if not refused.keys() - dead.keys():
+                    break
+                dead.update(refused)  # once more at once, those records to the dead-letter topic
+            committed = all(a.status == "ok" for a in acks)
+            for n in plan.riders:
+                pending = group[n].pending
+                answers[n] = (
+                    _answer(pending, "ok", "")
+                    if committed
+                    else _answer(
+                        pending, "error", "sent again; the batch holding its records was not written"
+                    )
+                )
+            written = iter(acks)
+            for n, item in enumerate(group):
+                if n not in answers:
+                    ack = next(written)
+                    answers[n] = replace(
+                        ack, first_seq=item.pending.batch.first_seq, last_seq=item.pending.last_seq
+                    )
+        return [answers[n] for n in range(len(group))]
+
+    def _plan(self, key: MarkKey, stream: _Stream, group: list[_Item]) -> _Plan:
+        """Which batches of ``group`` to write in one transaction, and the answers of the others:
+        an error for a batch behind seqs not written yet, ok for one committed before."""
+        plan = _Plan(mark=stream.mark)
         for n, item in enumerate(group):
             pending = item.pending
-            item.after = self._after(mark, item)
+            item.after = self._after(plan.mark, item)
             gap = unsettled_gap(item.after, pending.batch)
             if gap is not None:
                 self.stats.add(out_of_order=1)
@@ -263,7 +327,7 @@ class ExactlyOnceWriter:
                     pending.batch.first_seq,
                     *gap,
                 )
-                answers[n] = _answer(
+                plan.answers[n] = _answer(
                     pending, "error", f"out of order: seqs {gap[0]}..{gap[1]} not written yet"
                 )
                 continue
@@ -271,25 +335,14 @@ class ExactlyOnceWriter:
             if skipped:
                 self.stats.add(skipped_records=skipped)
             if item.after >= pending.last_seq:
-                answers[n] = _answer(pending, "ok", "")
+                if self._after(stream.mark, item) >= pending.last_seq:
+                    plan.answers[n] = _answer(pending, "ok", "")  # committed before
+                else:
+                    plan.riders.append(n)  # written by an earlier batch of this group, if at all
                 continue
-            todo.append(item)
-            mark = Mark(pending.batch.origin, pending.last_seq)
-        if todo:
-            dead: dict[int, str] = {}
-            while True:
-                acks, refused = self._transaction(key, stream, todo, mark, dead)
-                if not refused.keys() - dead.keys():
-                    break
-                dead.update(refused)  # once more at once, those records to the dead-letter topic
-            written = iter(acks)
-            for n, item in enumerate(group):
-                if n not in answers:
-                    ack = next(written)
-                    answers[n] = replace(
-                        ack, first_seq=item.pending.batch.first_seq, last_seq=item.pending.last_seq
-                    )
-        return [answers[n] for n in range(len(group))]
+            plan.todo.append(item)
+            plan.mark = Mark(pending.batch.origin, pending.last_seq)
+        return plan
 
     def _transaction(
         self, key: MarkKey, stream: _Stream, todo: list[_Item], new_mark: Mark, dead: dict[int, str]
@@ -388,7 +441,12 @@ class ExactlyOnceWriter:
         self._close_idle()
         sink = self._make_sink(key.transactional_id(self._prefix)).start()
         # registering the id fenced the previous owner: its open transaction is aborted
-        if not self._marks.catch_up(self._timeout_s):
+        try:
+            caught_up = self._marks.catch_up(self._timeout_s)
+        except BaseException:
+            sink.stop(0)
+            raise
+        if not caught_up:
             sink.stop(0)
             raise ProduceError("the marks topic could not be read to its end", code="_MARKS", retriable=True)
         stream = _Stream(sink, self._marks.mark(key), self._clock())
@@ -403,7 +461,11 @@ class ExactlyOnceWriter:
     def _close_idle(self) -> None:
         now = self._clock()
         with self._lock:
-            idle = [k for k, s in self._streams.items() if now - s.used > self._idle_close_s]
+            idle = [
+                k
+                for k, s in self._streams.items()
+                if now - s.used > self._idle_close_s and k not in self._active
+            ]
             closing = [self._streams.pop(k) for k in idle]
         for stream in closing:
             stream.sink.stop(self._timeout_s)
