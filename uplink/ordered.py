@@ -7,10 +7,13 @@ queue per key and lets at most one pool worker drain each queue.
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections import deque
 from collections.abc import Callable, Hashable
 from concurrent.futures import Executor
+
+log = logging.getLogger(__name__)
 
 
 class KeyedSerialExecutor:
@@ -40,4 +43,7 @@ class KeyedSerialExecutor:
                     del self._queues[key]
                     return
                 job = queue.popleft()
-            job()
+            try:
+                job()
+            except Exception:  # the key's later jobs still run, in order
+                log.exception("a job of %s failed", key)

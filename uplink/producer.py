@@ -125,11 +125,9 @@ class KafkaSink:
             return 0
         try:
             remaining: int = producer.flush(flush_timeout)
-        except KafkaException as exc:  # failed for good (fenced): nothing more will be delivered
+        except Exception as exc:  # noqa: BLE001 - failed for good (fenced), or a callback failed
             remaining = len(producer)
-            self._limiter.log(
-                logging.WARNING, "stop", "Kafka producer stopped undelivered: %s", _exception_error(exc)
-            )
+            self._limiter.log(logging.WARNING, "stop", "Kafka producer stopped undelivered: %s", exc)
         self._stopping.set()
         if self._poller is not None:
             self._poller.join(5)
@@ -301,6 +299,8 @@ class KafkaSink:
                 if self._fatal is None and error.fatal:
                     self._fatal = error
                 self._limiter.log(logging.WARNING, "poll", "Kafka producer: %s", error)
+            except Exception:  # a delivery callback failed: the reports after it still need serving
+                log.exception("Kafka producer: a delivery report's callback failed")
 
     def _on_client_error(self, err: KafkaError) -> None:
         if err.fatal():

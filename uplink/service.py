@@ -517,7 +517,13 @@ class Uplink:
         with self.stats.lock:
             self.stats.batches += 1
             self.stats.records += len(scanned) if scanned is not None else len(batch.records)
-        self._exactly_once().submit(pending, run, answer)
+        try:
+            writer = self._exactly_once()
+        except Exception as exc:  # noqa: BLE001 - the marks topic's reader could not start: answer, retry later
+            self._limiter.log(logging.ERROR, "exactly-once", "exactly-once writer not ready: %s", exc)
+            self._finish(query, error=f"exactly-once writer not ready: {exc}")
+            return
+        writer.submit(pending, run, answer)
 
     def _exactly_once(self) -> ExactlyOnceWriter:
         """The writer of exactly-once batches, made (and the marks topic read) on first use."""

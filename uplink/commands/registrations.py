@@ -22,6 +22,7 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.uplink.commands.decode import CommandDecoder
 from fleetlink.uplink.commands.directory import RobotDirectory
 from fleetlink.uplink.commands.errors import RegistryUnreachableError, UndecodableValueError
+from fleetlink.uplink.consumer_poll import poll_once
 from fleetlink.uplink.kafka_settings import KafkaSection
 
 log = logging.getLogger(__name__)
@@ -118,13 +119,16 @@ class RegistrationsReader:
             consumer.incremental_assign(new)
             self._assigned += new
 
+    def _failed(self, exc: KafkaException) -> None:
+        self._limiter.log(logging.WARNING, "poll", "registrations consumer: %s", exc)
+
     def _run(self) -> None:
         consumer = self._consumer
         if consumer is None:
             return
         last_check = last_metadata = time.monotonic()
         while not self._stop.is_set():
-            msg = consumer.poll(0.2)
+            msg = poll_once(consumer, 0.2, self._stop, self._failed)
             if msg is not None:
                 self._handle(msg)
             if time.monotonic() - last_metadata > METADATA_EVERY_S:

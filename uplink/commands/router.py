@@ -47,6 +47,7 @@ from fleetlink.uplink.commands.registrations import RegistrationsReader
 from fleetlink.uplink.commands.signing import CommandSigner, load_signer
 from fleetlink.uplink.commands.status_writer import STATUS_KEY, StatusIntake, StatusWriter
 from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.consumer_poll import poll_once
 from fleetlink.uplink.dead_letter import dead_letter
 from fleetlink.uplink.producer import KafkaSink
 from fleetlink.wire.calls import Outcome
@@ -250,12 +251,15 @@ class CommandRouter:
             if not topics or self._tracker.in_flight() >= self._max_in_flight:
                 self._stop.wait(0.05)
             else:
-                msg = consumer.poll(0.1)
+                msg = poll_once(consumer, 0.1, self._stop, self._failed)
                 if msg is not None:
                     self._dispatch(msg)
             if time.monotonic() - last_commit >= 0.2:
                 self._commit(consumer)
                 last_commit = time.monotonic()
+
+    def _failed(self, exc: KafkaException) -> None:
+        self._limiter.log(logging.WARNING, "poll", "command consumer: %s", exc)
 
     def _subscribe(self, consumer: Consumer, topics: tuple[str, ...]) -> None:
         if topics:

@@ -13,6 +13,7 @@ import threading
 from confluent_kafka import OFFSET_BEGINNING, Consumer, KafkaError, KafkaException, TopicPartition
 
 from fleetlink.common.worker import Worker
+from fleetlink.uplink.consumer_poll import poll_once
 from fleetlink.uplink.exactly_once.marks import NO_MARK, Mark, MarkKey, decode_mark
 from fleetlink.uplink.kafka_settings import KafkaSection
 
@@ -49,17 +50,20 @@ class MarksReader(Worker):
         that did not happen within ``timeout_s`` (or the end is unknown: Kafka unreachable)."""
         try:
             _low, high = self._consumer.get_watermark_offsets(self._partition, timeout_s, cached=False)
-        except KafkaException as exc:
+        except (KafkaException, RuntimeError) as exc:  # unreachable, or the consumer closed
             log.warning("marks topic %s: cannot learn its end: %s", self._partition.topic, exc)
             return False
         with self._cond:
             return bool(self._cond.wait_for(lambda: self._end >= high, timeout_s))
 
+    def _failed(self, exc: KafkaException) -> None:
+        log.warning("marks topic %s: %s", self._partition.topic, exc)
+
     def _run(self) -> None:
         consumer = self._consumer
         try:
             while not self._stop.is_set():
-                msg = consumer.poll(0.2)
+                msg = poll_once(consumer, 0.2, self._stop, self._failed)
                 if msg is None:
                     continue
                 error = msg.error()
