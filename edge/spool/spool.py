@@ -28,6 +28,7 @@ from fleetlink.edge.spool.frames import (
     FLAG_MARKS,
     HEADER_SIZE,
     SEGMENT_HEADER_SIZE,
+    Damage,
     Frame,
     encode_frame,
     peek_timestamp,
@@ -548,16 +549,9 @@ class Spool:
                 self._release_all_locked()
             queued = self._tracker.take_retry()
             if queued is not None:
-                found = read_frames(
-                    queued.segment,
-                    queued.offset,
-                    queued.end,
-                    after_seq=queued.first_seq - 1,
-                    max_records=queued.count,
-                    max_bytes=1 << 62,
-                    max_len=self._max_len,
-                )
-                return self._batch(queued, found.frames)
+                resent = self._reread(queued)
+                if resent is not None:
+                    return resent
             cursor = self._tracker.cursor
             while cursor.index < len(self._segments):
                 segment = self._segments[cursor.index]
@@ -593,18 +587,7 @@ class Spool:
                     max_bytes=max_bytes,
                     max_len=self._max_len,
                 )
-                self._c["corrupt_skipped"] += found.lost
-                self._depth -= found.lost
-                if found.damaged:
-                    self._report.add(
-                        [
-                            Finding(
-                                "corrupt", segment.path.name, d.offset, d.end, lo, hi, hi - lo + 1, d.reason
-                            )
-                            for d, lo, hi in found.damaged
-                        ],
-                        self._clock(),
-                    )
+                self._count_damage(segment, found.damaged, found.lost)
                 if not found.frames:
                     cursor.offset = found.end
                     continue
@@ -622,6 +605,58 @@ class Spool:
                 self._tracker.start(piece, count)
                 return self._batch(piece, found.frames)
             return None
+
+    def _reread(self, queued: Slice) -> SpoolBatch | None:
+        """A released batch read again to be sent again. Damaged since it was first read, its
+        records left go as a batch of their own and the lost ones are counted (None: none left)."""
+        found = read_frames(
+            queued.segment,
+            queued.offset,
+            queued.end,
+            after_seq=queued.first_seq - 1,
+            max_records=queued.count,
+            max_bytes=1 << 62,
+            max_len=self._max_len,
+        )
+        frames = found.frames
+        count = sum(f.count for f in frames)
+        if count == queued.count and frames[0].seq == queued.first_seq:
+            return self._batch(queued, frames)
+        self._tracker.finish(queued.first_seq)
+        # damage after the last frame left runs to the batch's end (a read alone cannot know)
+        tail = frames[-1].last_seq if frames else queued.first_seq - 1
+        damaged = [(d, lo, queued.last_seq if lo > tail else hi) for d, lo, hi in found.damaged]
+        self._count_damage(queued.segment, damaged, queued.count - count)
+        if not frames:
+            self._mark_moved()
+            return None
+        first = frames[0]
+        piece = Slice(
+            first.seq,
+            frames[-1].last_seq,
+            count,
+            queued.segment,
+            first.offset,
+            queued.end,
+            first.timestamp_ms,
+        )
+        self._tracker.resume(piece)
+        self._mark_moved()
+        return self._batch(piece, frames)
+
+    def _count_damage(self, segment: Segment, damaged: list[tuple[Damage, int, int]], lost: int) -> None:
+        """Records lost to damage a read met (``(range, first seq, last seq)``): counted, and
+        the damage reported."""
+        self._c["corrupt_skipped"] += lost
+        self._depth -= lost
+        if damaged:
+            self._report.add(
+                [
+                    Finding("corrupt", segment.path.name, d.offset, d.end, lo, hi, hi - lo + 1, d.reason)
+                    for d, lo, hi in damaged
+                ],
+                self._clock(),
+            )
 
     def _batch(self, piece: Slice, frames: Sequence[Frame]) -> SpoolBatch:
         groups = tuple(SpoolGroup(f.seq, f.count, f.timestamp_ms, f.group()) for f in frames)

@@ -56,6 +56,10 @@ class SendTracker:
         self.cursor.consumed += consumed
         self.cursor.next_seq = max(self.cursor.next_seq, found.last_seq + 1)
 
+    def resume(self, found: Slice) -> None:
+        """What is left of a released slice read again (damaged since), in flight again."""
+        self.in_flight[found.first_seq] = found
+
     def finish(self, first_seq: int) -> Slice | None:
         """The slice starting at ``first_seq`` is acknowledged (also accepted while released)."""
         found = self.in_flight.pop(first_seq, None)

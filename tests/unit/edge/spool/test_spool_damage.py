@@ -176,3 +176,43 @@ def test_damage_found_while_reading_is_reported(tmp_path: Path) -> None:
     assert (reason, first, last, records) == ("corrupt", 3, 3, 1)
     assert spool.stats().damage_unacknowledged == 1
     spool.close()
+
+
+def _bad_byte_in_frame(segment: Path, index: int) -> None:
+    with segment.open("r+b") as handle:
+        handle.seek(SEGMENT_HEADER_SIZE + index * FRAME + HEADER_SIZE + 20)
+        handle.write(b"\xff")
+
+
+@pytest.mark.parametrize(("damaged", "left"), [((0,), [2, 3, 4, 5]), ((0, 1, 2, 3, 4), [])])
+def test_a_batch_damaged_before_it_is_sent_again_goes_without_the_lost_records(
+    tmp_path: Path, damaged: tuple[int, ...], left: list[int]
+) -> None:
+    """The disk went bad under a batch in flight; the uplink did not take it, so it is read
+    again: what is left goes as a batch of its own (its seqs are the batch's), the rest counted."""
+    spool = Spool(tmp_path, SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)).open()
+    spool.append_many([RECORD] * 5)
+    spool._recent = type(spool._recent)(0)  # read from the file
+    first = spool.read_unacked(100, 1 << 20)
+    assert first is not None
+    assert (first.first_seq, first.last_seq) == (1, 5)
+    (segment,) = sorted(tmp_path.glob("*.seg"))
+    for index in damaged:
+        _bad_byte_in_frame(segment, index)
+    assert spool.release(first.first_seq)
+    again = spool.read_unacked(100, 1 << 20)
+    if left:
+        assert again is not None
+        assert [r.seq for r in again.records] == left
+        assert (again.first_seq, again.last_seq) == (left[0], left[-1])
+        assert again.acked == left[0] - 1  # the lost seqs are settled: nothing waits for them
+        assert spool.ack(again.first_seq)
+    else:
+        assert again is None
+    stats = spool.stats()
+    assert stats.corrupt_skipped == len(damaged)
+    assert stats.acked == len(left)
+    assert (stats.depth, stats.in_flight) == (0, 0)
+    assert spool.read_unacked(100, 1 << 20) is None
+    assert sum(f.records for f in spool.damage()) == len(damaged)
+    spool.close()
