@@ -89,6 +89,9 @@ def test_graph_shows_the_robots_and_their_topics_with_live_rates(page: Page, sta
 
     # the same site through the uplink's fleet console, over the Zenoh admin space (signed in
     # afresh: cookies do not tell ports apart, and both consoles take the same token)
+    # leave the edge console first: its next poll, signed out, would navigate to its login page
+    # and abort the navigation to the fleet console
+    page.goto("about:blank")
     page.context.clear_cookies()
     sign_in(page, stack.fleet_console, stack.token)
     row = page.locator(f'#sites tr[data-site="{stack.site}"]')
