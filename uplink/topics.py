@@ -52,6 +52,6 @@ def ensure_topics(kafka: KafkaSection, topics: TopicsSection, timeout_s: float =
         try:
             future.result(timeout_s)
             log.info("created topic %s", name)
-        except KafkaException as exc:
+        except (KafkaException, TimeoutError) as exc:
             if "TOPIC_ALREADY_EXISTS" not in str(exc):
                 log.warning("could not create topic %s: %s", name, exc)

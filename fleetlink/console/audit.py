@@ -15,6 +15,7 @@ whose record Kafka refused is still made, and the answer says the audit record i
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -131,15 +132,16 @@ class KafkaAudit(MemoryAudit):
                 self._producer.produce(
                     self.topic, key=entry["user"].encode(), value=value, on_delivery=report
                 )
-            except (BufferError, ValueError) as exc:  # KafkaException is a ValueError's sibling: below
+                self._producer.flush(self.timeout_s)
+            except Exception as exc:  # noqa: BLE001 - BufferError, KafkaException: say so, do not fail the change
                 return f"audit record not written: {exc}"
-            except Exception as exc:  # noqa: BLE001 - confluent_kafka.KafkaException: say so, do not fail the change
-                return f"audit record not written: {exc}"
-            self._producer.flush(self.timeout_s)
         if not done.is_set():
             return f"audit record not acknowledged by Kafka within {self.timeout_s:g} s"
         return f"audit record not written: {errors[0]}" if errors else None
 
     def close(self) -> None:
         """Flush the records still on their way to Kafka (waits up to ``timeout_s``)."""
-        self._producer.flush(self.timeout_s)
+        from confluent_kafka import KafkaException
+
+        with contextlib.suppress(KafkaException):  # the producer failed for good: nothing to flush
+            self._producer.flush(self.timeout_s)

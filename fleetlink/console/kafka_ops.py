@@ -16,6 +16,7 @@ The value an operator types is completed with each field's default (``fill_datum
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import threading
@@ -26,7 +27,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import fastavro
-from confluent_kafka import Producer
+from confluent_kafka import KafkaException, Producer
 
 from fleetlink.console.kafka_tail import KafkaTail, TailRecord
 from fleetlink.console.operations import CommandRefusedError
@@ -323,15 +324,21 @@ class KafkaCommands:
             done.set()
 
         with self._lock:
-            self._producer.produce(
-                topic,
-                key=robot.encode(),
-                value=confluent_frame(schema_id, body.getvalue()),
-                headers=[(ID_HEADERS[kind], command_id.encode()), ("fleetlink-console-user", user.encode())],
-                timestamp=int(time.time() * 1000),
-                on_delivery=report,
-            )
-            self._producer.flush(self.timeout_s)
+            try:
+                self._producer.produce(
+                    topic,
+                    key=robot.encode(),
+                    value=confluent_frame(schema_id, body.getvalue()),
+                    headers=[
+                        (ID_HEADERS[kind], command_id.encode()),
+                        ("fleetlink-console-user", user.encode()),
+                    ],
+                    timestamp=int(time.time() * 1000),
+                    on_delivery=report,
+                )
+                self._producer.flush(self.timeout_s)
+            except (BufferError, KafkaException) as exc:  # too large, queue full, producer failed
+                raise CommandRefusedError(f"Kafka refused the command: {exc}") from None
         if not done.is_set():
             raise CommandRefusedError(f"Kafka did not acknowledge the command within {self.timeout_s:g} s")
         err, msg = delivered[0]
@@ -358,5 +365,5 @@ class KafkaCommands:
 
     def close(self) -> None:
         """Flush and drop the producer (the console is stopping)."""
-        with self._lock:
+        with self._lock, contextlib.suppress(KafkaException):  # failed for good: nothing to flush
             self._producer.flush(self.timeout_s)
