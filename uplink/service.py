@@ -514,15 +514,15 @@ class Uplink:
             if scanned is not None
             else Pending(batch, batch.last_seq, at_or_below(batch))
         )
-        with self.stats.lock:
-            self.stats.batches += 1
-            self.stats.records += len(scanned) if scanned is not None else len(batch.records)
         try:
             writer = self._exactly_once()
         except Exception as exc:  # noqa: BLE001 - the marks topic's reader could not start: answer, retry later
             self._limiter.log(logging.ERROR, "exactly-once", "exactly-once writer not ready: %s", exc)
             self._finish(query, error=f"exactly-once writer not ready: {exc}")
             return
+        with self.stats.lock:
+            self.stats.batches += 1
+            self.stats.records += len(scanned) if scanned is not None else len(batch.records)
         writer.submit(pending, run, answer)
 
     def _exactly_once(self) -> ExactlyOnceWriter:

@@ -53,7 +53,8 @@ def read_frames(
     size = min(limit - start, max_bytes + max_records * HEADER_SIZE + READ_SLACK)
     while True:
         data = _pread(segment.path, size, start)
-        final = start + len(data) >= limit
+        # a short read: the file ends here (cut short under the spool), nothing more will come
+        final = start + len(data) >= limit or len(data) < size
         result = ReadResult(frames=[], end=start)
         total = 0
         records = 0

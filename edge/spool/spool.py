@@ -547,8 +547,7 @@ class Spool:
             self._check_open()
             if not skip_in_flight:
                 self._release_all_locked()
-            queued = self._tracker.take_retry()
-            if queued is not None:
+            while (queued := self._tracker.take_retry()) is not None:
                 resent = self._reread(queued)
                 if resent is not None:
                     return resent
@@ -587,7 +586,9 @@ class Spool:
                     max_bytes=max_bytes,
                     max_len=self._max_len,
                 )
-                self._count_damage(segment, found.damaged, found.lost)
+                self._count_damage(
+                    segment, [(d, lo, hi, hi - lo + 1) for d, lo, hi in found.damaged], found.lost
+                )
                 if not found.frames:
                     cursor.offset = found.end
                     continue
@@ -625,8 +626,18 @@ class Spool:
         self._tracker.finish(queued.first_seq)
         # damage after the last frame left runs to the batch's end (a read alone cannot know)
         tail = frames[-1].last_seq if frames else queued.first_seq - 1
-        damaged = [(d, lo, queued.last_seq if lo > tail else hi) for d, lo, hi in found.damaged]
-        self._count_damage(queued.segment, damaged, queued.count - count)
+        ranges = [(d, lo, queued.last_seq if lo > tail else hi) for d, lo, hi in found.damaged]
+        damaged = [(d, lo, hi, hi - lo + 1) for d, lo, hi in ranges]
+        lost = queued.count - count
+        unnamed = lost - sum(n for *_r, n in damaged)
+        if unnamed > 0:  # gone without damage of its own (the file cut short, known damage grown)
+            named = {s for _d, lo, hi in ranges for s in range(lo, hi + 1)}
+            named.update(s for f in frames for s in range(f.seq, f.last_seq + 1))
+            gone = [s for s in range(queued.first_seq, queued.last_seq + 1) if s not in named]
+            missing = Damage(queued.offset, queued.end, "records missing when read again")
+            lo, hi = (gone[0], gone[-1]) if gone else (queued.first_seq, queued.last_seq)
+            damaged.append((missing, lo, hi, unnamed))
+        self._count_damage(queued.segment, damaged, lost)
         if not frames:
             self._mark_moved()
             return None
@@ -644,16 +655,16 @@ class Spool:
         self._mark_moved()
         return self._batch(piece, frames)
 
-    def _count_damage(self, segment: Segment, damaged: list[tuple[Damage, int, int]], lost: int) -> None:
-        """Records lost to damage a read met (``(range, first seq, last seq)``): counted, and
-        the damage reported."""
+    def _count_damage(self, segment: Segment, damaged: list[tuple[Damage, int, int, int]], lost: int) -> None:
+        """Records lost to damage a read met (``(range, first seq, last seq, records)``):
+        counted, and the damage reported."""
         self._c["corrupt_skipped"] += lost
         self._depth -= lost
         if damaged:
             self._report.add(
                 [
-                    Finding("corrupt", segment.path.name, d.offset, d.end, lo, hi, hi - lo + 1, d.reason)
-                    for d, lo, hi in damaged
+                    Finding("corrupt", segment.path.name, d.offset, d.end, lo, hi, n, d.reason)
+                    for d, lo, hi, n in damaged
                 ],
                 self._clock(),
             )

@@ -216,3 +216,52 @@ def test_a_batch_damaged_before_it_is_sent_again_goes_without_the_lost_records(
     assert spool.read_unacked(100, 1 << 20) is None
     assert sum(f.records for f in spool.damage()) == len(damaged)
     spool.close()
+
+
+def _five_in_two_batches(tmp_path: Path) -> tuple[Spool, Path]:
+    spool = Spool(tmp_path, SpoolOptions(segment_bytes=8192, max_bytes=1 << 20, group_records=1)).open()
+    spool.append_many([RECORD] * 6)
+    spool._recent = type(spool._recent)(0)  # read from the file
+    for first in (1, 4):
+        batch = spool.read_unacked(3, 1 << 20)
+        assert batch is not None
+        assert batch.first_seq == first
+    assert spool.release_all() == 2
+    (segment,) = sorted(tmp_path.glob("*.seg"))
+    return spool, segment
+
+
+def test_a_released_batch_lost_whole_lets_the_next_released_one_go_first(tmp_path: Path) -> None:
+    spool, segment = _five_in_two_batches(tmp_path)
+    for index in (0, 1, 2):
+        _bad_byte_in_frame(segment, index)
+    again = spool.read_unacked(100, 1 << 20)
+    assert again is not None
+    assert [r.seq for r in again.records] == [4, 5, 6]  # not fresh records past a batch still due
+    assert again.acked == 3
+    assert spool.stats().corrupt_skipped == 3
+    spool.close()
+
+
+@pytest.mark.parametrize(("frames_left", "sent_again"), [(5, [[4, 5]]), (2, [])])
+def test_a_segment_cut_short_under_released_batches_is_counted_not_waited_on(
+    tmp_path: Path, frames_left: int, sent_again: list[list[int]]
+) -> None:
+    """The file lost its end while batches were in flight: what is left goes again, the rest is
+    counted and reported with its seqs, and no read waits for bytes that will not come."""
+    spool, segment = _five_in_two_batches(tmp_path)
+    keep = SEGMENT_HEADER_SIZE + frames_left * FRAME
+    with segment.open("r+b") as handle:
+        handle.truncate(keep)
+    batches = []
+    while (batch := spool.read_unacked(100, 1 << 20)) is not None:
+        batches.append([r.seq for r in batch.records])
+        assert spool.ack(batch.first_seq)
+    assert batches[0] == [1, 2, 3][:frames_left]
+    assert batches[1:] == sent_again
+    lost = 6 - frames_left
+    assert spool.stats().corrupt_skipped == lost
+    assert sum(f.records for f in spool.damage()) == lost
+    named = {s for f in spool.damage() for s in range(f.first_seq or 0, (f.last_seq or -1) + 1)}
+    assert named == set(range(frames_left + 1, 7))
+    spool.close()
