@@ -145,9 +145,15 @@ def create_topics(bootstrap: str, names: list[str], partitions: int = 2) -> None
 
 
 def produce_scenario(
-    bootstrap: str, registry_url: str, topics: Topics, scenario: dict[str, list[Event]]
+    bootstrap: str, registry_url: str, topics: Topics, scenario: dict[str, list[Event]], *, live: bool = False
 ) -> int:
-    """Produce as fleetlink does: CDR from the robot -> Avro body (schemas codec) -> Confluent framing."""
+    """Produce as fleetlink does: CDR from the robot -> Avro body (schemas codec) -> Confluent framing.
+
+    ``live``: each event when its time comes, as robots publish to an app that is running. Replayed
+    at once instead, a new robot's three topic partitions fill one after the other, and the app
+    reads one ahead of the others by more than its grace (its idle partitions seem to have
+    nothing): records counted as late, a decision moved. Without ``live``, produce before the
+    app starts."""
     ts = load_typestore("jazzy", msg_paths=[IROBOT])
     registry = SchemaRegistryClient({"url": registry_url})
     names = sensor_topics(topics)
@@ -164,7 +170,10 @@ def produce_scenario(
     timeline = sorted(
         ((e, robot) for robot, events in scenario.items() for e in events), key=lambda p: p[0].ts
     )
+    started, first_ts = time.monotonic(), timeline[0][0].ts if timeline else 0
     for event, robot in timeline:
+        if live and (ahead := started + (event.ts - first_ts) / 1000 - time.monotonic()) > 0:
+            time.sleep(ahead)  # the robot's pace
         typename = PKG + SENSOR_TYPES[event.sensor]
         cdr = bytes(ts.serialize_cdr(ros_message(ts, event), typename))
         producer.produce(

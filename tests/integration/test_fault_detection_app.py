@@ -119,7 +119,7 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
 ) -> None:
     caplog.set_level(logging.WARNING, logger="fleetlink.examples.fault_detection")
     settings, seen = running_app.settings, running_app.seen
-    produced = produce_scenario(kafka_bootstrap, schema_registry_url, topics, SCENARIO)
+    produced = produce_scenario(kafka_bootstrap, schema_registry_url, topics, SCENARIO, live=True)
     assert produced == 3 * 3 * (DURATION_MS // PERIOD_MS)
 
     wait_all_committed(kafka_bootstrap, settings.group, list(sensor_topics(topics).values()), timeout=45)
@@ -154,7 +154,7 @@ def test_one_red_then_one_green_only_for_the_robot_that_failed_longer_than_the_w
 
     # a robot that joins while the app runs is judged like the others, nothing restarted
     late_joiner = shifted(robot_events(lambda _s, t: t >= 1000), DURATION_MS)
-    produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_04": late_joiner})
+    produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_04": late_joiner}, live=True)
     [(state, joined_red_at)] = expected_changes(late_joiner, WINDOW_MS)
     wait_all_committed(kafka_bootstrap, settings.group, list(sensor_topics(topics).values()), timeout=30)
     new_commands = read_commands(kafka_bootstrap, schema_registry_url, topics.commands)[2:]
@@ -237,14 +237,14 @@ def test_state_survives_a_restart_on_a_fresh_disk(
     with app_in_thread(
         app_settings(kafka_bootstrap, schema_registry_url, topics, tmp_path / "one", group)
     ) as app:
-        produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_05": first})
+        produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_05": first}, live=True)
         wait_all_committed(kafka_bootstrap, group, names, timeout=45)
     assert [(c.state.value, c.stamp_ms) for c in app.seen] == [("failed", red_at)]
 
     with app_in_thread(
         app_settings(kafka_bootstrap, schema_registry_url, topics, tmp_path / "two", group)
     ) as app:
-        produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_05": second})
+        produce_scenario(kafka_bootstrap, schema_registry_url, topics, {"tb4_05": second}, live=True)
         wait_all_committed(kafka_bootstrap, group, names, timeout=45)
     assert [(c.state.value, c.stamp_ms) for c in app.seen] == [("running", green_at)]
 
