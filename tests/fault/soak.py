@@ -174,13 +174,19 @@ def run_fleet(
         def stats() -> dict[str, Any]:
             return read_stats(stats_file)[1]
 
-        deadline = time.monotonic() + 60
-        while (
-            len(stats().get("subscriptions", {})) < robots * topics or len(stats().get("robots", {})) < robots
-        ):
-            if time.monotonic() > deadline or edge.proc is None or edge.proc.poll() is not None:
-                raise AssertionError(f"the edge did not take the {robots} robots:\n{edge.tail()}")
-            time.sleep(0.2)
+        def took_every_robot() -> bool:
+            if edge.proc is None or edge.proc.poll() is not None:
+                raise AssertionError("the edge ended before it took the robots")
+            data = stats()
+            return (
+                len(data.get("subscriptions", {})) >= robots * topics
+                and len(data.get("robots", {})) >= robots
+            )
+
+        try:
+            wait_until(took_every_robot, 60, interval=0.05, message=f"the edge takes the {robots} robots")
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}\n{edge.tail()}") from None
         result.registrations = robots
         began = time.monotonic()
         pub.stdin.write("go\n")
