@@ -23,6 +23,7 @@ from confluent_kafka.schema_registry.avro import AvroDeserializer
 from confluent_kafka.serialization import MessageField, SerializationContext
 from rosbags.rosbag2 import Reader
 
+from fleetlink.common.zenoh_configs import render_router_config
 from fleetlink.edge.agent import EdgeAgent
 from fleetlink.edge.config import EdgeConfig
 from fleetlink.localstack.zenoh_router import ZenohRouter
@@ -31,7 +32,7 @@ from fleetlink.schemas.registry import on_a_live_connection
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.service import Uplink
 from tests.helpers import wait_until, zenoh_peer_config
-from tests.paths import BAGS
+from tests.paths import BAGS, DEPLOY
 
 HUSKY = BAGS / "robot_localization_husky"
 TB3 = BAGS / "fuse_turtlebot3_sim"
@@ -113,6 +114,15 @@ def edge_config(
     }
     data.update(extra)
     return EdgeConfig.model_validate(data)
+
+
+def isolating_cloud_router() -> ZenohRouter:
+    """A cloud router that lets only ``fleetlink/**`` cross, as the shipped dev template does
+    (``deploy/zenoh/cloud-router-dev.json5``): each site's raw ROS traffic stays on the site, so
+    robots of different sites may share names. (The bare cloud router of the other tests passes
+    everything: their sites' robots see each other, which some of them test.)"""
+    template = render_router_config(DEPLOY / "zenoh" / "cloud-router-dev.json5", listen=[])
+    return ZenohRouter(extra={"access_control": json.loads(template.get_json("access_control"))})
 
 
 @contextmanager

@@ -1,7 +1,10 @@
 """Several uplinks share a fleet's load: each edge's stream goes to one uplink by name (found by
 probing), and when that uplink stops its edges move to the others, losing nothing.
 
-Real Kafka, registry, a cloud router, two uplinks and four sites (a router and an edge each)."""
+Real Kafka, registry, a cloud router, two uplinks and four sites (a router and an edge each).
+Each site's robot is ``/tb4_01``: the cloud router keeps each site's ROS traffic on the site,
+as the shipped one does (with a bare one, every edge would take every site's robot).
+"""
 
 from __future__ import annotations
 
@@ -12,14 +15,21 @@ from pathlib import Path
 
 from fleetlink.edge.agent import EdgeAgent
 from fleetlink.edge.runtime.uplinks import pick
-from fleetlink.localstack.zenoh_router import ZenohRouter
 from fleetlink.roswire import cdr
 from fleetlink.roswire.node import RosNode
 from fleetlink.schemas.typestore import load_typestore
 from fleetlink.uplink.service import Uplink
 from fleetlink.wire import ingest_key
 from tests.helpers import wait_until, zenoh_peer_config
-from tests.integration.e2e_stack import Cloud, TopicReader, edge_config, seqs, site, uplink_config
+from tests.integration.e2e_stack import (
+    Cloud,
+    TopicReader,
+    edge_config,
+    isolating_cloud_router,
+    seqs,
+    site,
+    uplink_config,
+)
 
 STRING = "std_msgs/msg/String"
 SITES = 4
@@ -41,7 +51,7 @@ def test_two_uplinks_share_the_sites_and_one_takes_over_when_the_other_stops(
 ) -> None:
     tag = uuid.uuid4().hex[:8]
     reader = TopicReader(kafka_bootstrap, schema_registry_url)
-    with ZenohRouter() as cloud_router, ExitStack() as stack:
+    with isolating_cloud_router() as cloud_router, ExitStack() as stack:  # every robot is tb4_01
         base = uplink_config(cloud_router.endpoint, kafka_bootstrap, schema_registry_url, suffix=tag)
         ids = (f"share-a-{tag}", f"share-b-{tag}")
         a = stack.enter_context(Uplink(base.model_copy(update={"id": ids[0]})))
@@ -121,3 +131,4 @@ def test_two_uplinks_share_the_sites_and_one_takes_over_when_the_other_stops(
         )
         assert sorted(set(seqs(records))) == list(range(1, 101)), s  # lost 0 (a batch the stopped
         # uplink wrote but could not acknowledge is written again: at least once)
+        assert {reader.value(m)["data"].split()[0] for m in records} == {s}  # its own robot's alone
