@@ -4,8 +4,10 @@ publishing real recorded messages on five topics at a steady rate.
 Run by bench/bench_fleet.py: ``fleet_publisher.py --connect EP --first N --robots K --hz F``.
 Declares the robots (node, publishers), prints ``ready``, waits for a line on stdin, publishes
 every topic of every robot at ``--hz`` for ``--seconds`` (the publications evenly spread over
-each period), prints ``done <published> <seconds> <behind>`` (``behind``: publications that left
-more than one period late), then waits for a line before closing the sessions.
+each period) and one last sample per topic that waits for room instead of being dropped (so a
+sample lost on the way before it is a gap in the sequence numbers at the edge), prints
+``done <published> <seconds> <behind>`` (``behind``: publications that left more than one
+period late), then waits for a line before closing the sessions.
 """
 
 from __future__ import annotations
@@ -118,6 +120,9 @@ def main() -> int:
                 behind += 1
             pub, msgs = pubs[n % len(pubs)]
             pub.publish_cdr(msgs[(n // len(pubs)) % len(msgs)])
+            published += 1
+        for pub, msgs in pubs:  # a last sample each that is never dropped: any loss before it is a gap
+            pub.publish_cdr(msgs[0], block=True)
             published += 1
         elapsed = time.perf_counter() - began
     else:

@@ -135,8 +135,10 @@ class RosPublisher(StartStop):
             self._publisher = None
         self.node.forget(self)
 
-    def publish_cdr(self, payload: bytes, *, source_ts_ns: int | None = None) -> int:
-        """Put one CDR-encoded message; returns its sequence number."""
+    def publish_cdr(self, payload: bytes, *, source_ts_ns: int | None = None, block: bool = False) -> int:
+        """Put one CDR-encoded message; returns its sequence number. ``block``: this one sample
+        waits for room on the way instead of being dropped, whatever the publisher's congestion
+        control (after it, a sample dropped before shows as a gap in the sequence numbers)."""
         publisher = self._publisher
         if publisher is None:
             raise RoswireError(f"publisher on {self.topic} is not started")
@@ -144,7 +146,13 @@ class RosPublisher(StartStop):
             self.seq += 1
             seq = self.seq
             stamp = time.time_ns() if source_ts_ns is None else source_ts_ns
-            publisher.put(payload, attachment=encode(seq, stamp, self.gid, self.attachment_version))
+            attachment = encode(seq, stamp, self.gid, self.attachment_version)
+            if block:  # the same key, priority and order as the publisher's own samples
+                self.node.session.put(
+                    self.key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.BLOCK
+                )
+            else:
+                publisher.put(payload, attachment=attachment)
         return seq
 
     def publish(self, message: object) -> int:
