@@ -74,12 +74,16 @@ def test_row47_store_killed_records_wait_for_their_objects_and_all_arrive_once(
             store.kill()
             for seed in range(2, 5):
                 camera.publish_cdr(image_cdr(320, 240, seed=seed))
-            wait_until(lambda: agent.snapshot()["objects"]["retries"] >= 2, 20, message="uploads failing")
+
+            def failing(objects: dict[str, int]) -> bool:  # the 3 images taken, their uploads failing
+                return objects["pending"] == 3 and objects["retries"] >= 2
+
+            wait_until(lambda: failing(agent.snapshot()["objects"]), 20, message="3 uploads failing")
             snap = agent.snapshot()
-            assert snap["objects"]["pending"] == 3  # waiting, neither dropped nor dead-lettered
+            assert snap["objects"]["pending"] == 3  # still waiting, neither dropped nor dead-lettered
             assert snap["objects"]["outages"] == 1
             assert claims(agent) == {"inline": 0, "claimed": 2, "failed": 0}
-            assert len(reader.consume(topic, 0, lambda ms: False, 1.0)) == 2  # none without its object
+            assert len(reader.read(topic, 2)) == 2  # the 2 stored, then none without its object
             store.start()  # the same port and folder
             wait_until(lambda: claims(agent)["claimed"] == 5, 30, message="all 5 images stored")
             wait_until(lambda: agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0, 20)

@@ -88,14 +88,15 @@ def test_robot_running_before_discovery_starts_is_found(
     early = robot(zenoh_router, domain, "tb4_07")
     try:
         with RobotWatcher(observer, TB4, grace_s=0.2) as watcher:
+            # the node token and the publisher token (each token's reply comes on its own: the
+            # robot is named at the first)
             wait_until(
-                lambda: [r.name for r in watcher.robots()] == ["tb4_07"],
+                lambda: [(r.name, len(r.entities)) for r in watcher.robots()] == [("tb4_07", 2)],
                 timeout=5,
-                message="pre-existing robot tb4_07 found",
+                message="pre-existing robot tb4_07 found with its node and its publisher",
             )
             (found,) = watcher.robots()
             assert found.robot_type == "turtlebot4"
-            assert len(found.entities) == 2  # the node token and the publisher token
     finally:
         early.stop()
 
