@@ -52,6 +52,7 @@ def main() -> None:
                 registry_url=registry,
                 window=args.window,
                 out=io.StringIO(),
+                usual_ports=False,
             )
             summary = Demo(options).run()
             if not summary["loop_closed"]:

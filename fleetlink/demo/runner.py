@@ -61,6 +61,9 @@ class DemoOptions:
     duration_s: float | None = None
     step_timeout_s: float = 90.0
     app: Literal["python", "java"] = "python"
+    usual_ports: bool = True
+    """Serve the consoles and metrics on the docs' ports (8480, 8490, 9464) where free; False: on
+    free ports only, for a demo started beside other services that may take those ports."""
     out: TextIO = field(default=sys.stdout)
 
 
@@ -148,10 +151,15 @@ class Demo:
             site.endpoint,
             work,
             (),
-            edge_admin=_listen(8480),
-            uplink_metrics=_listen(9464),
-            fleet_console=_listen(8490),
+            edge_admin=self._listen(8480),
+            uplink_metrics=self._listen(9464),
+            fleet_console=self._listen(8490),
         )
+
+    def _listen(self, preferred: int) -> str:
+        """127.0.0.1 and the port people expect (the docs' 8480, 8490, 9464), or a free one."""
+        usual = self.o.usual_ports and not port_in_use(preferred)
+        return f"127.0.0.1:{preferred if usual else free_port()}"
 
     def _process(self, name: str, argv: list[str], ready: Callable[[], bool]) -> None:
         self._start_process(name, [sys.executable, "-m", "fleetlink", *argv], ready)
@@ -410,11 +418,6 @@ class Demo:
 
     def _wait(self, seconds: float | None) -> None:
         self._stop.wait(seconds)
-
-
-def _listen(preferred: int) -> str:
-    """127.0.0.1 and the port people expect (the docs' 8480, 8490, 9464), or a free one."""
-    return f"127.0.0.1:{free_port() if port_in_use(preferred) else preferred}"
 
 
 def _read(path: Path) -> str:

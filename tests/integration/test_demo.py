@@ -39,6 +39,7 @@ def test_demo_closes_the_loop(
             out=out,
             step_timeout_s=60,
             app=app,
+            usual_ports=False,  # other tests' services may hold 8480, 8490, 9464 meanwhile
         )
     )
     result: dict[str, Any] = {}

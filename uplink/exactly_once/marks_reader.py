@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 
 from confluent_kafka import OFFSET_BEGINNING, Consumer, KafkaError, KafkaException, TopicPartition
 
@@ -18,6 +19,9 @@ from fleetlink.uplink.exactly_once.marks import NO_MARK, Mark, MarkKey, decode_m
 from fleetlink.uplink.kafka_settings import KafkaSection
 
 log = logging.getLogger(__name__)
+
+_RETRY_S = 0.1
+"""The pause before asking a partition's end again after a retriable error."""
 
 
 class MarksReader(Worker):
@@ -47,12 +51,20 @@ class MarksReader(Worker):
 
     def catch_up(self, timeout_s: float) -> bool:
         """Wait until everything committed to the marks topic by now has been read; False when
-        that did not happen within ``timeout_s`` (or the end is unknown: Kafka unreachable)."""
-        try:
-            _low, high = self._consumer.get_watermark_offsets(self._partition, timeout_s, cached=False)
-        except (KafkaException, RuntimeError) as exc:  # unreachable, or the consumer closed
-            log.warning("marks topic %s: cannot learn its end: %s", self._partition.topic, exc)
-            return False
+        that did not happen within ``timeout_s`` (or the end is unknown: Kafka unreachable).
+        Learning the end and reading up to it each get ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = max(deadline - time.monotonic(), 0.001)
+            try:
+                _low, high = self._consumer.get_watermark_offsets(self._partition, left, cached=False)
+                break
+            except (KafkaException, RuntimeError) as exc:  # unreachable, or the consumer closed
+                # a leader being elected (a new topic, a broker restarting) passes: ask again
+                again = isinstance(exc, KafkaException) and _transient(exc.args[0])
+                if not again or time.monotonic() >= deadline or self._stop.wait(_RETRY_S):
+                    log.warning("marks topic %s: cannot learn its end: %s", self._partition.topic, exc)
+                    return False
         with self._cond:
             return bool(self._cond.wait_for(lambda: self._end >= high, timeout_s))
 
@@ -85,3 +97,13 @@ class MarksReader(Worker):
                         self._marks[key] = mark
         finally:
             consumer.close()
+
+
+_LEADERLESS = frozenset(
+    (KafkaError.NOT_LEADER_FOR_PARTITION, KafkaError.LEADER_NOT_AVAILABLE, KafkaError.UNKNOWN_TOPIC_OR_PART)
+)
+
+
+def _transient(error: KafkaError) -> bool:
+    """An error that passes by itself: a partition between leaders, a topic not yet known."""
+    return bool(error.retriable()) or error.code() in _LEADERLESS
