@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import fastavro
-from confluent_kafka import KafkaException, Producer
+from confluent_kafka import KafkaError, KafkaException, Producer
 
 from fleetlink.console.kafka_tail import KafkaTail, TailRecord
 from fleetlink.console.operations import CommandRefusedError
@@ -337,11 +337,19 @@ class KafkaCommands:
                     on_delivery=report,
                 )
                 self._producer.flush(self.timeout_s)
+                if not done.is_set():  # not sent yet (Kafka unreachable): taken back, never sent later
+                    self._producer.purge(in_queue=True, in_flight=False)
+                    self._producer.poll(0)
             except (BufferError, KafkaException) as exc:  # too large, queue full, producer failed
                 raise CommandRefusedError(f"Kafka refused the command: {exc}") from None
-        if not done.is_set():
-            raise CommandRefusedError(f"Kafka did not acknowledge the command within {self.timeout_s:g} s")
+        if not done.is_set():  # sent, unanswered: the broker may still write it
+            raise CommandRefusedError(
+                f"Kafka did not acknowledge command {command_id} within {self.timeout_s:g} s; it was "
+                "sent and may still be written: look for its status before sending it again"
+            )
         err, msg = delivered[0]
+        if err is not None and err.code() == KafkaError._PURGE_QUEUE:
+            raise CommandRefusedError(f"Kafka not reached within {self.timeout_s:g} s: command not sent")
         if err is not None:
             raise CommandRefusedError(f"Kafka refused the command: {err}")
         return {
