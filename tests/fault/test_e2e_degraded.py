@@ -35,6 +35,7 @@ from tests.fault.e2e_processes import (
     Generator,
     bed,
     generate,
+    spool_depth,
     streaming,
     tally,
 )
@@ -74,7 +75,7 @@ def test_kafka_frozen_longer_than_the_ack_timeout(
                 "the edge times out on the frozen broker and re-sends",
             )
             generate(b, gen, 800)
-            assert b.durable()["buffer"]["depth"] >= 400  # the edge keeps spooling
+            spool_depth(b, 400, "the edge keeps spooling")
         finally:
             own_kafka.process.signal(signal.SIGCONT)
         frozen_s = time.monotonic() - frozen_at
@@ -123,12 +124,11 @@ def test_slow_wan_backlog_grows_in_the_spool_not_in_front_of_zenoh(
         generate(b, gen, 300)
         b.relay.set_mode("delay", 0.2)  # ~0.4 s a round trip
         generate(b, gen, 2400)
-        backlog = b.durable()["buffer"]["depth"]
         # one batch of 100 per round trip cannot keep up with 600/s: the backlog grows; with the
         # defaults (4 x 2,000) the link keeps up and holds what a round trip takes (~240)
         profile = e2e_processes.PROFILE
         expected = 500 if profile.window / 0.4 < 600 else 120
-        assert backlog >= expected, f"the backlog should wait in the spool ({backlog} records there)"
+        backlog = spool_depth(b, expected, "the backlog waits in the spool")
         b.assert_memory_bounded()
         b.relay.set_mode("pass")
         sent = gen.pause()
@@ -168,7 +168,7 @@ def test_registry_down_when_a_new_topic_needs_its_schema(
                 "batches answered 'error' while the registry is down, and sent again",
             )
             generate(b, gen, 400)
-            assert b.durable()["buffer"]["depth"] >= 300  # waiting in the spool
+            spool_depth(b, 300, "the records wait in the spool")
             assert reader.consume(b.topic, 0, lambda ms: False, 0.5) == []  # nothing half-produced
             registry.set_mode("pass")
             generate(b, gen, 200)

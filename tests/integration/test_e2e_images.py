@@ -160,10 +160,12 @@ def test_the_edge_learns_the_uplinks_limit_and_keeps_larger_records_off_the_wan(
             wait_until(lambda: agent.snapshot()["record_limit"]["learned"] == MAX_MESSAGE, 20)
             camera.publish_cdr(image_cdr(640, 480, seed=4))
             camera.publish_cdr(image_cdr(64, 48, seed=5))
-            # the buffer is empty before the images arrive too: wait for the big one to be seen
+            # the buffer is empty before the images arrive too: wait for the big one to be seen,
+            # and the small one (after it) taken and acknowledged with the chatter record
             wait_until(
                 lambda: (
                     agent.snapshot()["oversized"] == 1
+                    and agent.snapshot()["processor"]["samples"] >= 3
                     and agent.snapshot()["streams"]["durable"]["buffer"]["depth"] == 0
                 ),
                 20,

@@ -156,13 +156,19 @@ def test_robots_join_register_and_leave(
         ("tb4_02", "deregistered", "liveliness_lost"),
     ]
     msgs = reader.read_until(cloud_.registrations, lambda ms: len(events_of(ms, reader, site_name)) >= 4)
-    assert events_of(msgs, reader, site_name) == want
+    # tb4_01, leaving last, may be deregistered too before the edge stops: a fifth event, after these
+    leaving_last = ("tb4_01", "deregistered", "liveliness_lost")
+    events = events_of(msgs, reader, site_name)
+    assert events[:4] == want
+    assert set(events[4:]) <= {leaving_last}, events
     mine = [m for m in msgs if headers(m).get("fleetlink.site") == site_name]
     assert all(m.timestamp()[1] > 0 for m in mine)
     first_value = reader.value(mine[0])
     assert (first_value["robot_type"], first_value["edge_id"]) == ("tb4", "edge-1")
 
-    assert [(e["robot"], e["event"], e["reason"]) for e in ros_events] == want
+    told = [(e["robot"], e["event"], e["reason"]) for e in ros_events]
+    assert told[:4] == want
+    assert set(told[4:]) <= {leaving_last}, told
     assert {e["site"] for e in ros_events} == {site_name}
 
     chat = by_key(reader.read(topic, 130))
