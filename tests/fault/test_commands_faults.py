@@ -17,7 +17,6 @@ Also    a repeater restarted within the lease resumes repeating from its journal
 
 from __future__ import annotations
 
-import itertools
 import signal
 import struct
 import subprocess
@@ -166,7 +165,9 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
             kafka_bootstrap,
             schema_registry_url,
             wan.cloud.endpoint,
-            [lightring_mapping(topic, period="1s", lease="25s")],
+            # a lease that outlasts the test: its steps (two uplinks starting, a group rebalance
+            # after a kill) take 20-40 s on a loaded machine, and the repeats must not end before
+            [lightring_mapping(topic, period="1s", lease="120s")],
             suffix=run,
         )
         # the killed uplink's group membership must time out before the second one gets the partition
@@ -183,7 +184,9 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
             robots.add_robot("tb4_01")
             wait_repeater_sees(rep, "/tb4_01/cmd_lightring")
             producer.send(topic, "tb4_01", RED, command_id=f"once-{run}")
-            site.relay.set_mode("delay", delay_s=2.0)  # the repeater's reply will take a while
+            # the repeater's reply takes a while (under the uplink's 5 s query timeout): the kill
+            # below lands between forwarding and commit even when this process is held up
+            site.relay.set_mode("delay", delay_s=4.0)
             with uplink_process(config, tmp_path / "uplink1.yaml") as first:
                 wait_until(lambda: rep.stats.applied == 1, timeout=30, message="first uplink forwarded it")
                 first.send_signal(signal.SIGKILL)  # between forwarding and commit
@@ -213,9 +216,10 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
             # status records are at-least-once: the slowed link may have made the repeater send its
             # batch twice, but the command reached "delivered" once and nothing else happened to it
             assert set(status.statuses(f"once-{run}")) == {"delivered"}
+            # one schedule, once a second: the re-delivery caused no extra publish (counted over the
+            # whole span, so one late tick, and the next one sooner to keep the rhythm, is no extra)
             times = [t for t, _ in leds.of("tb4_01")]
-            gaps = [b - a for a, b in itertools.pairwise(times)]
-            assert min(gaps) > 0.5  # one schedule: the re-delivery caused no extra publish
+            assert len(times) - 1 <= (times[-1] - times[0]) / 1.0 + 0.5, times
 
 
 def test_row25_repeater_restarted_after_the_lease_does_not_replay(
@@ -314,7 +318,7 @@ def test_repeater_restarted_within_the_lease_resumes_without_reapplying(
 def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
     kafka_bootstrap: str, schema_registry_url: str, tmp_path: Path
 ) -> None:
-    lease = 5.0
+    lease = 8.0  # the command reaches the robot (1-3 s on a loaded machine), then a cut of some seconds
     with lightring_bed(kafka_bootstrap, schema_registry_url, period="500ms", lease=f"{lease}s") as bed:
         ts, run, topic, producer, leds, site, config = (
             bed.ts,
