@@ -7,9 +7,13 @@ then puts it down and waits for the green one. For every command it reports
 * ``total``: from the stamp of the first failing (healed) record to the command being
   readable in Kafka, on the wall clock;
 * ``window``: the part the rule itself imposes (command stamp - that first stamp): the window
-  length, less up to one sensor period (the last healthy record may precede the first failing
-  one by a period, and the window must only outgrow the healthy one);
-* ``app``: the rest (command arrival - command stamp): Kafka round trips and processing.
+  length, less the gap since the last record before the change (the window must only outgrow
+  that record: about one sensor period, more if the robot was held up);
+* ``app``: the rest (command arrival - command stamp): Kafka round trips and processing;
+* ``gap``: from the last record before the change to the first after it;
+* ``due``: from the first record after the change to the first record stamped a whole window
+  after the last one before it: the earliest record that can complete an all-failing (healed)
+  window. ``window + gap`` exceeds the window length, and ``window`` is at most ``due``.
 
 It measures Kafka → app → Kafka only; the edge, uplink and repeater legs are not included.
 """
@@ -71,13 +75,16 @@ class Measurement:
     total_ms: int
     window_ms: int
     app_ms: int
+    gap_ms: int
+    due_ms: int
 
 
 @dataclass
 class Robot:
     """Publishes the three sensor topics until stopped; ``failing`` flips what they say.
 
-    ``changed_at`` is the stamp of the first record sent after ``failing`` last changed.
+    ``changed_at`` is the stamp of the first record sent after ``failing`` last changed,
+    ``before_change`` that of the last one before it, ``stamps`` those of every record since.
     """
 
     producer: Any
@@ -86,6 +93,9 @@ class Robot:
     period_s: float
     failing: bool = False
     changed_at: int | None = None
+    before_change: int | None = None
+    last_stamp: int | None = None
+    stamps: list[int] = field(default_factory=list)
     stop: threading.Event = field(default_factory=threading.Event)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -93,7 +103,16 @@ class Robot:
         """Make the next records say failure (``failing``) or healthy, and restart ``changed_at``."""
         with self.lock:
             self.changed_at = None
+            self.before_change = self.last_stamp
+            self.stamps = []
             self.failing = failing
+
+    def change(self) -> tuple[int, int, list[int]] | None:
+        """Stamps: the first record after the last change, the last one before it, all since."""
+        with self.lock:
+            if self.changed_at is None or self.before_change is None:
+                return None
+            return self.changed_at, self.before_change, list(self.stamps)
 
     def loop(self) -> None:
         """Produce one record per sensor every ``period_s`` until ``stop`` is set, then flush."""
@@ -102,6 +121,8 @@ class Robot:
                 ts, failing = now_ms(), self.failing
                 if self.changed_at is None:
                     self.changed_at = ts
+                self.last_stamp = ts
+                self.stamps.append(ts)
             for sensor, (prefix, codec) in self.frames.items():
                 body = codec.encode_datum(datum(sensor, ts, failing))
                 self.producer.produce(
@@ -221,16 +242,19 @@ def measure(args: argparse.Namespace) -> list[Measurement]:
                 for failing in (True, False):
                     robot.flip(failing)
                     arrival = wait_for(arrivals, len(rows) + 1, timeout_s=args.window / 1000 + 30)
-                    start = robot.changed_at
-                    if start is None:  # the command came before any record of the change: impossible
+                    change = robot.change()
+                    if change is None:  # the command came before any record of the change: impossible
                         raise RuntimeError(f"command {arrival} before the robot reported the change")
+                    start, before, stamps = change
+                    due = next((s for s in stamps if s - before > args.window), arrival.stamp_ms)
                     row = Measurement(
                         arrival.state, arrival.arrived_ms - start, arrival.stamp_ms - start,
-                        arrival.arrived_ms - arrival.stamp_ms,
+                        arrival.arrived_ms - arrival.stamp_ms, start - before, due - start,
                     )  # fmt: skip
                     rows.append(row)
                     print(f"{row.state:8} total {row.total_ms:5d} ms  window {row.window_ms:5d} ms  "
-                          f"app {row.app_ms:4d} ms", flush=True)  # fmt: skip
+                          f"app {row.app_ms:4d} ms  gap {row.gap_ms:4d} ms  due {row.due_ms:5d} ms",
+                          flush=True)  # fmt: skip
         finally:
             robot.stop.set()
             stop.set()

@@ -267,8 +267,12 @@ def test_latency_tool_measures_window_and_app_parts(kafka_bootstrap: str, schema
     rows = [line.split() for line in done.stdout.splitlines() if line.startswith(("failed ", "running "))]
     assert [row[0] for row in rows] == ["failed", "running"]
     for row in rows:
-        window, app = int(row[5]), int(row[8])
-        assert 500 - 200 < window <= 500 + 100
+        window, app, gap, due = int(row[5]), int(row[8]), int(row[11]), int(row[14])
+        # never before a whole window after the last record before the change, and no later
+        # than the first record that completes one (however late the robot published it)
+        assert window + gap > 500
+        assert window <= due
+        assert gap > 0
         assert 0 <= app < 2000
     assert (
         sum(
