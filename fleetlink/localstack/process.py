@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import os
+import random
 import signal
 import socket
 import subprocess
+import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,12 +29,70 @@ def exit_on_sigterm() -> None:
     signal.signal(signal.SIGTERM, handler)
 
 
+_CLAIMS_KEPT = 512
+"""Port claims a process holds (the oldest given back first)."""
+_claims: deque[socket.socket] = deque()
+_claims_lock = threading.Lock()
+
+
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port on ``host`` that was free a moment ago (the OS picked it)."""
+    """A TCP port on ``host`` that is free now and that nothing else will be handed meanwhile.
+
+    The port is told to a server that binds it seconds later, so two things must not take it in
+    between. Outgoing connections: their source ports come from the kernel's ephemeral range
+    (``net.ipv4.ip_local_port_range``), and the port is picked below it. Other processes picking
+    ports this way (two test runs, a demo beside them): each port is claimed with an abstract
+    Unix socket named for it, held by this process (its last ``_CLAIMS_KEPT`` ports); a port
+    claimed elsewhere is passed over. Where neither works, the OS picks one (port 0)."""
+    low, high = _below_ephemeral()
+    for _attempt in range(256):
+        port = random.randint(low, high)
+        claim = _claim(port)
+        if claim is None:
+            continue
+        if _bindable(host, port):
+            with _claims_lock:
+                _claims.append(claim)
+                while len(_claims) > _CLAIMS_KEPT:
+                    _claims.popleft().close()
+            return port
+        claim.close()
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))
-        port: int = s.getsockname()[1]
-        return port
+        picked: int = s.getsockname()[1]
+        return picked
+
+
+def _below_ephemeral() -> tuple[int, int]:
+    """The ports below the kernel's ephemeral range (at most 12,000 of them, none under 10,000)."""
+    try:
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    high = max(low - 1, 10_001)
+    return max(10_000, high - 12_000), high
+
+
+def _claim(port: int) -> socket.socket | None:
+    """An abstract Unix socket named for ``port`` (machine-wide, gone with its process), or None
+    when another process holds it or the platform has none."""
+    claim = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        claim.bind(f"\0fleetlink-port-{port}")
+    except OSError:
+        claim.close()
+        return None
+    return claim
+
+
+def _bindable(host: str, port: int) -> bool:
+    """Whether a listener could bind ``host:port`` now (no listener, no lingering connection)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+        return True
 
 
 def port_in_use(port: int, host: str = "127.0.0.1") -> bool:
