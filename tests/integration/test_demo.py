@@ -43,13 +43,30 @@ def test_demo_closes_the_loop(
         )
     )
     result: dict[str, Any] = {}
-    runner = threading.Thread(target=lambda: result.update(summary=demo.run()))
+
+    def run() -> None:
+        try:
+            result["summary"] = demo.run()
+        except BaseException as exc:  # noqa: BLE001 - handed to the test's thread, which fails with it
+            result["error"] = exc
+
+    def failed() -> None:
+        error = result.get("error")
+        if error is not None:  # the demo failed: say why now, not when a wait runs out
+            raise AssertionError(f"the demo failed: {error!r}\n{out.getvalue()}") from error
+
+    def told_urls() -> bool:
+        failed()
+        return "metrics: " in out.getvalue()
+
+    runner = threading.Thread(target=run)
     runner.start()
     try:
-        wait_until(lambda: "metrics: " in out.getvalue(), timeout=120, message="the demo's URLs told")
+        wait_until(told_urls, timeout=120, message="the demo's URLs told")
         _consoles_and_metrics_answer(out.getvalue(), demo.token)
     finally:
         runner.join(300)
+    failed()
     summary = result["summary"]
     told = out.getvalue()
 
