@@ -212,8 +212,26 @@ def run_fleet(
             )
 
         settled = Settled(stats_file, lambda data: data.get("intake", {}).get("offered"), processed)
-        wait_until(settled.check, 30, interval=0.05, message="the edge took and processed every sample")
+        try:
+            wait_until(settled.check, 30, interval=0.05, message="the edge took and processed every sample")
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}\n{_progress(stats(), result.published)}\n{edge.tail()}") from None
         result.stats = settled.stats
         pub.stdin.write("bye\n")
         pub.stdin.flush()
     return result
+
+
+def _progress(data: dict[str, Any], published: int) -> str:
+    """What ``processed`` judges, from the edge's last stats: to tell which part never held."""
+    intake, processor = data.get("intake", {}), data.get("processor", {})
+    subscriptions = data.get("subscriptions", {}).values()
+    missing = sum(int(s.get("missing", 0)) for s in subscriptions)
+    received = sum(int(s.get("received", 0)) for s in subscriptions)
+    return (
+        f"published {published}; intake offered {intake.get('offered')} + missing {missing} "
+        f"(received {received}, gaps {sum(int(s.get('gaps', 0)) for s in subscriptions)}); "
+        f"intake queued {intake.get('queued')}, dropped {intake.get('dropped')}; "
+        f"taken {intake.get('taken')} vs processed {processor.get('samples')}, "
+        f"processor errors {processor.get('errors')}"
+    )
