@@ -74,12 +74,50 @@ const MAX_KEYS: usize = 65536;
 /// Plans kept at most; keys beyond take the Python path (counted there).
 const MAX_PLANS: usize = 65536;
 const OTHER_KEYS: &str = "*";
+/// Publishers whose intake drops are remembered between two takes.
+const MAX_DROP_SOURCES: usize = 65536;
 
 struct Queue {
     items: VecDeque<Raw>,
     bytes: usize,
     high_water: usize,
     woken: bool,
+    /// Per publisher GID, samples dropped here since the last take (`IntakeDrops`).
+    dropped_by: HashMap<[u8; 16], u64>,
+}
+
+/// Samples of each publisher dropped at the intake and not yet matched by a sequence gap.
+///
+/// A sample dropped at the intake is counted there (`dropped`); the next sample `take()` sees
+/// from that publisher then skips its sequence number. That gap is not a loss on the way, so it
+/// is excused against these counts rather than counted again as `missing`: each sample is
+/// counted once. Bounded by `max_sources` publishers (beyond, a drop is counted twice).
+struct IntakeDrops {
+    pending: HashMap<[u8; 16], u64>,
+    max_sources: usize,
+}
+
+impl IntakeDrops {
+    fn add(&mut self, drops: HashMap<[u8; 16], u64>) {
+        for (gid, n) in drops {
+            if self.pending.len() < self.max_sources || self.pending.contains_key(&gid) {
+                *self.pending.entry(gid).or_insert(0) += n;
+            }
+        }
+    }
+
+    /// Of a gap of `missing` samples from `gid`, those that are not intake drops.
+    fn excuse(&mut self, gid: &[u8; 16], missing: u64) -> u64 {
+        let Some(pending) = self.pending.get_mut(gid) else {
+            return missing;
+        };
+        let excused = missing.min(*pending);
+        *pending -= excused;
+        if *pending == 0 {
+            self.pending.remove(gid);
+        }
+        missing - excused
+    }
 }
 
 struct Shared {
@@ -130,6 +168,13 @@ impl Shared {
         let size = raw.size();
         let mut q = self.queue.lock().unwrap();
         if q.items.len() >= self.max_items || q.bytes + size > self.max_bytes {
+            // under the lock: the next sample of this publisher cannot be taken before its drop
+            // is known there (IntakeDrops)
+            if let Some(att) = raw.attachment.as_deref().and_then(attachment::parse) {
+                if q.dropped_by.len() < MAX_DROP_SOURCES || q.dropped_by.contains_key(&att.gid) {
+                    *q.dropped_by.entry(att.gid).or_insert(0) += 1;
+                }
+            }
             drop(q);
             sub.dropped.fetch_add(1, Ordering::Relaxed);
             self.dropped.fetch_add(1, Ordering::Relaxed);
@@ -185,6 +230,7 @@ struct State {
     programs: HashMap<u32, Arc<Program>>,
     plans: HashMap<String, Arc<Plan>>,
     seqs: SeqTracker,
+    intake_drops: IntakeDrops,
     keys: HashMap<String, KeyCounts>,
     subs: HashMap<u32, Arc<SubAtomics>>,
     topics: HashMap<u32, String>,
@@ -323,7 +369,13 @@ impl DataPlane {
         Ok(DataPlane {
             session: Mutex::new(Some(session)),
             shared: Arc::new(Shared {
-                queue: Mutex::new(Queue { items: VecDeque::new(), bytes: 0, high_water: 0, woken: false }),
+                queue: Mutex::new(Queue {
+                    items: VecDeque::new(),
+                    bytes: 0,
+                    high_water: 0,
+                    woken: false,
+                    dropped_by: HashMap::new(),
+                }),
                 ready: Condvar::new(),
                 max_items,
                 max_bytes,
@@ -341,6 +393,7 @@ impl DataPlane {
                 programs: HashMap::new(),
                 plans: HashMap::new(),
                 seqs: SeqTracker::new(max_sources),
+                intake_drops: IntakeDrops { pending: HashMap::new(), max_sources },
                 keys: HashMap::new(),
                 subs: HashMap::new(),
                 topics: HashMap::new(),
@@ -487,8 +540,9 @@ impl DataPlane {
         busy_collect_s: f64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let mut taken = py.detach(|| {
-            let raws = self.wait_and_drain(max_samples.max(1), timeout_s, collect_s, busy_rate, busy_collect_s);
-            self.process(raws, max_value_bytes, group_records, group_bytes)
+            let (raws, drops) =
+                self.wait_and_drain(max_samples.max(1), timeout_s, collect_s, busy_rate, busy_collect_s);
+            self.process(raws, drops, max_value_bytes, group_records, group_bytes)
         });
         let marks = PyBytes::new(py, &taken.marks_block());
         let mut groups: Vec<(u8, Bound<'py, PyBytes>)> = Vec::new();
@@ -596,7 +650,14 @@ impl DataPlane {
     /// takes of the last 100 ms or so, so a burst at a low rate does not count), a take's fixed
     /// cost (waking the threads that handle what it spools) outweighs a few ms of latency:
     /// collect until `busy_collect_s` after the first sample.
-    fn wait_and_drain(&self, max: usize, timeout_s: f64, collect_s: f64, busy_rate: f64, busy_collect_s: f64) -> Vec<Raw> {
+    fn wait_and_drain(
+        &self,
+        max: usize,
+        timeout_s: f64,
+        collect_s: f64,
+        busy_rate: f64,
+        busy_collect_s: f64,
+    ) -> (Vec<Raw>, HashMap<[u8; 16], u64>) {
         let busy = busy_rate > 0.0 && self.pace.lock().unwrap().rate >= busy_rate;
         self.shared.busy.store(busy, Ordering::Relaxed);
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
@@ -624,13 +685,21 @@ impl DataPlane {
         let raws: Vec<Raw> = q.items.drain(..n).collect();
         let freed: usize = raws.iter().map(Raw::size).sum();
         q.bytes -= freed;
+        let drops = std::mem::take(&mut q.dropped_by);
         drop(q);
         self.shared.taken.fetch_add(raws.len() as u64, Ordering::Relaxed);
         self.pace.lock().unwrap().note(raws.len());
-        raws
+        (raws, drops)
     }
 
-    fn process(&self, raws: Vec<Raw>, max_value_bytes: usize, group_records: u32, group_bytes: usize) -> Taken {
+    fn process(
+        &self,
+        raws: Vec<Raw>,
+        drops: HashMap<[u8; 16], u64>,
+        max_value_bytes: usize,
+        group_records: u32,
+        group_bytes: usize,
+    ) -> Taken {
         let mut taken = Taken {
             marks: HashMap::new(),
             groups: [Grouper::new(group_records, group_bytes), Grouper::new(group_records, group_bytes)],
@@ -640,6 +709,9 @@ impl DataPlane {
             oldest_ns: raws.first().map_or(0, |r| r.received_ns),
         };
         let mut state = self.state.lock().unwrap();
+        if !drops.is_empty() {
+            state.intake_drops.add(drops);
+        }
         let mut bodies: Vec<Vec<u8>> = Vec::new();
         for raw in raws {
             let counts = if let Some(counts) = state.keys.get_mut(&raw.key) {
@@ -655,7 +727,14 @@ impl DataPlane {
                 taken.slow.push(raw); // no or a broken attachment: the Python path says why
                 continue;
             };
-            let seen = state.seqs.observe(&att.gid, att.seq);
+            let seen = match state.seqs.observe(&att.gid, att.seq) {
+                Seen::Gap(missing) => match state.intake_drops.excuse(&att.gid, missing) {
+                    0 => Seen::Next, // every sample skipped was dropped at the intake (counted there)
+                    lost => Seen::Gap(lost),
+                },
+                Seen::LostAtRestart(missing) => Seen::LostAtRestart(state.intake_drops.excuse(&att.gid, missing)),
+                seen => seen,
+            };
             let fresh = att.seq >= 0 && !matches!(seen, Seen::Duplicate);
             if !matches!(seen, Seen::First | Seen::Next) {
                 let key = if state.keys.contains_key(&raw.key) { raw.key.as_str() } else { OTHER_KEYS };

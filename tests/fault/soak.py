@@ -108,9 +108,11 @@ def run_fleet(
     warmup_s: float,
     spool: dict[str, Any],
     block: bool = False,
+    intake: dict[str, Any] | None = None,
 ) -> Soak:
     """``robots`` robots publish ``topics`` topics each at ``hz`` for ``seconds`` (``block``:
-    reliable, blocking publishers) into an edge with the ``spool`` settings, the WAN cut."""
+    reliable, blocking publishers) into an edge with the ``spool`` (and ``intake``) settings,
+    the WAN cut."""
     result = Soak(name)
     with ExitStack() as stack:
         cloud = stack.enter_context(ZenohRouter())
@@ -139,6 +141,8 @@ def run_fleet(
             "spool": {"dir": str(tmp / "spool"), **spool},
             "wan": {"ack_timeout": "2s"},
         }
+        if intake:
+            config["intake"] = intake
         edge_yaml = tmp / "edge.yaml"
         edge_yaml.write_text(yaml.safe_dump(config))
         edge = Process(

@@ -6,6 +6,9 @@ the spool (lost 0: no sequence gap, nothing dropped at the intake), and the edge
 it on the key expressions it declared at start: none was dropped and declared again. The receive
 thread read the steady stream with far fewer wake-ups than samples (``intake.coalesce``, on by
 default), and losing none on the way.
+
+An intake far too small for the rate drops samples, and each is counted once: as dropped at the
+intake, not again as a sequence gap when its publisher's next sample is taken.
 """
 
 from __future__ import annotations
@@ -31,3 +34,24 @@ def test_ten_thousand_messages_a_second_all_reach_the_spool(tmp_path: Path) -> N
     assert "stopped receiving" not in edge_log
     coalesced = run.count("intake", "coalesced")
     assert 0 < coalesced < run.published / 3, f"{coalesced} waits for {run.published} samples"
+
+
+def test_samples_dropped_at_the_intake_are_counted_once(tmp_path: Path) -> None:
+    spool = {"segment_bytes": "16MiB", "max_bytes": "512MiB"}
+    run = run_fleet(
+        tmp_path,
+        "small intake",
+        robots=4,
+        topics=1,
+        hz=1000.0,
+        seconds=8.0,
+        warmup_s=2.0,
+        spool=spool,
+        block=True,  # nothing lost on the way: every gap the edge sees is its own intake's doing
+        intake={"max_samples": 8},
+    )
+    print("\n" + run.summary())
+    accounted = run.accounted()
+    assert accounted["dropped at the intake"] > 0, accounted  # the intake was too small for the rate
+    assert accounted["lost in transit (sequence gaps)"] == 0, accounted
+    assert sum(accounted.values()) == run.published + run.registrations, accounted
