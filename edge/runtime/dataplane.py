@@ -182,6 +182,7 @@ class NativeSource:
         self._next_sub = 1
         self._acceptor = SampleAcceptor(track_sequences=False)  # the sequences are followed natively
         self._rejected: dict[str, int] = {}  # topic -> samples refused on the general path
+        self._unmapped: dict[str, int] = {}  # topic -> samples no mapping took on the general path
         self._topics: dict[str, str] = {}  # data key -> topic (parsed once)
         self._programs: dict[int, int] = {}  # id(codec) -> program id
         self._codecs: list[Codec] = []  # keeps the codecs (and so their ids) alive
@@ -280,6 +281,7 @@ class NativeSource:
 
     def install(self, maker: RecordMaker, keys: Iterable[str]) -> None:
         """Hand the fast plans the general path made for ``keys`` to the data plane."""
+        self._unmapped = maker.unmapped
         for key in keys:
             plan = maker.plan_for(key)  # lanes () when no mapping takes the key: dropped natively
             if plan is None or plan.lanes is None or self._installed.get(key) is plan:
@@ -351,10 +353,11 @@ class NativeSource:
         }
 
     def topic_stats(self) -> dict[str, dict[str, int]]:
-        """Per ROS topic that sent anything: samples taken, refused, and what the publishers'
-        sequence numbers say (gaps, missing: lost before the edge saw them; duplicates)."""
+        """Per ROS topic that sent anything: samples taken, refused, unmapped (no mapping took them:
+        no record), and what the publishers' sequence numbers say (gaps, missing: lost before the
+        edge saw them; duplicates)."""
         out: dict[str, dict[str, int]] = {}
-        names = ("received", "gaps", "missing", "duplicates", "lost_at_restart")
+        names = ("received", "gaps", "missing", "duplicates", "lost_at_restart", "unmapped")
         for key, counts in self.plane.key_stats().items():
             topic = self.topic_of(key) or key
             entry = out.setdefault(topic, dict.fromkeys(names, 0))
@@ -363,7 +366,8 @@ class NativeSource:
         for entry_topic, entry in out.items():
             rejected = self._rejected.get(entry_topic, 0)
             entry["rejected"] = rejected
-            entry["delivered"] = entry["received"] - rejected
+            entry["unmapped"] += self._unmapped.get(entry_topic, 0)
+            entry["delivered"] = entry["received"] - rejected - entry["unmapped"]
         return out
 
 

@@ -200,6 +200,8 @@ class RecordMaker:
         self.counters: dict[str, MappingCounters] = {}
         self.unknown_type_samples = 0
         self.rejected = 0
+        self.unmapped: dict[str, int] = {}
+        """Per ROS topic, samples on the general path that no mapping took (no record made)."""
         """Samples the subscriber refused (no attachment, bad CDR header, bad key)."""
         self.oversize = oversize
         self.oversized = 0
@@ -229,6 +231,9 @@ class RecordMaker:
         plan = self._plans.get(sample.key)  # the data key names topic, type and hash
         if plan is None or plan.bounds is not bounds or plan.topic != sample.topic:
             plan = self._plan(sample, bounds)
+        if not bounds:  # no mapping takes it (its robot is not registered, or not yet): counted
+            self.unmapped[sample.topic] = self.unmapped.get(sample.topic, 0) + 1
+            return []
         if plan.lanes is not None:
             return run_plan(plan, sample, self.fast_value_limit, self._one, now_ns)
         out: list[Outgoing] = []

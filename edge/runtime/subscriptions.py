@@ -230,7 +230,17 @@ class SubscriptionManager:
             types = {topic: entry.typename for topic, entry in self._active.items()}
         stats = self.source.topic_stats()
         empty = dict.fromkeys(
-            ("received", "delivered", "rejected", "gaps", "missing", "duplicates", "lost_at_restart"), 0
+            (
+                "received",
+                "delivered",
+                "rejected",
+                "unmapped",
+                "gaps",
+                "missing",
+                "duplicates",
+                "lost_at_restart",
+            ),
+            0,
         )
         return {
             topic: {"type": types.get(topic), **stats.get(topic, empty)}

@@ -67,6 +67,9 @@ struct KeyCounts {
     missing: u64,
     duplicates: u64,
     lost_at_restart: u64,
+    /// Samples that made no record: no mapping takes their key (a robot not registered, or not
+    /// yet), so they are counted here rather than lost without a trace.
+    unmapped: u64,
 }
 
 /// Data keys counted one by one at most; more (a peer inventing keys) are counted together.
@@ -598,14 +601,14 @@ impl DataPlane {
             .collect()
     }
 
-    /// Per data key taken: `(received, gaps, missing, duplicates, lost_at_restart)` (keys beyond
-    /// the first 65,536 are counted under `*`).
-    fn key_stats(&self) -> HashMap<String, (u64, u64, u64, u64, u64)> {
+    /// Per data key taken: `(received, gaps, missing, duplicates, lost_at_restart, unmapped)`
+    /// (keys beyond the first 65,536 are counted under `*`).
+    fn key_stats(&self) -> HashMap<String, (u64, u64, u64, u64, u64, u64)> {
         let state = self.state.lock().unwrap();
         state
             .keys
             .iter()
-            .map(|(k, c)| (k.clone(), (c.received, c.gaps, c.missing, c.duplicates, c.lost_at_restart)))
+            .map(|(k, c)| (k.clone(), (c.received, c.gaps, c.missing, c.duplicates, c.lost_at_restart, c.unmapped)))
             .collect()
     }
 
@@ -756,6 +759,13 @@ impl DataPlane {
                 taken.slow.push(raw);
                 continue;
             };
+            if plan.lanes.is_empty() {
+                if fresh || att.seq < 0 {
+                    let key = if state.keys.contains_key(&raw.key) { raw.key.as_str() } else { OTHER_KEYS };
+                    state.keys.get_mut(key).expect("counted above").unmapped += 1;
+                }
+                continue;
+            }
             if att.seq < 0 || !convert_all(&plan, &raw.payload, max_value_bytes, &mut bodies) {
                 if fresh {
                     taken.mark(att.gid, att.seq);

@@ -204,7 +204,10 @@ def test_row37_kill9_in_a_burst_every_record_is_in_kafka_or_counted_lost_before_
                 in_kafka[name].add(int(n))
             found.update(stats=stats, in_kafka=in_kafka, reads=found.get("reads", 0) + 1)
             counted = {
-                r: sum(stats["subscriptions"][f"/{r}/chatter"][c] for c in ("lost_at_restart", "missing"))
+                r: sum(
+                    stats["subscriptions"][f"/{r}/chatter"][c]
+                    for c in ("lost_at_restart", "missing", "unmapped")
+                )
                 for r in ROBOTS
             }
             return all(len(in_kafka[r]) + counted[r] >= published[r] for r in ROBOTS)
@@ -223,21 +226,31 @@ def test_row37_kill9_in_a_burst_every_record_is_in_kafka_or_counted_lost_before_
             topic = f"/{name}/chatter"
             counters = subscriptions[topic]
             lost = counters["lost_at_restart"]
-            summary[name] = (published[name], len(in_kafka[name]), lost, counters["missing"])
+            # unmapped: samples that came before the restarted edge registered their robot again
+            summary[name] = (
+                published[name],
+                len(in_kafka[name]),
+                lost,
+                counters["missing"],
+                counters["unmapped"],
+            )
             assert in_kafka[name] <= set(range(published[name])), name  # nothing invented
             assert lost_before_spool[name] == {topic: lost}
             assert metric(admin, "fleetlink_lost_before_spool_total", robot=name, topic=topic) == lost
         print(
             f"\nkilled at {killed_at} published; per robot (published, in Kafka, lost before the spool, "
-            f"missing): {summary}; not in Kafka: "
+            f"missing, unmapped): {summary}; not in Kafka: "
             f"{ {name: ranges(set(range(published[name])) - in_kafka[name]) for name in ROBOTS} }"
         )
         # an intake drop is counted there, not as a gap; the default intake never fills here
         assert stats["intake"]["dropped"] == 0
-        for name, (count_published, count_kafka, lost, missing) in summary.items():
+        for name, (count_published, count_kafka, lost, missing, unmapped) in summary.items():
             absent = ranges(set(range(count_published)) - in_kafka[name])
-            assert count_kafka + lost + missing == count_published, (name, summary, "not in Kafka:", absent)
-        assert sum(lost for _p, _k, lost, _m in summary.values()) > 0  # the robots went on while it was down
+            counted = lost + missing + unmapped
+            assert count_kafka + counted == count_published, (name, summary, "not in Kafka:", absent)
+        assert (
+            sum(lost for _p, _k, lost, _m, _u in summary.values()) > 0
+        )  # the robots went on while it was down
         assert total >= 50_000
 
 

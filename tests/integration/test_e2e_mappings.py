@@ -205,3 +205,44 @@ def test_many_to_many(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> Non
             assert {headers(m)["fleetlink.source_topic"] for m in got} == {f"/{robot}/{sensor}"}
             for msg, raw in list(zip(got, expected[sensor], strict=True))[::7]:  # every 7th record
                 assert same(reader.value(msg), avro_shaped(ts, ts.deserialize_cdr(raw, kind), kind))
+
+
+def test_samples_no_mapping_takes_are_counted_not_lost_silently(cloud_: Cloud, tmp_path: Path) -> None:
+    """A robot whose samples arrive while it is not registered (here registration is explicit and
+    it never registers; after an edge restart, before discovery finds it again) makes no record:
+    each of its samples is counted as ``unmapped`` on its topic, the general path's first and the
+    data plane's after it alike, and none is reported delivered."""
+    robot_types = {
+        "tb4": {
+            "match": "/tb4_*",
+            "mappings": [
+                {"name": "chatter", "from": "/{robot}/chatter", "to": "fleet.chatter", "type": STRING}
+            ],
+        }
+    }
+    with site(cloud_) as router:
+        config = edge_config(
+            tmp_path / "spool",
+            router.endpoint,
+            cloud_,
+            site=unique_site(),
+            robot_types=robot_types,
+            registration={"discover": False, "grace_period": "1s"},
+        )
+        robot = RosNode(
+            "talker", "/tb4_07", config=zenoh_peer_config(router.endpoint), typestore=load_typestore("jazzy")
+        )
+        with EdgeAgent(config) as agent, robot as node:
+            publisher = node.create_publisher("/tb4_07/chatter", STRING, congestion="block")
+            wait_until(publisher.has_subscribers, 10, message="the edge receives /tb4_*/chatter")
+            for i in range(200):
+                publisher.publish_cdr(cdr.encode_string(f"tb4_07:{i}"))
+
+            def chatter() -> dict[str, int]:
+                counters: dict[str, int] = agent.snapshot()["subscriptions"].get("/tb4_07/chatter", {})
+                return counters
+
+            wait_until(lambda: chatter().get("received") == 200, 20, message="the 200 samples taken")
+            counters = chatter()
+            assert "tb4_07" not in agent.snapshot().get("robots", {})
+    assert (counters["unmapped"], counters["delivered"], counters["missing"]) == (200, 0, 0), counters

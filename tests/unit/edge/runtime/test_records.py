@@ -189,6 +189,18 @@ def test_many_to_one_and_many_to_many() -> None:
     ]
 
 
+def test_a_sample_no_mapping_takes_is_counted_not_lost_silently() -> None:
+    maker, table, _ = maker_for(robot_types=[HUSKY], robots=["husky_1"])
+    payload = imu_payloads()[0]
+    assert maker.make(sample("/husky_2/imu/data", payload), 0) == []  # husky_2 not registered (yet)
+    assert maker.make(sample("/husky_2/imu/data", payload), 0) == []
+    assert len(maker.make(sample("/husky_1/imu/data", payload), 0)) == 1
+    assert maker.unmapped == {"/husky_2/imu/data": 2}
+    table.add_robot("husky_2")
+    assert len(maker.make(sample("/husky_2/imu/data", payload), 0)) == 1
+    assert maker.unmapped == {"/husky_2/imu/data": 2}
+
+
 @pytest.mark.parametrize(
     ("text", "topic", "stage"),
     [
