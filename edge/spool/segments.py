@@ -117,7 +117,10 @@ class Recovery:
     last_seq: int
     findings: list[Finding]
     marks: list[bytes]
-    """The marks blocks of the segments kept, oldest first."""
+    """The marks blocks of every segment read (kept and spent), oldest first."""
+    spent: list[Path]
+    """Segments wholly acknowledged or empty: the spool deletes them once their marks are in the
+    snapshot, so that a second crash cannot take the marks with them."""
 
 
 def _lost(reason: str, path: Path, damage: Damage, seqs: tuple[int, int], ack_mark: int) -> Finding:
@@ -311,13 +314,14 @@ def survey(directory: Path, state: LedgerState, max_len: int) -> Survey:
 
 
 def recover(directory: Path, state: LedgerState, max_len: int) -> Recovery:
-    """Survey ``directory`` and act on it: cut torn tails, delete segments wholly acknowledged,
-    empty or deleted on purpose; find where the sender resumes."""
+    """Survey ``directory`` and act on it: cut torn tails, delete segments deleted on purpose, set
+    apart those wholly acknowledged or empty (``Recovery.spent``); find where the sender resumes."""
     found = survey(directory, state, max_len)
     for path in found.gone:
         path.unlink()
     segments: list[Segment] = []
     marks: list[bytes] = []
+    spent: list[Path] = []
     for scanned in found.scans:
         segment = scanned.segment
         if scanned.truncate_at is not None:
@@ -325,7 +329,7 @@ def recover(directory: Path, state: LedgerState, max_len: int) -> Recovery:
                 handle.truncate(scanned.truncate_at)
         marks.extend(scanned.marks)
         if segment.count == 0 or segment.last_seq <= state.ack_mark:
-            segment.path.unlink()
+            spent.append(segment.path)
             continue
         segments.append(segment)
     cursor, depth = _position(segments, state.ack_mark, max_len)
@@ -336,6 +340,7 @@ def recover(directory: Path, state: LedgerState, max_len: int) -> Recovery:
         last_seq=found.last_seq,
         findings=found.findings,
         marks=marks,
+        spent=spent,
     )
 
 

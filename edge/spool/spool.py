@@ -157,6 +157,7 @@ class Spool:
         self._report.load()
         self._note_findings(found.findings)
         self._restore_marks(found.marks)
+        self._delete_spent(found.spent)
         self._bytes = sum(s.size for s in self._segments)
         self._persisted_mark = state.ack_mark
         resume = max(found.last_seq, state.ack_mark) + 1
@@ -220,6 +221,18 @@ class Spool:
             except MarksError:  # (the frame's checksum held: only a bug writes such a block)
                 log.warning("spool %s: a marks block does not decode; ignored", self.directory)
         self._marks.changed = False
+
+    def _delete_spent(self, paths: Sequence[Path]) -> None:
+        """Delete the segments recovery found spent, once the snapshot holds their marks; if the
+        snapshot cannot be written they stay, to be read again at the next open."""
+        if not paths:
+            return
+        self._marks.changed = True
+        self._save_marks()
+        if self._marks.changed:
+            return
+        for path in paths:
+            path.unlink(missing_ok=True)
 
     def close(self) -> None:
         """fsync, record a clean stop, release the directory. Idempotent."""

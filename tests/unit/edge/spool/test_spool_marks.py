@@ -213,3 +213,49 @@ def test_pending_marks_are_kept_by_a_clean_close(tmp_path: Path) -> None:
         spool.note_marks(encode_marks([(G3, 42)]))  # samples that made no durable record, then a clean stop
     with Spool(tmp_path, OPTIONS) as spool:
         assert spool.marks() == [(G3, 42)]
+
+
+def test_marks_of_segments_deleted_at_open_survive_a_second_crash(tmp_path: Path) -> None:
+    # a crash after the ack but before the acked segment went: the next open deletes the segment;
+    # if its marks were then only in memory, a second crash would seed the older snapshot and
+    # count the robots' samples since then as lost at restart
+    spool = Spool(tmp_path, OPTIONS).open()
+    spool.note_marks(encode_marks([(G1, 10)]))
+    spool.append_many([RECORD] * 3)
+    spool.note_marks(encode_marks([(G1, 20), (G2, 7)]))
+    spool.append_many([RECORD] * 3)
+    while (batch := spool.read_unacked(100, 1 << 20)) is not None:
+        spool.ack(batch.first_seq)
+    crash(spool)
+    assert list(tmp_path.glob("*.seg"))  # acknowledged, still on disk
+    spool = Spool(tmp_path, OPTIONS).open()
+    assert not list(tmp_path.glob("*.seg"))  # spent: deleted at open
+    assert sorted(spool.marks()) == [(G1, 20), (G2, 7)]
+    crash(spool)  # before anything else was appended or snapshotted
+    with Spool(tmp_path, OPTIONS) as spool:
+        assert sorted(spool.marks()) == [(G1, 20), (G2, 7)]
+
+
+def test_a_spent_segment_stays_while_the_snapshot_cannot_be_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    spool = Spool(tmp_path, OPTIONS).open()
+    spool.note_marks(encode_marks([(G1, 10)]))
+    spool.append_many([RECORD] * 3)
+    while (batch := spool.read_unacked(100, 1 << 20)) is not None:
+        spool.ack(batch.first_seq)
+    crash(spool)
+
+    def refuse(path: Path, marks: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("fleetlink.edge.spool.spool.write_snapshot", refuse)
+    spool = Spool(tmp_path, OPTIONS).open()
+    assert list(tmp_path.glob("*.seg"))  # kept: its marks are nowhere else on disk
+    assert spool.marks() == [(G1, 10)]
+    crash(spool)
+    monkeypatch.undo()
+    with Spool(tmp_path, OPTIONS) as spool:
+        assert spool.marks() == [(G1, 10)]
+        assert spool.stats().depth == 0
+    assert not list(tmp_path.glob("*.seg"))
