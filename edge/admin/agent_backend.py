@@ -102,6 +102,7 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
             healthy.append(bool(sender.get("healthy", True)))
     subscriptions = _dict(data.get("subscriptions"))
     gaps = {str(topic): _int(_dict(sub).get("missing")) for topic, sub in subscriptions.items()}
+    unmapped = {str(topic): _int(_dict(sub).get("unmapped")) for topic, sub in subscriptions.items()}
     issues = {
         str(name): [
             MappingIssue(reason=str(i.get("reason", "")), detail=str(i.get("detail", "")))
@@ -129,6 +130,7 @@ def snapshot_from_agent(data: Mapping[str, Any], config: EdgeConfig) -> EdgeSnap
         wan=wan,
         wan_link_up=all(healthy) if healthy else None,
         sequence_gaps=gaps,
+        unmapped=unmapped,
         failure=None if running is not False else "the edge agent is not running",
         lost_before_spool={
             str(robot): {str(topic): _int(n) for topic, n in _dict(topics).items()}

@@ -123,6 +123,8 @@ class EdgeSnapshot:
     """Stream -> its sender's totals."""
     sequence_gaps: Mapping[str, int] = field(default_factory=dict)
     """ROS topic -> messages missing so far (running total)."""
+    unmapped: Mapping[str, int] = field(default_factory=dict)
+    """ROS topic -> samples received that no mapping took (running total)."""
     failure: str | None = None
     """Set when the agent cannot do its job (spool unwritable, a worker thread died)."""
     lost_before_spool: Mapping[str, Mapping[str, int]] = field(default_factory=dict)

@@ -102,6 +102,8 @@ class EdgeTelemetry:
             m.on_ack_latencies(latency.counts, latency.sum_s)
         for topic, missing in snapshot.sequence_gaps.items():
             m.on_gap(topic, d(("gap", topic), missing))
+        for topic, n in snapshot.unmapped.items():
+            m.on_unmapped(topic, d(("unmapped", topic), n))
         for robot, topics in snapshot.lost_before_spool.items():
             for topic, lost in topics.items():
                 m.on_lost_before_spool(robot, topic, d(("lost_before_spool", robot, topic), lost))

@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from fleetlink.common.metrics import MetricsRecorder
+from fleetlink.edge.admin.agent_backend import snapshot_from_agent
+from fleetlink.edge.admin.telemetry import EdgeTelemetry
 from fleetlink.edge.agent import EdgeAgent
 from fleetlink.roswire import cdr
 from fleetlink.roswire.node import RosNode
@@ -245,4 +248,7 @@ def test_samples_no_mapping_takes_are_counted_not_lost_silently(cloud_: Cloud, t
             wait_until(lambda: chatter().get("received") == 200, 20, message="the 200 samples taken")
             counters = chatter()
             assert "tb4_07" not in agent.snapshot().get("robots", {})
+            metrics = MetricsRecorder()
+            EdgeTelemetry(metrics).observe(snapshot_from_agent(agent.snapshot(), config), robots=0)
+            assert metrics.value("fleetlink_unmapped_samples", topic="/tb4_07/chatter") == 200
     assert (counters["unmapped"], counters["delivered"], counters["missing"]) == (200, 0, 0), counters

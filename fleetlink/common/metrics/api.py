@@ -37,6 +37,9 @@ class Metrics(Protocol):
     def on_gap(self, topic: str, n: int = 1) -> None:
         """Count ``n`` ROS messages missing from the publishers' sequence numbers on ``topic``."""
 
+    def on_unmapped(self, topic: str, n: int = 1) -> None:
+        """Count ``n`` ROS messages received on ``topic`` that no mapping took."""
+
     def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None:
         """Count ``n`` messages ``robot`` published on ``topic`` that never reached the spool."""
 
@@ -165,6 +168,10 @@ class FamilyMetrics:
     def on_gap(self, topic: str, n: int = 1) -> None:
         """Add ``n`` to ``fleetlink_sequence_gaps``."""
         self._count("fleetlink_sequence_gaps", topic, n=n)
+
+    def on_unmapped(self, topic: str, n: int = 1) -> None:
+        """Add ``n`` to ``fleetlink_unmapped_samples``."""
+        self._count("fleetlink_unmapped_samples", topic, n=n)
 
     def on_lost_before_spool(self, robot: str, topic: str, n: int = 1) -> None:
         """Add ``n`` to ``fleetlink_lost_before_spool``."""

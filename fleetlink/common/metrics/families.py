@@ -91,6 +91,11 @@ _EDGE: tuple[Family, ...] = (
     ),
     _c("fleetlink_sequence_gaps", ("topic",), "ROS messages missing from a publisher's sequence numbers"),
     _c(
+        "fleetlink_unmapped_samples",
+        ("topic",),
+        "ROS messages received that no mapping took (a robot not registered, or not yet)",
+    ),
+    _c(
         "fleetlink_lost_before_spool",
         ("robot", "topic"),
         "ROS messages a publisher sent that never reached the spool: the edge was stopped or crashed "

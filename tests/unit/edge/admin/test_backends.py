@@ -71,7 +71,9 @@ AGENT: dict[str, Any] = {
         "durable": {"buffer": dataclasses.asdict(SPOOL), "sender": SENDER},
         "memory": {"buffer": {**dataclasses.asdict(SPOOL), "stream": "memory"}},
     },
-    "subscriptions": {"/tb4_01/ir_intensity": {"type": "x", "received": 10, "gaps": 1, "missing": 3}},
+    "subscriptions": {
+        "/tb4_01/ir_intensity": {"type": "x", "received": 10, "gaps": 1, "missing": 3, "unmapped": 2}
+    },
 }
 
 
@@ -114,6 +116,7 @@ def test_snapshot_from_agent() -> None:
     }
     assert snap.wan_link_up is False
     assert snap.sequence_gaps == {"/tb4_01/ir_intensity": 3}
+    assert snap.unmapped == {"/tb4_01/ir_intensity": 2}
     assert snap.failure is None
 
 

@@ -172,6 +172,7 @@ def test_telemetry_reports_increments_and_gauges() -> None:
         },
         wan_link_up=True,
         sequence_gaps={"/tb4_01/ir": 2},
+        unmapped={"/tb4_09/ir": 4},
         lost_before_spool={"tb4_01": {"/tb4_01/ir": 7}},
     )
     health = telemetry.observe(snap, robots=2)
@@ -205,6 +206,7 @@ def test_telemetry_reports_increments_and_gauges() -> None:
         ("fleetlink_wan_link_up", ()): 1,
         ("fleetlink_robots_registered", ()): 2,
         ("fleetlink_sequence_gaps", ("/tb4_01/ir",)): 2,
+        ("fleetlink_unmapped_samples", ("/tb4_09/ir",)): 4,
         ("fleetlink_lost_before_spool", ("tb4_01", "/tb4_01/ir")): 7,
         ("fleetlink_spool_damage_unacknowledged", ("durable",)): 0,
         ("fleetlink_intake_queued_samples", ()): 0.0,
