@@ -25,6 +25,7 @@ use zenoh::{Config, Session, Wait};
 
 use crate::attachment;
 use crate::cdr_avro::Program;
+use crate::drops::Drops;
 use crate::seq::{SeqTracker, Seen};
 
 const FLAG_SOURCE_SEQ: u8 = 0x04;
@@ -85,42 +86,8 @@ struct Queue {
     bytes: usize,
     high_water: usize,
     woken: bool,
-    /// Per publisher GID, samples dropped here since the last take (`IntakeDrops`).
-    dropped_by: HashMap<[u8; 16], u64>,
-}
-
-/// Samples of each publisher dropped at the intake and not yet matched by a sequence gap.
-///
-/// A sample dropped at the intake is counted there (`dropped`); the next sample `take()` sees
-/// from that publisher then skips its sequence number. That gap is not a loss on the way, so it
-/// is excused against these counts rather than counted again as `missing`: each sample is
-/// counted once. Bounded by `max_sources` publishers (beyond, a drop is counted twice).
-struct IntakeDrops {
-    pending: HashMap<[u8; 16], u64>,
-    max_sources: usize,
-}
-
-impl IntakeDrops {
-    fn add(&mut self, drops: HashMap<[u8; 16], u64>) {
-        for (gid, n) in drops {
-            if self.pending.len() < self.max_sources || self.pending.contains_key(&gid) {
-                *self.pending.entry(gid).or_insert(0) += n;
-            }
-        }
-    }
-
-    /// Of a gap of `missing` samples from `gid`, those that are not intake drops.
-    fn excuse(&mut self, gid: &[u8; 16], missing: u64) -> u64 {
-        let Some(pending) = self.pending.get_mut(gid) else {
-            return missing;
-        };
-        let excused = missing.min(*pending);
-        *pending -= excused;
-        if *pending == 0 {
-            self.pending.remove(gid);
-        }
-        missing - excused
-    }
+    /// Per publisher GID, the samples dropped here since the last take (`Drops`).
+    dropped_by: Drops,
 }
 
 struct Shared {
@@ -172,11 +139,9 @@ impl Shared {
         let mut q = self.queue.lock().unwrap();
         if q.items.len() >= self.max_items || q.bytes + size > self.max_bytes {
             // under the lock: the next sample of this publisher cannot be taken before its drop
-            // is known there (IntakeDrops)
+            // is known there (Drops)
             if let Some(att) = raw.attachment.as_deref().and_then(attachment::parse) {
-                if q.dropped_by.len() < MAX_DROP_SOURCES || q.dropped_by.contains_key(&att.gid) {
-                    *q.dropped_by.entry(att.gid).or_insert(0) += 1;
-                }
+                q.dropped_by.note(&att.gid, att.seq);
             }
             drop(q);
             sub.dropped.fetch_add(1, Ordering::Relaxed);
@@ -233,7 +198,7 @@ struct State {
     programs: HashMap<u32, Arc<Program>>,
     plans: HashMap<String, Arc<Plan>>,
     seqs: SeqTracker,
-    intake_drops: IntakeDrops,
+    intake_drops: Drops,
     keys: HashMap<String, KeyCounts>,
     subs: HashMap<u32, Arc<SubAtomics>>,
     topics: HashMap<u32, String>,
@@ -377,7 +342,7 @@ impl DataPlane {
                     bytes: 0,
                     high_water: 0,
                     woken: false,
-                    dropped_by: HashMap::new(),
+                    dropped_by: Drops::new(MAX_DROP_SOURCES),
                 }),
                 ready: Condvar::new(),
                 max_items,
@@ -396,7 +361,7 @@ impl DataPlane {
                 programs: HashMap::new(),
                 plans: HashMap::new(),
                 seqs: SeqTracker::new(max_sources),
-                intake_drops: IntakeDrops { pending: HashMap::new(), max_sources },
+                intake_drops: Drops::new(max_sources),
                 keys: HashMap::new(),
                 subs: HashMap::new(),
                 topics: HashMap::new(),
@@ -660,7 +625,7 @@ impl DataPlane {
         collect_s: f64,
         busy_rate: f64,
         busy_collect_s: f64,
-    ) -> (Vec<Raw>, HashMap<[u8; 16], u64>) {
+    ) -> (Vec<Raw>, Drops) {
         let busy = busy_rate > 0.0 && self.pace.lock().unwrap().rate >= busy_rate;
         self.shared.busy.store(busy, Ordering::Relaxed);
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s.max(0.0));
@@ -688,7 +653,7 @@ impl DataPlane {
         let raws: Vec<Raw> = q.items.drain(..n).collect();
         let freed: usize = raws.iter().map(Raw::size).sum();
         q.bytes -= freed;
-        let drops = std::mem::take(&mut q.dropped_by);
+        let drops = std::mem::replace(&mut q.dropped_by, Drops::new(MAX_DROP_SOURCES));
         drop(q);
         self.shared.taken.fetch_add(raws.len() as u64, Ordering::Relaxed);
         self.pace.lock().unwrap().note(raws.len());
@@ -698,7 +663,7 @@ impl DataPlane {
     fn process(
         &self,
         raws: Vec<Raw>,
-        drops: HashMap<[u8; 16], u64>,
+        drops: Drops,
         max_value_bytes: usize,
         group_records: u32,
         group_bytes: usize,
@@ -713,7 +678,7 @@ impl DataPlane {
         };
         let mut state = self.state.lock().unwrap();
         if !drops.is_empty() {
-            state.intake_drops.add(drops);
+            state.intake_drops.absorb(drops);
         }
         let mut bodies: Vec<Vec<u8>> = Vec::new();
         for raw in raws {
@@ -730,14 +695,8 @@ impl DataPlane {
                 taken.slow.push(raw); // no or a broken attachment: the Python path says why
                 continue;
             };
-            let seen = match state.seqs.observe(&att.gid, att.seq) {
-                Seen::Gap(missing) => match state.intake_drops.excuse(&att.gid, missing) {
-                    0 => Seen::Next, // every sample skipped was dropped at the intake (counted there)
-                    lost => Seen::Gap(lost),
-                },
-                Seen::LostAtRestart(missing) => Seen::LostAtRestart(state.intake_drops.excuse(&att.gid, missing)),
-                seen => seen,
-            };
+            let seen = state.seqs.observe(&att.gid, att.seq);
+            let seen = state.intake_drops.settle(&att.gid, att.seq, seen); // drops counted at the intake
             let fresh = att.seq >= 0 && !matches!(seen, Seen::Duplicate);
             if !matches!(seen, Seen::First | Seen::Next) {
                 let key = if state.keys.contains_key(&raw.key) { raw.key.as_str() } else { OTHER_KEYS };

@@ -3,6 +3,7 @@
 pub mod attachment;
 pub mod cdr_avro;
 pub mod dataplane;
+pub mod drops;
 pub mod producer;
 pub mod rdkafka;
 pub mod seq;
