@@ -127,13 +127,16 @@ class CallRunner:
         *,
         final: bool,
     ) -> None:
+        at_ms = int(self._clock() * 1000)
+        if status == "timeout":  # a timer may fire a fraction of a ms early: the deadline is what passed
+            at_ms = max(at_ms, env.deadline_ms)
         out = Outcome(
             kind,  # type: ignore[arg-type]
             env.call_id,
             env.robot,
             env.mapping,
             status,
-            int(self._clock() * 1000),
+            at_ms,
             detail,
             payload,
             env.issued_at_ms,
