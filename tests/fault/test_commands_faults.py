@@ -368,7 +368,11 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
                     f"the repeater: {rep.pending_statuses()}"
                 ) from None
             assert set(status.statuses(f"cut-{run}", site="")) <= {"expired"}
-            assert leds.last("tb4_01") == last
+            # nothing after the lease, the heal included (the robot's times are arrival times: a
+            # repeat sent just before the lease ran out may land after ``last`` was read above)
+            after_heal = leds.last("tb4_01")
+            assert after_heal is not None
+            assert after_heal <= sent + lease + 0.3
 
 
 def test_wan_cut_dead_man_stops_a_long_lease_early(
