@@ -4,8 +4,9 @@ publishing real recorded messages on five topics at a steady rate.
 Run by bench/bench_fleet.py: ``fleet_publisher.py --connect EP --first N --robots K --hz F``.
 Declares the robots (node, publishers), prints ``ready``, waits for a line on stdin, publishes
 every topic of every robot at ``--hz`` for ``--seconds`` (the publications evenly spread over
-each period) and one last sample per topic that waits for room instead of being dropped (so a
-sample lost on the way before it is a gap in the sequence numbers at the edge), prints
+each period), the first and the last sample of each topic waiting for room instead of being
+dropped (a sample lost on the way between them is a gap in the sequence numbers at the edge;
+one lost before a publisher's first sample the edge receives would be counted nowhere), prints
 ``done <published> <seconds> <behind>`` (``behind``: publications that left more than one
 period late), then waits for a line before closing the sessions.
 """
@@ -119,7 +120,7 @@ def main() -> int:
             elif -delay > period:
                 behind += 1
             pub, msgs = pubs[n % len(pubs)]
-            pub.publish_cdr(msgs[(n // len(pubs)) % len(msgs)])
+            pub.publish_cdr(msgs[(n // len(pubs)) % len(msgs)], block=n < len(pubs))
             published += 1
         for pub, msgs in pubs:  # a last sample each that is never dropped: any loss before it is a gap
             pub.publish_cdr(msgs[0], block=True)
