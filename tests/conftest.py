@@ -9,6 +9,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+# Property tests judge results, never speed: a per-example deadline or a "too slow" data check
+# measures the machine's load (a loaded run once took 327 ms for an example that takes 0.6 ms)
+settings.register_profile("fleetlink", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("fleetlink")
 
 pytest_plugins = ["tests.fixtures.services"]
 
