@@ -14,7 +14,9 @@ use std::collections::HashMap;
 
 use crate::seq::Seen;
 
-const MAX_RUNS: usize = 32;
+/// Runs kept per publisher: a publisher has one run of drops per stretch the intake was full while
+/// it sent (a few between two takes); at most 65,536 publishers x 8 runs x 16 bytes = 8 MiB.
+const MAX_RUNS: usize = 8;
 
 /// One publisher's dropped sequence numbers: ascending runs `(first, last)`, and a count of
 /// those that did not fit.
