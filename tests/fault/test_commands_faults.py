@@ -343,6 +343,8 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
             cut_at = time.time()
             wait_until(lambda: rep.schedule.link_lost_since is not None, timeout=5, message="link loss seen")
             wait_until(lambda: not rep.schedule.active(), timeout=lease + 3, message="command ended")
+            # the schedule ends a command under the lock the publishes hold: none is under way now
+            publishes = rep.stats.publishes
             during = [t for t, _ in leds.of("tb4_01") if t > cut_at]
             assert len(during) >= 3  # the site kept repeating on its own while the WAN was down
             last = leds.last("tb4_01")
@@ -368,11 +370,9 @@ def test_wan_cut_local_repeats_stop_when_the_lease_runs_out(
                     f"the repeater: {rep.pending_statuses()}"
                 ) from None
             assert set(status.statuses(f"cut-{run}", site="")) <= {"expired"}
-            # nothing after the lease, the heal included (the robot's times are arrival times: a
-            # repeat sent just before the lease ran out may land after ``last`` was read above)
-            after_heal = leds.last("tb4_01")
-            assert after_heal is not None
-            assert after_heal <= sent + lease + 0.3
+            # nothing published after the lease, the heal included (the robot logs arrival times:
+            # a repeat sent just before the lease ran out may land after ``last`` was read above)
+            assert rep.stats.publishes == publishes
 
 
 def test_wan_cut_dead_man_stops_a_long_lease_early(
@@ -403,8 +403,7 @@ def test_wan_cut_dead_man_stops_a_long_lease_early(
             wait_until(lambda: not rep.schedule.active(), timeout=10, message="dead-man ended the command")
             ended_at = time.time()
             assert ended_at - cut_at < 2.0 + 1.0 + 1.5  # dead-man + one heartbeat timeout + slack
-            last = leds.last("tb4_01")
-            assert last is not None
+            publishes = rep.stats.publishes  # (none under way: see the test above)
             site.relay.set_mode("pass")
             wait_until(
                 lambda: distinct(status.statuses(f"dm-{run}")) == ["delivered", "expired"],
@@ -413,4 +412,4 @@ def test_wan_cut_dead_man_stops_a_long_lease_early(
             )
             expired = next(v for v in status.values() if v["status"] == "expired")
             assert expired["detail"].startswith("dead-man: no contact with the uplink")
-            assert leds.last("tb4_01") == last  # stopped for good, though the lease had 50 s left
+            assert rep.stats.publishes == publishes  # stopped for good, though the lease had 50 s left
