@@ -15,13 +15,16 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 
+# the native extension (native/) is built by pip install: a change to its sources installs again
+NATIVE := native/Cargo.toml native/Cargo.lock $(wildcard native/src/*.rs)
+
 # the demo needs fleetlink with its demo extra (the stream app, the console); the checks need the dev
 # extra (the demo's and the test tools); an edge device needs neither: `pip install fleetlink`
-$(DEMO_STAMP): pyproject.toml | $(BIN)/python
+$(DEMO_STAMP): pyproject.toml $(NATIVE) | $(BIN)/python
 	$(BIN)/pip install --quiet -e '.[demo]'
 	@touch $(DEMO_STAMP)
 
-$(STAMP): pyproject.toml | $(BIN)/python
+$(STAMP): pyproject.toml $(NATIVE) | $(BIN)/python
 	$(BIN)/pip install --quiet -e '.[dev]'
 	@touch $(STAMP) $(DEMO_STAMP)
 
