@@ -117,7 +117,12 @@ def test_row48_store_refusing_dead_letters_with_the_image_and_the_next_flows(
         with EdgeAgent(config) as agent, camera_robot(router.endpoint, "cam_12") as camera:
             shutil.rmtree(bucket_dir)  # the store now answers 404 NoSuchBucket: a refusal
             camera.publish_cdr(image_cdr(320, 240, seed=1))
-            wait_until(lambda: claims(agent)["failed"] == 1, 20, message="the refusal")
+            try:
+                wait_until(lambda: claims(agent)["failed"] == 1, 20, message="the refusal")
+            except AssertionError as exc:  # say where the image stopped: intake, claims, store
+                snap = agent.snapshot()
+                seen = {k: snap.get(k) for k in ("intake", "subscriptions", "claims", "objects")}
+                raise AssertionError(f"{exc}; the edge: {seen}") from None
             with ObjectStore(store.section()) as s3:
                 s3.ensure_bucket()
             camera.publish_cdr(image_cdr(320, 240, seed=2))
