@@ -163,11 +163,17 @@ def wait_spooled_and_acked(
     try:
         wait_until(done, timeout, interval=0.1, message=f"{records} records spooled and acknowledged")
     except AssertionError as exc:
-        snap = agent.snapshot()
-        brief = {k: snap.get(k) for k in ("intake", "processor", "streams", "subscriptions")}
-        raise AssertionError(f"{exc}; edge: {json.dumps(brief, default=str)}") from None
+        raise AssertionError(f"{exc}; edge: {edge_brief(agent)}") from None
     sender = agent.snapshot()["streams"][stream_name]["sender"]
     assert sender["records_dead_lettered"] == uplink_dead_letters, sender
+
+
+def edge_brief(agent: EdgeAgent, *extra: str) -> str:
+    """The edge's counters along the data path (and ``extra`` snapshot keys), as JSON: what a
+    test that waited in vain prints to say where the records stopped."""
+    snap = agent.snapshot()
+    keys = ("intake", "processor", "streams", "subscriptions", *extra)
+    return json.dumps({k: snap.get(k) for k in keys}, default=str)
 
 
 def wait_received(agent: EdgeAgent, samples: int, timeout: float) -> None:

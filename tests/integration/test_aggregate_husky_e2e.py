@@ -22,7 +22,7 @@ from fleetlink.edge.agent import EdgeAgent
 from fleetlink.roswire.node import RosNode
 from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
-from tests.integration.e2e_stack import HUSKY, TopicReader, cloud, edge_config, site, unique_site
+from tests.integration.e2e_stack import HUSKY, TopicReader, cloud, edge_brief, edge_config, site, unique_site
 
 IMU = "sensor_msgs/msg/Imu"
 S = 1_000_000_000
@@ -128,7 +128,10 @@ def test_imu_aggregates_in_kafka_equal_numpy_over_the_bag(
             for stamp, raw in messages:
                 publisher.publish_cdr(raw, source_ts_ns=stamp)
             # the last window closes on the idle timeout (processing time) after the last sample
-            msgs = TopicReader(kafka_bootstrap, schema_registry_url).read(topic, len(want), timeout=40)
+            try:
+                msgs = TopicReader(kafka_bootstrap, schema_registry_url).read(topic, len(want), timeout=40)
+            except AssertionError as exc:  # say where the windows stopped: stage, spool, WAN
+                raise AssertionError(f"{exc}; edge: {edge_brief(agent, 'stages')}") from None
             stages = agent.snapshot()["stages"]["imu_1s"]["aggregate"]
     assert len(msgs) == len(want)  # and nothing followed the expected windows
     assert stages["received"] == len(messages)
