@@ -28,10 +28,11 @@ import zenoh
 
 from fleetlink.common.objects import ObjectStore, ObjectStoreError
 from fleetlink.common.zenoh_options import ZenohOptions
-from fleetlink.edge.config import EdgeConfig
+from fleetlink.edge.config import EARLY_MAX_BYTES, EARLY_MAX_SAMPLES, EdgeConfig
 from fleetlink.edge.errors import MappingError
 from fleetlink.edge.mapping import Delivery, MappingSpec, MappingTable
 from fleetlink.edge.runtime.dataplane import NativeSource, python_config_json
+from fleetlink.edge.runtime.early import EarlySamples
 from fleetlink.edge.runtime.errors import RuntimeSetupError
 from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.limits import RecordLimit
@@ -212,6 +213,7 @@ class EdgeAgent:
             max_record_bytes=limit.value,
             oversize=config.wan.oversize,
             object_prefix=config.objects.prefix if config.objects is not None else "",
+            awaits_robot=self.table.awaits_robot,
         )
         session_config = edge_session_config(self.zenoh_options)
         plane_config = python_config_json(session_config)
@@ -248,6 +250,10 @@ class EdgeAgent:
             for delivery, buffer in buffers.items()
         }
         senders = self._senders
+        early = EarlySamples(
+            config.registration.hold, max_samples=EARLY_MAX_SAMPLES, max_bytes=EARLY_MAX_BYTES
+        )
+        source.waiting = early.waiting
         self._processor = Processor(
             self.intake,
             self._maker,
@@ -256,6 +262,7 @@ class EdgeAgent:
             source=source,
             table_version=lambda: self.table.version,
             default_linger_s=options.linger_s,
+            early=early,
         )
         if config.objects is not None:
             self._start_offloader(self._processor)

@@ -188,6 +188,10 @@ class RegistrationSection(Section):
     """Register robots found in the ROS graph whose namespace matches a robot type."""
     grace_period: DurationNs = 5 * _NS
     """How long a robot may be gone (liveliness lost) before it is deregistered."""
+    hold: DurationNs = 2 * _NS
+    """How long samples that come before their robot's registration wait for it (a robot that
+    publishes at once can outrun its discovery); those whose robot has not registered by then
+    are counted as unmapped. 0: not held (counted as unmapped at once)."""
 
 
 class SpoolSection(Section):
@@ -240,6 +244,10 @@ class MemorySection(Section):
 BASE_RSS = 256 << 20
 """The edge process with nothing held (measured 170-200 MB with 1,000 subscriptions and the
 standard type store; rounded up)."""
+EARLY_MAX_SAMPLES = 16_384
+"""Samples that may wait for their robot's registration at once (``registration.hold``)."""
+EARLY_MAX_BYTES = 16 << 20
+"""Payload bytes that may wait for their robot's registration at once."""
 
 
 class IntakeSection(Section):
@@ -345,11 +353,13 @@ class EdgeConfig(Section):
         """The edge's resident memory at most, in bytes, whatever the backlog: the base process
         (interpreter, libraries, type store, Zenoh sessions), the intake (samples plus the
         bookkeeping of each), the spool's frames kept in memory, the memory buffer, the WAN
-        batches in flight (raw and compressed) and the group being built."""
+        batches in flight (raw and compressed) and the group being built, and the samples that
+        wait for their robot's registration."""
         recent = min(32 << 20, int(self.spool.max_bytes))
         intake = int(self.intake.max_bytes) + self.intake.max_samples * 160
         wan = self.wan.max_in_flight * 2 * int(self.wan.batch_max_bytes) + 2 * int(self.wan.batch_max_bytes)
-        return BASE_RSS + intake + recent + int(self.memory.max_bytes) + wan
+        early = EARLY_MAX_BYTES + EARLY_MAX_SAMPLES * 160 if self.registration.hold else 0
+        return BASE_RSS + intake + recent + int(self.memory.max_bytes) + wan + early
 
     @model_validator(mode="after")
     def _unique_names(self) -> EdgeConfig:

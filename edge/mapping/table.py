@@ -279,6 +279,19 @@ class MappingTable:
                 return spec.name
         return None
 
+    def awaits_robot(self, topic: str) -> bool:
+        """Whether a robot type's mapping would take ``topic`` once its robot registers: the topic
+        matches one of the type's source patterns, the captured robot matches that type's
+        ``match`` glob first, and that robot is not registered yet."""
+        with self._lock:
+            for kind, templates in self._templates.items():
+                for compiled in templates.values():
+                    captures = compiled.pattern.match(topic)
+                    robot = None if captures is None else captures.get("robot")
+                    if robot and robot not in self._robots and self.robot_type_for(robot) == kind:
+                        return True
+            return False
+
     def add_robot(self, robot: str, robot_type: str | None = None) -> tuple[str, ...]:
         """Register a robot (its type from ``robot_type`` or else from the ``match`` globs) and
         instantiate its type's mappings; returns their names. Re-registering is idempotent."""

@@ -24,7 +24,7 @@ import json
 import logging
 import os
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -183,6 +183,8 @@ class NativeSource:
         self._acceptor = SampleAcceptor(track_sequences=False)  # the sequences are followed natively
         self._rejected: dict[str, int] = {}  # topic -> samples refused on the general path
         self._unmapped: dict[str, int] = {}  # topic -> samples no mapping took on the general path
+        self.waiting: Callable[[], Mapping[str, int]] = dict
+        """Topic -> samples waiting for their robot's registration (``edge.runtime.early``)."""
         self._topics: dict[str, str] = {}  # data key -> topic (parsed once)
         self._programs: dict[int, int] = {}  # id(codec) -> program id
         self._codecs: list[Codec] = []  # keeps the codecs (and so their ids) alive
@@ -354,8 +356,8 @@ class NativeSource:
 
     def topic_stats(self) -> dict[str, dict[str, int]]:
         """Per ROS topic that sent anything: samples taken, refused, unmapped (no mapping took them:
-        no record), and what the publishers' sequence numbers say (gaps, missing: lost before the
-        edge saw them; duplicates)."""
+        no record), waiting (for their robot's registration), and what the publishers' sequence
+        numbers say (gaps, missing: lost before the edge saw them; duplicates)."""
         out: dict[str, dict[str, int]] = {}
         names = ("received", "gaps", "missing", "duplicates", "lost_at_restart", "unmapped")
         for key, counts in self.plane.key_stats().items():
@@ -363,11 +365,13 @@ class NativeSource:
             entry = out.setdefault(topic, dict.fromkeys(names, 0))
             for name, value in zip(names, counts, strict=True):
                 entry[name] += value
+        waiting = self.waiting()
         for entry_topic, entry in out.items():
             rejected = self._rejected.get(entry_topic, 0)
             entry["rejected"] = rejected
             entry["unmapped"] += self._unmapped.get(entry_topic, 0)
-            entry["delivered"] = entry["received"] - rejected - entry["unmapped"]
+            entry["waiting"] = waiting.get(entry_topic, 0)
+            entry["delivered"] = entry["received"] - rejected - entry["unmapped"] - entry["waiting"]
         return out
 
 

@@ -13,6 +13,10 @@ Each chunk's publisher marks (the last sequence number of every publisher whose 
 go to the ``at_least_once`` buffer just before its last append of the chunk, so the durable spool
 writes them with those records (``edge.spool.marks``): after a crash they say exactly which
 samples reached the spool.
+
+A sample that comes before its robot's registration (``early``) waits for it, holding back its
+publisher's mark as a claim-checked record does until its upload: made into records when the
+robot registers, counted as unmapped when it does not in time.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from fleetlink.common.ratelimit import LogLimiter
 from fleetlink.edge.claim_check import Claimed, ClaimJob
 from fleetlink.edge.errors import SpoolError, SpoolFullError
 from fleetlink.edge.mapping import Delivery
+from fleetlink.edge.runtime.early import EarlySamples
 from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
 from fleetlink.edge.runtime.records import RecordMaker
@@ -147,12 +152,17 @@ class Processor:
         chunk: int = 512,
         clock_ns: Callable[[], int] = time.time_ns,
         uploader: Uploader | None = None,
+        early: EarlySamples | None = None,
     ) -> None:
         self.intake = intake
+        self.early = early
+        """Samples waiting for their robot's registration (None: not held, counted as unmapped)."""
+        self._early_version: int | None = None
         self.maker = maker
         self.uploader = uploader
         self._held: dict[bytes, list[int]] = {}
-        """Publisher GID -> sequence numbers of its samples whose records wait for an upload."""
+        """Publisher GID -> sequence numbers of its samples whose records wait: for an upload, or
+        for their robot's registration."""
         self._held_jobs: dict[int, tuple[bytes, int]] = {}
         self._released: list[tuple[bytes, int]] = []
         """Where claim-checked payloads go; without one they are dead-lettered."""
@@ -211,7 +221,14 @@ class Processor:
                 "rejected_samples": self.maker.rejected,
                 "oversized": self.maker.oversized,
                 "claims": dataclasses.asdict(self.maker.claim_stats),
+                "early": self._early_counters(),
             }
+
+    def _early_counters(self) -> dict[str, int]:
+        early = self.early
+        if early is None:
+            return {}
+        return {**dataclasses.asdict(early.stats), "waiting": len(early), "waiting_bytes": early.bytes}
 
     # -- the loop --------------------------------------------------------------------------------
     def _run(self) -> None:
@@ -230,9 +247,11 @@ class Processor:
                 self.lag_ns = max(0, now - taken.oldest_received_ns)
             try:
                 with self._lock:
+                    version = self._table_version()
                     if self.source is not None:
-                        self.source.sync(self._table_version())
-                    out = self._records(items, now)
+                        self.source.sync(version)
+                    out = self._early_ones(version, now)
+                    out.extend(self._records(items, now))
                     if taken.samples:
                         out.extend(self._records(taken.samples, now))
                         if self.source is not None:
@@ -266,6 +285,8 @@ class Processor:
         for item in items:
             if isinstance(item, RosSample):
                 self.stats.samples += 1
+                if self.early is not None and self._waits(item, now_ns, out):
+                    continue
                 extend(make(item, now_ns))
             elif isinstance(item, Rejected):
                 out.extend(self.maker.rejected_sample(item.topic, item.error, item.received_ns))
@@ -278,6 +299,65 @@ class Processor:
                 source = item if isinstance(item, RosSample) else None
                 out.extend(self._hand_over(self.maker.drain_claims(), source))
         return out
+
+    def _waits(self, sample: RosSample, now_ns: int, out: list[Outgoing]) -> bool:
+        """Whether ``sample`` waits for its robot's registration (``self.early``: no mapping takes
+        it yet, one will once its robot registers). When its robot registered since samples of its
+        topic began to wait, those are made into records first (into ``out``), in order."""
+        early = self.early
+        assert early is not None
+        topic = sample.topic
+        if early.holds(topic):
+            if self.maker.takes(topic):
+                self._let_go(early.release(topic), now_ns, out)
+                return False
+        elif not self.maker.waits_for_robot(sample):
+            return False
+        if not early.add(sample, now_ns):
+            return False  # the hold is full (or given up on this topic): counted as unmapped
+        if sample.gid is not None and sample.seq is not None:
+            self._held.setdefault(sample.gid, []).append(sample.seq)
+        return True
+
+    def _early_ones(self, table_version: int, now_ns: int) -> list[Outgoing]:
+        """The records of the samples whose robot registered; those that waited too long given up."""
+        early = self.early
+        out: list[Outgoing] = []
+        if early is None:
+            return out
+        if table_version != self._early_version:
+            self._early_version = table_version
+            early.retry()  # topics given up on may have a robot now
+        if not len(early):
+            return out
+        for topic in early.topics():
+            if self.maker.takes(topic):
+                self._let_go(early.release(topic), now_ns, out)
+        for sample in early.expired(now_ns):
+            self._unhold(sample)
+            self.maker.count_unmapped(sample.topic)
+        return out
+
+    def _let_go(self, samples: Sequence[RosSample], now_ns: int, out: list[Outgoing]) -> None:
+        for sample in samples:
+            self._unhold(sample)
+            out.extend(self.maker.make(sample, now_ns))
+            if self.maker.claims:
+                out.extend(self._hand_over(self.maker.drain_claims(), sample))
+
+    def _unhold(self, sample: RosSample) -> None:
+        """A sample that waited leaves the hold: its mark may go with this chunk's."""
+        if sample.gid is not None and sample.seq is not None:
+            self._free_mark(sample.gid, sample.seq)
+
+    def _free_mark(self, gid: bytes, seq: int) -> None:
+        """The record of ``seq`` (held back) enters the spool now: its mark goes with the chunk's."""
+        seqs = self._held.get(gid)
+        if seqs is not None and seq in seqs:
+            seqs.remove(seq)
+            if not seqs:
+                del self._held[gid]
+        self._released.append((gid, seq))
 
     def _hand_over(self, jobs: Sequence[ClaimJob], source: RosSample | None = None) -> list[Outgoing]:
         """Give claim jobs to the uploader; the records of those finished at once. A job that
@@ -299,15 +379,8 @@ class Processor:
     def _release(self, job: ClaimJob) -> None:
         """A held job came back: its record enters the spool now, and with it its mark."""
         held = self._held_jobs.pop(id(job), None)
-        if held is None:
-            return
-        gid, seq = held
-        seqs = self._held.get(gid)
-        if seqs is not None:
-            seqs.remove(seq)
-            if not seqs:
-                del self._held[gid]
-        self._released.append(held)
+        if held is not None:
+            self._free_mark(*held)
 
     def _marks(self, items: Sequence[Item], taken: Taken) -> bytes:
         """The chunk's marks block (``_marks_of``), with those of the claim-checked records it

@@ -183,10 +183,13 @@ class RecordMaker:
         max_record_bytes: int = DEFAULT_MAX_RECORD_BYTES,
         oversize: Oversize = "dead_letter",
         object_prefix: str = "",
+        awaits_robot: Callable[[str], bool] | None = None,
     ) -> None:
         self.site = site
         self.edge_id = edge_id
         self._match = match
+        self._awaits_robot = awaits_robot
+        """Whether a topic no mapping takes will be taken once its robot registers."""
         self._types = types
         self.dead_letter_topic = dead_letter_topic
         self.max_value_bytes = max_value_bytes
@@ -232,7 +235,7 @@ class RecordMaker:
         if plan is None or plan.bounds is not bounds or plan.topic != sample.topic:
             plan = self._plan(sample, bounds)
         if not bounds:  # no mapping takes it (its robot is not registered, or not yet): counted
-            self.unmapped[sample.topic] = self.unmapped.get(sample.topic, 0) + 1
+            self.count_unmapped(sample.topic)
             return []
         if plan.lanes is not None:
             return run_plan(plan, sample, self.fast_value_limit, self._one, now_ns)
@@ -245,6 +248,23 @@ class RecordMaker:
                 continue
             self._one(bound, sample, now_ns, out)
         return out
+
+    def takes(self, topic: str) -> bool:
+        """Whether a mapping takes ``topic`` now."""
+        return bool(self._match(topic))
+
+    def waits_for_robot(self, sample: RosSample) -> bool:
+        """Whether no mapping takes ``sample``'s topic yet but one will once its robot registers
+        (``edge.runtime.early``). Its data key then keeps coming to the general path: no plan
+        that drops it natively is made for it meanwhile."""
+        if self._awaits_robot is None or self._match(sample.topic) or not self._awaits_robot(sample.topic):
+            return False
+        self._plans[sample.key] = FastPlan(sample.topic, (), None)
+        return True
+
+    def count_unmapped(self, topic: str) -> None:
+        """A sample of ``topic`` that no mapping took: no record, counted."""
+        self.unmapped[topic] = self.unmapped.get(topic, 0) + 1
 
     def _plan(self, sample: RosSample, bounds: Sequence[BoundMapping]) -> FastPlan:
         """The fast lanes of ``sample``'s (topic, type, hash), when every mapping allows them."""

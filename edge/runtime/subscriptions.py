@@ -235,6 +235,7 @@ class SubscriptionManager:
                 "delivered",
                 "rejected",
                 "unmapped",
+                "waiting",
                 "gaps",
                 "missing",
                 "duplicates",

@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 import uuid
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,7 @@ from fleetlink.edge.admin.telemetry import EdgeTelemetry
 from fleetlink.edge.agent import EdgeAgent
 from fleetlink.roswire import cdr
 from fleetlink.roswire.node import RosNode
+from fleetlink.roswire.publisher import RosPublisher
 from fleetlink.schemas.typestore import load_typestore
 from tests.helpers import wait_until, zenoh_peer_config
 from tests.integration.e2e_stack import (
@@ -210,27 +212,22 @@ def test_many_to_many(cloud_: Cloud, reader: TopicReader, tmp_path: Path) -> Non
                 assert same(reader.value(msg), avro_shaped(ts, ts.deserialize_cdr(raw, kind), kind))
 
 
-def test_samples_no_mapping_takes_are_counted_not_lost_silently(cloud_: Cloud, tmp_path: Path) -> None:
-    """A robot whose samples arrive while it is not registered (here registration is explicit and
-    it never registers; after an edge restart, before discovery finds it again) makes no record:
-    each of its samples is counted as ``unmapped`` on its topic, the general path's first and the
-    data plane's after it alike, and none is reported delivered."""
-    robot_types = {
-        "tb4": {
-            "match": "/tb4_*",
-            "mappings": [
-                {"name": "chatter", "from": "/{robot}/chatter", "to": "fleet.chatter", "type": STRING}
-            ],
-        }
-    }
+@contextmanager
+def unregistered_talker(
+    cloud_: Cloud, tmp_path: Path, hold: str, topic: str = "fleet.chatter"
+) -> Iterator[tuple[EdgeAgent, RosPublisher]]:
+    """An edge whose robots register only explicitly (``registration.hold``: ``hold``; robot type
+    ``tb4`` maps ``/{robot}/chatter`` to ``topic``), and robot tb4_07 publishing
+    ``/tb4_07/chatter``, not registered."""
+    chat = {"name": "chatter", "from": "/{robot}/chatter", "to": topic, "type": STRING}
     with site(cloud_) as router:
         config = edge_config(
             tmp_path / "spool",
             router.endpoint,
             cloud_,
             site=unique_site(),
-            robot_types=robot_types,
-            registration={"discover": False, "grace_period": "1s"},
+            robot_types={"tb4": {"match": "/tb4_*", "mappings": [chat]}},
+            registration={"discover": False, "grace_period": "1s", "hold": hold},
         )
         robot = RosNode(
             "talker", "/tb4_07", config=zenoh_peer_config(router.endpoint), typestore=load_typestore("jazzy")
@@ -238,17 +235,67 @@ def test_samples_no_mapping_takes_are_counted_not_lost_silently(cloud_: Cloud, t
         with EdgeAgent(config) as agent, robot as node:
             publisher = node.create_publisher("/tb4_07/chatter", STRING, congestion="block")
             wait_until(publisher.has_subscribers, 10, message="the edge receives /tb4_*/chatter")
-            for i in range(200):
-                publisher.publish_cdr(cdr.encode_string(f"tb4_07:{i}"))
+            yield agent, publisher
 
-            def chatter() -> dict[str, int]:
-                counters: dict[str, int] = agent.snapshot()["subscriptions"].get("/tb4_07/chatter", {})
-                return counters
 
-            wait_until(lambda: chatter().get("received") == 200, 20, message="the 200 samples taken")
-            counters = chatter()
-            assert "tb4_07" not in agent.snapshot().get("robots", {})
-            metrics = MetricsRecorder()
-            EdgeTelemetry(metrics).observe(snapshot_from_agent(agent.snapshot(), config), robots=0)
-            assert metrics.value("fleetlink_unmapped_samples", topic="/tb4_07/chatter") == 200
-    assert (counters["unmapped"], counters["delivered"], counters["missing"]) == (200, 0, 0), counters
+def chatter(agent: EdgeAgent) -> dict[str, int]:
+    counters: dict[str, int] = agent.snapshot()["subscriptions"].get("/tb4_07/chatter", {})
+    return counters
+
+
+def test_samples_no_mapping_takes_are_counted_not_lost_silently(cloud_: Cloud, tmp_path: Path) -> None:
+    """A robot whose samples arrive while it is not registered (here registration is explicit and
+    it never registers) makes no record: its samples wait ``registration.hold`` for it, then each
+    is counted as ``unmapped`` on its topic, the general path's and the data plane's alike, and
+    none is reported delivered."""
+    with unregistered_talker(cloud_, tmp_path, hold="1s") as (agent, publisher):
+        for i in range(100):
+            publisher.publish_cdr(cdr.encode_string(f"tb4_07:{i}"))
+        wait_until(lambda: chatter(agent).get("received") == 100, 20, message="the 100 samples taken")
+        wait_until(lambda: chatter(agent)["unmapped"] == 100, 10, message="given up after the hold")
+        for i in range(100, 200):  # the topic was given up: not held again, counted at once
+            publisher.publish_cdr(cdr.encode_string(f"tb4_07:{i}"))
+        wait_until(lambda: chatter(agent).get("received") == 200, 20, message="the 200 samples taken")
+        counters = chatter(agent)
+        snap = agent.snapshot()
+        assert "tb4_07" not in snap.get("robots", {})
+        assert snap["early"]["held"] == snap["early"]["expired"] == 100
+        metrics = MetricsRecorder()
+        EdgeTelemetry(metrics).observe(snapshot_from_agent(snap, agent.config), robots=0)
+        assert metrics.value("fleetlink_unmapped_samples", topic="/tb4_07/chatter") == 200
+    assert (counters["unmapped"], counters["waiting"], counters["delivered"], counters["missing"]) == (
+        200,
+        0,
+        0,
+        0,
+    ), counters
+
+
+def test_samples_before_their_robots_registration_reach_kafka_in_order(
+    cloud_: Cloud, reader: TopicReader, tmp_path: Path
+) -> None:
+    """A robot that publishes before its registration (discovery trails a robot that starts at
+    once; here it registers explicitly, late): its first samples wait for the registration and
+    reach Kafka first, in order, none lost, none counted as unmapped."""
+    topic = f"fleet.chatter.{uuid.uuid4().hex[:8]}"
+    with unregistered_talker(cloud_, tmp_path, hold="30s", topic=topic) as (agent, publisher):
+        for i in range(50):
+            publisher.publish_cdr(cdr.encode_string(f"tb4_07:{i}"))
+        wait_until(lambda: chatter(agent).get("waiting") == 50, 20, message="50 samples waiting")
+        assert agent.snapshot()["streams"]["durable"]["buffer"]["appended"] == 0
+        agent.register_robot("tb4", "tb4_07")  # as a message on /fleetlink/register does
+        for i in range(50, 80):
+            publisher.publish_cdr(cdr.encode_string(f"tb4_07:{i}"))
+        wait_spooled_and_acked(agent, 80 + 1, 20)  # and the registration event
+        counters = chatter(agent)
+        early = agent.snapshot()["early"]
+    mine = reader.read(topic, 80)
+    assert [reader.value(m)["data"] for m in mine] == [f"tb4_07:{i}" for i in range(80)]
+    assert seqs(mine) == list(range(1, 81))
+    assert (counters["received"], counters["delivered"], counters["unmapped"], counters["waiting"]) == (
+        80,
+        80,
+        0,
+        0,
+    )
+    assert (early["held"], early["released"], early["expired"]) == (50, 50, 0)

@@ -283,3 +283,14 @@ def test_match_is_fast_with_many_robots() -> None:
     assert all(len(m) >= 1 for m in first)
     assert [t.match(topic) for topic in topics] == first
     assert all(a is b for a, b in zip(first, [t.match(topic) for topic in topics], strict=True))
+
+
+def test_a_topic_awaits_its_robot_only_where_a_robot_type_would_take_it() -> None:
+    t = table()
+    assert t.awaits_robot("/tb4_01/ir_intensity")  # tb4_01 matches /tb4_* and is not registered
+    assert t.awaits_robot("/c3_02/odom")
+    assert not t.awaits_robot("/c3_02/ir_intensity")  # c3 robots have no such mapping
+    assert not t.awaits_robot("/other_1/ir_intensity")  # no robot type matches other_1
+    assert not t.awaits_robot("/map")
+    t.add_robot("tb4_01")
+    assert not t.awaits_robot("/tb4_01/ir_intensity")  # registered: a mapping takes it now

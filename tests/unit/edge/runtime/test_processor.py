@@ -10,7 +10,8 @@ import pytest
 
 from fleetlink.edge.claim_check import Claimed, ClaimJob
 from fleetlink.edge.errors import SpoolFullError
-from fleetlink.edge.mapping import MappingSpec, MappingTable
+from fleetlink.edge.mapping import MappingSpec, MappingTable, RobotTypeSpec
+from fleetlink.edge.runtime.early import EarlySamples
 from fleetlink.edge.runtime.intake import Intake
 from fleetlink.edge.runtime.outgoing import Outgoing
 from fleetlink.edge.runtime.processor import Emit, Item, Processor, Rejected, Taken
@@ -322,3 +323,75 @@ def test_a_group_above_the_buffer_limit_is_refused_alone_and_counted() -> None:
     assert batch is not None
     assert [g.records for g in batch.groups] == [1, 1]
     assert processor.stats.errors == 0
+
+
+def early_processor(hold_s: float) -> tuple[Processor, MappingTable, CallLog, Intake[Item], RecordMaker]:
+    """A processor over a table whose robot type ``tb4`` maps ``/{robot}/chat``, no robot registered."""
+    table = MappingTable(
+        [
+            RobotTypeSpec(
+                name="tb4",
+                match="/tb4_*",
+                mappings=(MappingSpec(name="chat", source="/{robot}/chat", topic="fleet.chat"),),
+            )
+        ]
+    )
+    made = RecordMaker(
+        site="s",
+        edge_id="e",
+        match=table.match,
+        types=codecs(),
+        dead_letter_topic="dlq",
+        awaits_robot=table.awaits_robot,
+    )
+    durable = CallLog("durable")
+    intake: Intake[Item] = Intake()
+    processor = Processor(
+        intake,
+        made,
+        {"at_least_once": durable, "best_effort": CallLog("memory")},
+        table_version=lambda: table.version,
+        early=EarlySamples(int(hold_s * 1e9), max_samples=100, max_bytes=1 << 20),
+    )
+    return processor, table, durable, intake, made
+
+
+def early_counts(processor: Processor) -> dict[str, int]:
+    counts = processor.counters()["early"]
+    assert isinstance(counts, dict)
+    return counts
+
+
+def test_samples_before_their_robots_registration_wait_for_it_in_order() -> None:
+    processor, table, durable, intake, made = early_processor(hold_s=30)
+    with processor:
+        for seq, text in enumerate(("a", "b", "c"), start=1):
+            intake.offer(string_sample("/tb4_01/chat", text, seq)._replace(gid=G1))
+        wait_until(lambda: processor.stats.samples == 3, 5)
+        wait_until(lambda: early_counts(processor)["waiting"] == 3, 5)
+        assert durable.calls == [("marks", [(G1, 0)])]  # no record, and no mark past those that wait
+        table.add_robot("tb4_01")
+        wait_until(lambda: processor.stats.appended == 3, 5)
+        intake.offer(string_sample("/tb4_01/chat", "d", 4)._replace(gid=G1))
+        wait_until(lambda: processor.stats.appended == 4, 5)
+    batch = durable.read_unacked(100, 1 << 20)
+    assert batch is not None
+    assert [decode_payload(r.payload).value[-1:] for r in batch.records] == [b"a", b"b", b"c", b"d"]
+    assert ("marks", [(G1, 3)]) in durable.calls
+    assert made.unmapped == {}
+    early = early_counts(processor)
+    assert (early["held"], early["released"], early["expired"], early["waiting"]) == (3, 3, 0, 0)
+
+
+def test_samples_whose_robot_never_registers_are_given_up_and_counted_unmapped() -> None:
+    processor, _table, durable, intake, made = early_processor(hold_s=0.3)
+    with processor:
+        for seq in (1, 2):
+            intake.offer(string_sample("/tb4_01/chat", "x", seq)._replace(gid=G1))
+        wait_until(lambda: made.unmapped.get("/tb4_01/chat") == 2, 5)
+        intake.offer(string_sample("/tb4_01/chat", "y", 3)._replace(gid=G1))  # the topic was given up
+        wait_until(lambda: made.unmapped.get("/tb4_01/chat") == 3, 5)
+        wait_until(lambda: ("marks", [(G1, 3)]) in durable.calls, 5)  # counted: the marks move on
+    assert processor.stats.appended == 0
+    early = early_counts(processor)
+    assert (early["held"], early["released"], early["expired"], early["waiting"]) == (2, 0, 2, 0)
