@@ -315,6 +315,7 @@ class Processor:
             return False
         if not early.add(sample, now_ns):
             return False  # the hold is full (or given up on this topic): counted as unmapped
+        self.maker.keep_general(sample)
         if sample.gid is not None and sample.seq is not None:
             self._held.setdefault(sample.gid, []).append(sample.seq)
         return True

@@ -236,6 +236,8 @@ class RecordMaker:
             plan = self._plan(sample, bounds)
         if not bounds:  # no mapping takes it (its robot is not registered, or not yet): counted
             self.count_unmapped(sample.topic)
+            if plan.lanes is None:  # kept on the general path while samples waited: dropped natively now
+                self._plan(sample, bounds)
             return []
         if plan.lanes is not None:
             return run_plan(plan, sample, self.fast_value_limit, self._one, now_ns)
@@ -255,12 +257,17 @@ class RecordMaker:
 
     def waits_for_robot(self, sample: RosSample) -> bool:
         """Whether no mapping takes ``sample``'s topic yet but one will once its robot registers
-        (``edge.runtime.early``). Its data key then keeps coming to the general path: no plan
-        that drops it natively is made for it meanwhile."""
-        if self._awaits_robot is None or self._match(sample.topic) or not self._awaits_robot(sample.topic):
-            return False
+        (``edge.runtime.early``)."""
+        return bool(
+            self._awaits_robot is not None
+            and not self._match(sample.topic)
+            and self._awaits_robot(sample.topic)
+        )
+
+    def keep_general(self, sample: RosSample) -> None:
+        """Samples of ``sample``'s data key keep coming to the general path (one waits for its
+        robot): no plan that drops them natively is made for it meanwhile."""
         self._plans[sample.key] = FastPlan(sample.topic, (), None)
-        return True
 
     def count_unmapped(self, topic: str) -> None:
         """A sample of ``topic`` that no mapping took: no record, counted."""

@@ -393,5 +393,8 @@ def test_samples_whose_robot_never_registers_are_given_up_and_counted_unmapped()
         wait_until(lambda: made.unmapped.get("/tb4_01/chat") == 3, 5)
         wait_until(lambda: ("marks", [(G1, 3)]) in durable.calls, 5)  # counted: the marks move on
     assert processor.stats.appended == 0
+    plan = made.plan_for("k")  # the data key the samples came on: dropped natively from now on
+    assert plan is not None
+    assert plan.lanes == ()
     early = early_counts(processor)
     assert (early["held"], early["released"], early["expired"], early["waiting"]) == (2, 0, 2, 0)
