@@ -188,7 +188,7 @@ class RegistrationSection(Section):
     """Register robots found in the ROS graph whose namespace matches a robot type."""
     grace_period: DurationNs = 5 * _NS
     """How long a robot may be gone (liveliness lost) before it is deregistered."""
-    hold: DurationNs = 2 * _NS
+    hold: DurationNs = 5 * _NS
     """How long samples that come before their robot's registration wait for it (a robot that
     publishes at once can outrun its discovery); those whose robot has not registered by then
     are counted as unmapped. 0: not held (counted as unmapped at once)."""
