@@ -21,10 +21,12 @@ robot registers, counted as unmapped when it does not in time.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Protocol
@@ -160,9 +162,9 @@ class Processor:
         self._early_version: int | None = None
         self.maker = maker
         self.uploader = uploader
-        self._held: dict[bytes, list[int]] = {}
+        self._held: dict[bytes, deque[int]] = {}
         """Publisher GID -> sequence numbers of its samples whose records wait: for an upload, or
-        for their robot's registration."""
+        for their robot's registration (in arrival order: the first usually leaves first)."""
         self._held_jobs: dict[int, tuple[bytes, int]] = {}
         self._released: list[tuple[bytes, int]] = []
         """Where claim-checked payloads go; without one they are dead-lettered."""
@@ -317,7 +319,7 @@ class Processor:
             return False  # the hold is full (or given up on this topic): counted as unmapped
         self.maker.keep_general(sample)
         if sample.gid is not None and sample.seq is not None:
-            self._held.setdefault(sample.gid, []).append(sample.seq)
+            self._held.setdefault(sample.gid, deque()).append(sample.seq)
         return True
 
     def _early_ones(self, table_version: int, now_ns: int) -> list[Outgoing]:
@@ -354,8 +356,9 @@ class Processor:
     def _free_mark(self, gid: bytes, seq: int) -> None:
         """The record of ``seq`` (held back) enters the spool now: its mark goes with the chunk's."""
         seqs = self._held.get(gid)
-        if seqs is not None and seq in seqs:
-            seqs.remove(seq)
+        if seqs is not None:
+            with contextlib.suppress(ValueError):
+                seqs.remove(seq)  # at once when it is the first (a deque: no shifting)
             if not seqs:
                 del self._held[gid]
         self._released.append((gid, seq))
@@ -374,7 +377,7 @@ class Processor:
                 out.extend(self.maker.finish_claim(done))
             elif source is not None and source.gid is not None and source.seq is not None:
                 self._held_jobs[id(job)] = (source.gid, source.seq)
-                self._held.setdefault(source.gid, []).append(source.seq)
+                self._held.setdefault(source.gid, deque()).append(source.seq)
         return out
 
     def _release(self, job: ClaimJob) -> None:
