@@ -36,11 +36,15 @@ from fleetlink.demo.configs import (
     uplink_config,
 )
 from fleetlink.demo.story import Story, led_colour
+from fleetlink.demo.supervision import run_restarting
 from fleetlink.demo.watch import LogFollower, TopicWatcher, app_has_committed
 from fleetlink.localstack.process import ServerProcess, free_port, log_tail, port_in_use
 from fleetlink.localstack.registry import registry_url_lines
 from fleetlink.localstack.stack import LocalStack
 from fleetlink.localstack.zenoh_router import ZenohRouter
+
+APP_ATTEMPTS = 3
+"""Runs of the Python fault-detection app before the demo gives up on it (``supervision``)."""
 
 
 class DemoError(FleetlinkError):
@@ -291,9 +295,18 @@ class Demo:
             state = getattr(command.state, "value", command.state)
             self.say(f"fault detection: {command.robot} is now {state} (every event in its window agreed)")
 
-        thread = threading.Thread(
-            target=run_app, args=(settings, stop, decided), name="fault-app", daemon=True
-        )
+        def restarted(error: BaseException, attempt: int) -> None:
+            self.say(f"fault-detection app stopped on an error ({error!r}); starting it again ({attempt})")
+
+        def supervised() -> None:
+            run_restarting(
+                lambda: run_app(settings, stop, decided),
+                attempts=APP_ATTEMPTS,
+                stop=stop,
+                on_restart=restarted,
+            )
+
+        thread = threading.Thread(target=supervised, name="fault-app", daemon=True)
         thread.start()
 
         def stop_app() -> None:
