@@ -146,8 +146,7 @@ class EdgeAdmin:
         try:
             return self.start(self._agent_backend, agent.session)
         except BaseException:
-            self._agent_backend.stop()
-            self._agent_backend = None
+            self.stop()  # the backend too, unless start's own cleanup already stopped it
             raise
 
     def stop(self) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import socket
 import time
 import uuid
 from collections.abc import Iterator
@@ -26,6 +27,7 @@ from openapi_spec_validator import validate
 from prometheus_client.parser import text_string_to_metric_families
 from pydantic import SecretStr
 
+from fleetlink.common.metrics.errors import ServeError
 from fleetlink.console.edge import console_extension
 from fleetlink.edge.admin import EdgeAdmin
 from fleetlink.edge.admin.store import default_overlay_path
@@ -222,6 +224,23 @@ def test_restart_keeps_the_changes(zenoh_router: str, tmp_path: Path) -> None:
             message="the saved mapping runs after the restart",
         )
         assert "ir" not in edge.agent.snapshot()["mappings"]
+
+
+def test_a_taken_admin_port_fails_attach_with_the_bind_error(zenoh_router: str, tmp_path: Path) -> None:
+    """The first error reaches the caller (not one from cleaning up after it), and nothing is left running."""
+    config = edge_config(tmp_path / "spool", zenoh_router, site=site(), domain=next_domain())
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        host, port = taken.getsockname()
+        admin = EdgeAdmin(config, token=None, listen=f"{host}:{port}")
+        with EdgeAgent(admin.load(), stop_timeout_s=0.5) as agent:
+            with pytest.raises(ServeError, match="cannot listen"):
+                admin.attach(agent)
+            assert admin.service is None
+            assert admin.http is None
+            assert admin.zenoh is None
+            assert admin._agent_backend is None
 
 
 def test_the_api_refuses_requests_without_the_token(
