@@ -8,11 +8,12 @@ Tests never ``time.sleep`` to synchronise; they wait for a condition with a dead
 from __future__ import annotations
 
 import json
-import socket
 import time
 from collections.abc import Callable
 
 import zenoh
+
+from fleetlink.localstack.process import free_port
 
 __all__ = ["free_port", "wait_until", "zenoh_peer_config"]
 
@@ -42,15 +43,6 @@ def wait_until(
         return
     what = message or getattr(pred, "__name__", "condition")
     raise AssertionError(f"timed out after {time.monotonic() - start:.2f}s waiting for: {what}")
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that was free on ``host`` a moment ago (the OS picks it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind((host, 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 def zenoh_peer_config(endpoint: str, mode: str = "peer") -> zenoh.Config:
