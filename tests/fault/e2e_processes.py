@@ -244,8 +244,12 @@ class Bed:
         try:
             wait_until(condition, timeout, interval=0.1, message=what)
         except AssertionError as exc:
-            logs = "\n".join(f"--- {p.log.name}\n{p.tail()}" for p in self.processes)
-            raise AssertionError(f"{exc}\nedge stats: {json.dumps(self.stats())[:3000]}\n{logs}") from None
+            stats = json.dumps(self.stats())[:3000]
+            raise AssertionError(f"{exc}\nedge stats: {stats}\n{self.logs()}") from None
+
+    def logs(self) -> str:
+        """The tail of each process's log (those of processes started again included)."""
+        return "\n".join(f"--- {p.log.name}\n{p.tail()}" for p in self.processes)
 
     def stop_all(self) -> None:
         for process in self.processes:
@@ -361,6 +365,8 @@ def tally(reader: TopicReader, b: Bed, sent: int, what: str = "") -> Count:
     """Count what reached the bed's topic (and print it, with ``what`` happened)."""
     result = count(reader, read_all(reader, b.topic, sent), sent)
     print(f"\n[{b.site_name}] {sent} sent{what}: {result}")
+    if result.out_of_order or result.unexpected:
+        print(b.logs())
     return result
 
 
@@ -447,12 +453,15 @@ class Count:
     duplicated: int
     unexpected: int
     out_of_order: int
+    inversions: tuple[tuple[int, int, int], ...] = ()
+    """``(position, value before, value)`` of the first few values that came after a larger one."""
 
     def __str__(self) -> str:
         head = self.lost[:10]
+        where = f" at (position, before, value) {list(self.inversions)}" if self.inversions else ""
         return (
             f"lost {len(self.lost)} {head}, duplicated {self.duplicated}, unexpected {self.unexpected}, "
-            f"out of order {self.out_of_order}"
+            f"out of order {self.out_of_order}{where}"
         )
 
 
@@ -470,13 +479,15 @@ def count(reader: TopicReader, msgs: list[Message], sent: int) -> Count:
         if v not in seen:
             seen.add(v)
             firsts.append(v)
-    out_of_order = sum(1 for a, b in itertools.pairwise(firsts) if b < a)
+    inversions = [(i + 1, a, b) for i, (a, b) in enumerate(itertools.pairwise(firsts)) if b < a]
+    out_of_order = len(inversions)
     unexpected += sum(1 for v in seen if not 0 <= v < sent)
     return Count(
         lost=sorted(set(range(sent)) - seen),
         duplicated=len(values) - len(seen),
         unexpected=unexpected,
         out_of_order=out_of_order,
+        inversions=tuple(inversions[:10]),
     )
 
 
