@@ -110,8 +110,12 @@ class BatchJob:
         diversion: Diversion | None = None,
         counted: bool = True,
         dead: Mapping[int, str] | None = None,
+        on_retry: Callable[[], None] | None = None,
     ) -> None:
         self._batch = batch
+        self._on_retry = on_retry
+        """Called when a record is settled for a retry (the batch will be answered ``error``):
+        at once, so that the stream's later batches can wait for this one (``stream_fence``)."""
         self._dead_seqs = dead or {}
         """Seqs to send to the dead-letter topic without producing them (why, by seq): records
         Kafka refused for good in an exactly-once transaction that had to be aborted."""
@@ -277,6 +281,8 @@ class BatchJob:
                 self._dead.append(RecordFailure(record.seq, dead, dead_lettered=True))
             self._remaining -= 1
             done = self._remaining == 0
+        if retry is not None and self._on_retry is not None:
+            self._on_retry()
         if done:
             self._finish()
 

@@ -11,6 +11,8 @@ delivery reports. Records of other topics (diverted by the policy, a schema the 
 refused or could not give, raw dead letters of an internal topic) and records whose delivery
 failed go through the Python path (``ingest.BatchJob``), which makes the same records, dead
 letters and retries it always did. One ack answers the whole batch once every part is settled.
+Records of one topic may then be on two producers, which Kafka does not order one against the
+other: the stream's next batch waits (``ordered.Gate``) until the Python part is settled.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import Any
 from fleetlink._native import NativeProducer, ScannedBatch
 from fleetlink.schemas.single_object import confluent_frame
 from fleetlink.uplink.ingest import BatchJob, IngestStats, Sink, count_outcome
+from fleetlink.uplink.ordered import Gate
 from fleetlink.uplink.policy import Decision
 from fleetlink.uplink.schema_ids import SchemaIds, SchemaRefusedError, SchemaUnavailableError
 from fleetlink.wire import Ack, Batch, Record, RecordFailure, WireError, decode_payload
@@ -186,9 +189,11 @@ class NativeJob:
         self._produced_topics: list[int] = []
         self._produced_at = 0.0
 
-    def run(self) -> None:
+    def run(self) -> Gate | None:
         """Produce natively the records of topics whose schema ids are at hand, the rest through a
-        ``BatchJob``; ``on_done`` hears one ack once both parts are settled."""
+        ``BatchJob``; ``on_done`` hears one ack once both parts are settled. Returns a ``Gate``
+        that opens once the ``BatchJob`` part is settled when it is not yet: records of one topic
+        on two producers, the stream's next batch must not overtake them."""
         if self._counted:
             with self._stats.lock:
                 self._stats.batches += 1
@@ -208,7 +213,23 @@ class NativeJob:
         self._produced_topics = topics
         self._produced_at = time.monotonic()
         others = self._native.produce(self._scanned, topics, heads, self._native_done, min_seq=self._min_seq)
-        self._python_part(others, self._part_done)
+        if not others:
+            self._part_done(self._ack((), "ok", ""))
+            return None
+        gate = Gate()
+
+        def settled(ack: Ack) -> None:
+            try:
+                self._part_done(ack)
+            finally:
+                gate.open()
+
+        try:
+            self._python_part(others, settled)
+        except BaseException:
+            gate.open()
+            raise
+        return gate
 
     def _python_part(self, indices: list[int], on_done: Callable[[Ack], None]) -> None:
         if not indices:

@@ -53,12 +53,13 @@ from fleetlink.uplink.kafka_check import check_kafka_access
 from fleetlink.uplink.latency import DeliveryLatency
 from fleetlink.uplink.native_ingest import NativeIngest, NativeJob, view
 from fleetlink.uplink.native_sink import NativeSink
-from fleetlink.uplink.ordered import KeyedSerialExecutor
+from fleetlink.uplink.ordered import Gate, KeyedSerialExecutor
 from fleetlink.uplink.policy import Decision, InternalTopics, TopicPolicy
 from fleetlink.uplink.producer import KafkaSink
 from fleetlink.uplink.refusals import Refusals
 from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
+from fleetlink.uplink.stream_fence import StreamFence
 from fleetlink.uplink.topics import ensure_topics
 from fleetlink.wire import Ack, Batch, WireError, decode_batch, decode_batch_head, encode_ack
 from fleetlink.wire.keys import VIA, via_key
@@ -126,6 +127,8 @@ class Uplink:
         """Made and started at the end of ``start`` (the layer above passes the fleet console)."""
         self.extensions: list[UplinkExtension] = []
         self._slots = threading.BoundedSemaphore(config.ingest.max_concurrent_batches)
+        self._fence = StreamFence()
+        """At-least-once streams whose batch failed: their later batches wait for it (order)."""
         self._limiter = LogLimiter(log)
         # a dead letter must itself fit: keep room for its headers below the producer's limit
         self._dlq_max = max(1_000, config.kafka.message_max_bytes - 64 * 1024)
@@ -337,7 +340,7 @@ class Uplink:
                 ack.detail,
             )
 
-    def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> None:
+    def _ingest(self, query: zenoh.Query, data: bytes, arrived: float) -> Gate | None:
         """On a worker: decode the batch and produce it; the reply comes with the last delivery report."""
         scanned: ScannedBatch | None = None
         try:
@@ -357,11 +360,11 @@ class Uplink:
             )
             self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
             self._finish(query, error=f"malformed batch: {exc}")
-            return
-        sink, ids, admission, registrations = self._sink, self._ids, self._admission, self._registrations
-        if sink is None or ids is None or admission is None or registrations is None:
+            return None
+        ids, admission = self._ids, self._admission
+        if ids is None or admission is None:
             self._finish(query, error="uplink stopping")
-            return
+            return None
         # -- who sent it, what it may write (uplink.admission): per batch, per distinct topic --
         key = str(query.key_expr)
         source = source_of(key)
@@ -373,48 +376,88 @@ class Uplink:
             self.metrics.on_ingested(site_of(key), "refused", 0)
             self.delivery.on_batch(site_of(key), "refused")
             self._finish(query, error=f"refused ({verdict.reason}): {verdict.detail}")
-            return
-        diversion = (
-            Diversion(
-                verdict.source, verdict.routes, sink=sink, refusals=self.refusals, registrations=registrations
-            )
-            if verdict.routes
-            else None
-        )
+            return None
         # ---------------------------------------------------------------------------------------
         missing = ids.unknown(batch.site, batch.elided) if batch.elided else ()
-        last_seq = scanned.last_seq() if scanned is not None else batch.last_seq
         if missing:  # before anything is produced: the edge sends the batch again, with them
-            self.metrics.on_ingested(batch.site, "need_schemas", 0)
-            log.info(
-                "batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
-                batch.edge_id,
-                batch.stream,
-                batch.first_seq,
-                last_seq,
-                len(missing),
+            self._ask_for_schemas(query, batch, scanned, missing)
+            return None
+        if batch.origin:  # the edge asks for exactly-once delivery
+            self._write_exactly_once(
+                query, data, batch, scanned, source=verdict.source, routes=verdict.routes, arrived=arrived
             )
+            return None
+        return self._write_at_least_once(
+            query, batch, scanned, source=verdict.source, routes=verdict.routes, arrived=arrived
+        )
+
+    def _ask_for_schemas(
+        self, query: zenoh.Query, batch: Batch, scanned: ScannedBatch | None, missing: tuple[bytes, ...]
+    ) -> None:
+        """Answer ``need_schemas``: the batch left out schemas this uplink does not know."""
+        last_seq = scanned.last_seq() if scanned is not None else batch.last_seq
+        if not batch.origin:  # the stream's later batches wait for this one (order)
+            self._fence.failed((batch.site, batch.edge_id, batch.stream), batch.first_seq)
+        self.metrics.on_ingested(batch.site, "need_schemas", 0)
+        log.info(
+            "batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
+            batch.edge_id,
+            batch.stream,
+            batch.first_seq,
+            last_seq,
+            len(missing),
+        )
+        self._finish(
+            query,
+            Ack(
+                edge_id=batch.edge_id,
+                stream=batch.stream,
+                first_seq=batch.first_seq,
+                last_seq=last_seq,
+                status="need_schemas",
+                missing_schemas=missing,
+                detail="send the batch again with these schemas",
+            ),
+        )
+
+    def _write_at_least_once(
+        self,
+        query: zenoh.Query,
+        batch: Batch,
+        scanned: ScannedBatch | None,
+        *,
+        source: Source,
+        routes: Mapping[str, Decision],
+        arrived: float,
+    ) -> Gate | None:
+        """Produce an admitted at-least-once batch, unless an earlier batch of its stream failed
+        (``stream_fence``: then it is answered ``error`` and comes again after that one). Returns
+        the ``Gate`` the stream's next batch waits for, if it must wait (``NativeJob.run``)."""
+        sink, ids, registrations = self._sink, self._ids, self._registrations
+        if sink is None or ids is None or registrations is None:
+            self._finish(query, error="uplink stopping")
+            return None
+        stream = (batch.site, batch.edge_id, batch.stream)
+        fenced = self._fence.check(stream, batch.first_seq)
+        if fenced is not None:
+            self.metrics.on_ingested(batch.site, "held_back", 0)
             self._finish(
                 query,
                 Ack(
                     edge_id=batch.edge_id,
                     stream=batch.stream,
                     first_seq=batch.first_seq,
-                    last_seq=last_seq,
-                    status="need_schemas",
-                    missing_schemas=missing,
-                    detail="send the batch again with these schemas",
+                    last_seq=scanned.last_seq() if scanned is not None else batch.last_seq,
+                    status="error",
+                    detail=f"held back: batch {fenced.failed_seq}.. of this stream failed; it goes first",
                 ),
             )
-            return
-
-        if batch.origin:  # the edge asks for exactly-once delivery
-            self._write_exactly_once(
-                query, data, batch, scanned, source=verdict.source, routes=verdict.routes, arrived=arrived
-            )
-            return
+            return None
+        on_retry = partial(self._fence.failed, stream, batch.first_seq)
 
         def done(ack: Ack) -> None:
+            if ack.status == "error":
+                on_retry()
             self._answered(batch, scanned, ack, arrived)
             self._finish(query, ack)
 
@@ -428,19 +471,24 @@ class Uplink:
             stats=self.stats,
             dead_letter_max_bytes=self._dlq_max,
             on_delivery=on_delivery,
-            diversion=diversion,
+            diversion=(
+                Diversion(source, routes, sink=sink, refusals=self.refusals, registrations=registrations)
+                if routes
+                else None
+            ),
+            on_retry=on_retry,
         )
         native = self._native
         if scanned is None or native is None:
             job(batch, on_done=done).run()
-            return
-        NativeJob(
+            return None
+        return NativeJob(
             batch,
             scanned,
             native=native,
             sink=sink,
             schema_ids=ids,
-            routes=verdict.routes,
+            routes=routes,
             job=partial(job, counted=False),
             on_done=done,
             stats=self.stats,

@@ -1,0 +1,99 @@
+"""A robot's order across a batch that was not produced: the uplink with its registry behind a relay.
+
+An edge has several batches of a stream in flight. When one is not produced (the registry did
+not answer, or the uplink asks for a schema the batch left out) and the next one could be, the
+next must not reach Kafka before it: the uplink answers it ``error`` ("held back") until the
+first comes again, then takes both, in order.
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from urllib.parse import urlsplit, urlunsplit
+
+import pytest
+import zenoh
+
+from fleetlink.localstack.relay import TcpRelay
+from fleetlink.schemas.single_object import fingerprint
+from fleetlink.uplink.config import UplinkConfig
+from fleetlink.uplink.service import Uplink
+from fleetlink.wire import Record, single_object
+from fleetlink.wire.batch import Batch
+from tests.helpers import zenoh_peer_config
+from tests.integration.test_uplink_ingest import read_topic, send
+
+
+@dataclass
+class Bed:
+    registry: TcpRelay
+    edge: zenoh.Session
+    topic: str
+    schema: dict[str, object]
+
+    def batch(self, first: int, count: int, *, carry_schema: bool = True) -> Batch:
+        fp = fingerprint(self.schema)
+        records = tuple(
+            Record(
+                self.topic, b"tb4_01", single_object(fp, bytes([seq << 1])), (("n", b"%d" % seq),), seq=seq
+            )
+            for seq in range(first, first + count)
+        )
+        if carry_schema:
+            return Batch("site-a", "edge-1", self.topic, first, records, {fp: json.dumps(self.schema)})
+        return Batch("site-a", "edge-1", self.topic, first, records, elided=frozenset({fp}))
+
+    def order(self, bootstrap: str, count: int) -> list[int]:
+        return [int(dict(m.headers() or [])["n"]) for m in read_topic(bootstrap, self.topic, count)]
+
+
+@pytest.fixture
+def bed(kafka_bootstrap: str, schema_registry_url: str, zenoh_router: str) -> Iterator[Bed]:
+    url = urlsplit(schema_registry_url)
+    assert url.port is not None
+    name = uuid.uuid4().hex[:6]
+    with TcpRelay(url.port) as registry:
+        config = UplinkConfig.model_validate(
+            {
+                "kafka": {"bootstrap_servers": kafka_bootstrap},
+                "registry": {"url": urlunsplit(url._replace(netloc=f"127.0.0.1:{registry.port}"))},
+                "zenoh": {"mode": "client", "connect": [zenoh_router]},
+                "topics": {"dead_letter": f"dlq.{name}"},
+            }
+        )
+        schema: dict[str, object] = {
+            "type": "record",
+            "name": f"Count{name}",
+            "fields": [{"name": "n", "type": "long"}],
+        }
+        with Uplink(config), zenoh.open(zenoh_peer_config(zenoh_router, "client")) as edge:
+            yield Bed(registry, edge, f"fleet.order.{name}", schema)
+
+
+def test_a_batch_after_a_failed_one_waits_for_it(bed: Bed, kafka_bootstrap: str) -> None:
+    first, second = bed.batch(1, 10), bed.batch(11, 10)
+    bed.registry.set_mode("refuse")  # the schema cannot be registered: the first batch fails
+    failed = send(bed.edge, first)
+    assert failed.status == "error", failed
+    bed.registry.set_mode("pass")  # the registry is back as the next batch comes
+    held = send(bed.edge, second)
+    assert (held.status, held.first_seq, held.last_seq) == ("error", 11, 20), held
+    assert "held back: batch 1.." in held.detail
+    assert send(bed.edge, first).status == "ok"  # the failed batch again, then the one after it
+    assert send(bed.edge, second).status == "ok"
+    assert bed.order(kafka_bootstrap, 20) == list(range(1, 21))
+
+
+def test_a_batch_after_one_sent_back_for_its_schema_waits_for_it(bed: Bed, kafka_bootstrap: str) -> None:
+    lean = bed.batch(1, 10, carry_schema=False)  # the uplink never read this schema
+    asked = send(bed.edge, lean)
+    assert asked.status == "need_schemas", asked
+    held = send(bed.edge, bed.batch(11, 10))  # this one carries the schema: it could go, it waits
+    assert (held.status, held.first_seq) == ("error", 11), held
+    assert send(bed.edge, bed.batch(1, 10)).status == "ok"
+    assert send(bed.edge, bed.batch(11, 10)).status == "ok"
+    assert send(bed.edge, bed.batch(21, 5, carry_schema=False)).status == "ok"  # known now: no fence
+    assert bed.order(kafka_bootstrap, 25) == list(range(1, 26))
