@@ -448,8 +448,8 @@ class Uplink:
                     stream=batch.stream,
                     first_seq=batch.first_seq,
                     last_seq=scanned.last_seq() if scanned is not None else batch.last_seq,
-                    status="error",
-                    detail=f"held back: batch {fenced.failed_seq}.. of this stream failed; it goes first",
+                    status="held_back",
+                    detail=f"batch {fenced.failed_seq}.. of this stream was not produced: it goes first",
                 ),
             )
             return None

@@ -93,6 +93,8 @@ class SenderStats:
     """Schema texts left out of batches because an uplink had acknowledged them."""
     schema_requests: int = 0
     """Batches an uplink answered with ``need_schemas`` (sent again with the texts)."""
+    batches_held_back: int = 0
+    """Batches an uplink held back behind an earlier one that it did not produce (sent again after it)."""
     outages: int = 0
     in_flight: int = 0
 
@@ -476,6 +478,9 @@ class WanSender:
             )
         if ack.status == "need_schemas":
             return self._resend_with_schemas(flight, ack.missing_schemas)
+        if ack.status == "held_back":
+            self._held_back(flight)
+            return None
         if ack.status != "ok":
             return f"uplink: {ack.detail or 'batch not produced'}"
         self._known.update(flight.carried)
@@ -520,6 +525,16 @@ class WanSender:
             flight.last_seq,
         )
         return None
+
+    def _held_back(self, flight: _Flight) -> None:
+        """The uplink holds the batch back behind an earlier one of the stream that it did not
+        produce: send it again after that one. The earlier batch's own answer brings the backoff
+        (this one adds no step of its own); meanwhile one batch at a time, at the earliest after
+        the shortest backoff."""
+        self.stats.batches_held_back += 1
+        self.buffer.release(flight.first_seq)
+        self._healthy = False
+        self._retry_at = max(self._retry_at, self._clock() + self._backoff.min_s)
 
     def _succeeded(self) -> None:
         if self._outage_since is not None:

@@ -46,14 +46,17 @@ compressed, which outweighs a batch of a few small records (docs/wan_bytes.md).
 Ack (uplink -> edge, uncompressed)::
 
     "FLA" | version u8 | edge_id str16 | stream str16 | first_seq u64 | last_seq u64 | status u8
-    (0 ok, 1 error, 2 need_schemas) | detail str16 | n_failures u32
+    (0 ok, 1 error, 2 need_schemas, 3 held_back) | detail str16 | n_failures u32
     | { seq u64 | dead_lettered u8 | reason str16 } * n_failures
     | [n_missing u16 | { fingerprint 8 bytes } * n_missing, with status 2] | max_record_bytes u32
 
 ``ok``: every record of the batch is in Kafka, or in the dead-letter topic (listed in failures,
 all with ``dead_lettered``); the edge may drop the whole range from its spool. ``error``: the
 batch was not (entirely) made safe; the edge sends it again later. ``need_schemas``: nothing
-was produced; send the batch again with the text of the listed schemas. ``max_record_bytes``
+was produced; send the batch again with the text of the listed schemas. ``held_back``: nothing
+was produced, because an earlier batch of the stream was not (answered ``error`` or
+``need_schemas``): send it again after that one, so that records keep their order (an edge that
+does not know this status retries the batch as after an error). ``max_record_bytes``
 is the largest Kafka record the uplink produces (0: not said): the edge learns it from every
 answer and keeps larger records off the WAN (``fleetlink.wire.limits``).
 

@@ -12,9 +12,9 @@ from fleetlink.wire.framing import U16, U32, VERSION, Reader, str16
 ACK_MAGIC = b"FLA"
 _ACK_RANGE = struct.Struct("<QQB")
 _FAILURE_HEAD = struct.Struct("<QB")
-AckStatus = Literal["ok", "error", "need_schemas"]
-_STATUS_CODES: dict[str, int] = {"ok": 0, "error": 1, "need_schemas": 2}
-_STATUS_NAMES: dict[int, AckStatus] = {0: "ok", 1: "error", 2: "need_schemas"}
+AckStatus = Literal["ok", "error", "need_schemas", "held_back"]
+_STATUS_CODES: dict[str, int] = {"ok": 0, "error": 1, "need_schemas": 2, "held_back": 3}
+_STATUS_NAMES: dict[int, AckStatus] = {0: "ok", 1: "error", 2: "need_schemas", 3: "held_back"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,6 +33,9 @@ class Ack:
 
     ``need_schemas``: nothing of the batch was produced; the uplink knows no schema text for
     ``missing_schemas``, which the batch left out (``Batch.elided``): send it again with them.
+
+    ``held_back``: nothing of the batch was produced, because an earlier batch of its stream was
+    not: send it again after that one.
 
     ``max_record_bytes``: the largest Kafka record the answering uplink produces (its producer's
     ``message.max.bytes``; 0: not said). The edge applies it before the WAN (docs/images.md).

@@ -2,8 +2,8 @@
 
 An edge has several batches of a stream in flight. When one is not produced (the registry did
 not answer, or the uplink asks for a schema the batch left out) and the next one could be, the
-next must not reach Kafka before it: the uplink answers it ``error`` ("held back") until the
-first comes again, then takes both, in order.
+next must not reach Kafka before it: the uplink answers it ``held_back`` until the first comes
+again, then takes both, in order.
 """
 
 from __future__ import annotations
@@ -80,8 +80,8 @@ def test_a_batch_after_a_failed_one_waits_for_it(bed: Bed, kafka_bootstrap: str)
     assert failed.status == "error", failed
     bed.registry.set_mode("pass")  # the registry is back as the next batch comes
     held = send(bed.edge, second)
-    assert (held.status, held.first_seq, held.last_seq) == ("error", 11, 20), held
-    assert "held back: batch 1.." in held.detail
+    assert (held.status, held.first_seq, held.last_seq) == ("held_back", 11, 20), held
+    assert "batch 1.. of this stream was not produced" in held.detail
     assert send(bed.edge, first).status == "ok"  # the failed batch again, then the one after it
     assert send(bed.edge, second).status == "ok"
     assert bed.order(kafka_bootstrap, 20) == list(range(1, 21))
@@ -92,7 +92,7 @@ def test_a_batch_after_one_sent_back_for_its_schema_waits_for_it(bed: Bed, kafka
     asked = send(bed.edge, lean)
     assert asked.status == "need_schemas", asked
     held = send(bed.edge, bed.batch(11, 10))  # this one carries the schema: it could go, it waits
-    assert (held.status, held.first_seq) == ("error", 11), held
+    assert (held.status, held.first_seq) == ("held_back", 11), held
     assert send(bed.edge, bed.batch(1, 10)).status == "ok"
     assert send(bed.edge, bed.batch(11, 10)).status == "ok"
     assert send(bed.edge, bed.batch(21, 5, carry_schema=False)).status == "ok"  # known now: no fence

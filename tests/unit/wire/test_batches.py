@@ -318,6 +318,14 @@ ACKS: list[Ack] = [
         missing_schemas=(FP, FP2),
         detail="send the batch again with these schemas",
     ),
+    Ack(
+        edge_id="e",
+        stream="durable",
+        first_seq=11,
+        last_seq=20,
+        status="held_back",
+        detail="batch 1.. of this stream was not produced: it goes first",
+    ),
 ]
 
 

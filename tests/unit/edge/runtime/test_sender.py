@@ -458,3 +458,39 @@ def test_answers_that_wait_are_applied_at_the_next_batch() -> None:
         wait_until(drained(buffer), 5, message="every answer applied")
         assert (sender.stats.batches_acked, sender.stats.in_flight) == (3, 0)
         assert sender.ack_latency.totals().count == 3
+
+
+def test_batches_held_back_behind_a_failed_one_go_again_after_it_without_a_backoff_step_each() -> None:
+    """The uplink fails the first batch and holds back the one sent behind it (``held_back``): the
+    edge sends one batch at a time until the first is through, the records arrive in order, and
+    the outage counts one retry (one backoff step), not one per batch."""
+    buffer = MemoryBuffer(first_seq=1, group_records=FAST.batch_max_records)
+    buffer.append_many([payload(i) for i in range(40)])
+
+    def policy(batch: Batch, attempt: int) -> Answer:
+        if batch.first_seq == 1 and attempt == 0:
+            return None  # answered below, once the batches behind it were held back
+        if batch.first_seq > 1 and 1 not in delivered:
+            return encode_ack(
+                Ack(batch.edge_id, batch.stream, batch.first_seq, batch.last_seq, "held_back", detail="1..")
+            ), None
+        delivered.append(batch.first_seq)
+        return ok(batch)
+
+    delivered: list[int] = []
+    uplink = ScriptedUplink(policy)
+    with running(uplink, buffer) as sender:
+        sender.wake()
+        wait_until(lambda: sender.stats.batches_held_back == 1, 5, message="the second batch held back")
+        assert [b.first_seq for b in uplink.batches] == [1, 11]  # then one at a time: the first in flight
+        uplink.release_held(
+            lambda b: (
+                encode_ack(Ack(b.edge_id, b.stream, b.first_seq, b.last_seq, "error", detail="registry")),
+                None,
+            )
+        )
+        wait_until(drained(buffer), 5, message="buffer drained")
+    assert delivered == [1, 11, 21, 31]
+    assert [b.first_seq for b in uplink.batches] == [1, 11, 1, 11, 21, 31]
+    stats = sender.stats
+    assert (stats.batches_held_back, stats.batches_retried, stats.outages) == (1, 1, 1)
