@@ -191,15 +191,17 @@ class NativeJob:
 
     def run(self) -> Gate | None:
         """Produce natively the records of topics whose schema ids are at hand, the rest through a
-        ``BatchJob``; ``on_done`` hears one ack once both parts are settled. Returns a ``Gate``
-        that opens once the ``BatchJob`` part is settled when it is not yet: records of one topic
-        on two producers, the stream's next batch must not overtake them."""
+        ``BatchJob``; ``on_done`` hears one ack once both parts are settled. When the ``BatchJob``
+        part holds records of a topic the next batches produce natively (its schema id was not at
+        hand) and is not settled yet, returns a ``Gate`` that opens once it is: Kafka does not
+        order two producers, so the stream's next batch must not overtake them."""
         if self._counted:
             with self._stats.lock:
                 self._stats.batches += 1
                 self._stats.records += len(self._scanned)
         topics: list[int] = []
         heads: dict[tuple[int, bytes], bytes] = {}
+        unresolved = False
         for index, (topic, _count, _raw, fps) in enumerate(self._scanned.topics()):
             if topic in self._routes:
                 continue  # diverted or refused by the policy: the Python path knows how
@@ -208,13 +210,14 @@ class NativeJob:
                     schema_id = self._ids.id_for(self._head.site, topic, fp, self._head.schemas)
                     heads[index, fp] = confluent_frame(schema_id, b"")
             except (SchemaUnavailableError, SchemaRefusedError, WireError):
+                unresolved = True
                 continue  # the Python path retries or dead-letters these records, record by record
             topics.append(index)
         self._produced_topics = topics
         self._produced_at = time.monotonic()
         others = self._native.produce(self._scanned, topics, heads, self._native_done, min_seq=self._min_seq)
-        if not others:
-            self._part_done(self._ack((), "ok", ""))
+        if not unresolved:  # diverted or raw records only: the next batch sends those the same way
+            self._python_part(others, self._part_done)
             return None
         gate = Gate()
 
