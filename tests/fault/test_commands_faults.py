@@ -217,9 +217,13 @@ def test_row24_command_redelivered_after_uplink_kill_is_applied_once(
             # batch twice, but the command reached "delivered" once and nothing else happened to it
             assert set(status.statuses(f"once-{run}")) == {"delivered"}
             # one schedule, once a second: the re-delivery caused no extra publish (counted over the
-            # whole span, so one late tick, and the next one sooner to keep the rhythm, is no extra)
+            # span of the repeats, so one late tick, and the next one sooner to keep the rhythm, is no
+            # extra). The repeats keep the rhythm of the command's arrival; the first publish, by a
+            # publisher declared for it a moment before, may reach the robot up to half a second
+            # late on a loaded machine, so it does not start the span.
             times = [t for t, _ in leds.of("tb4_01")]
-            assert len(times) - 1 <= (times[-1] - times[0]) / 1.0 + 0.5, times
+            repeats = times[1:]
+            assert len(repeats) - 1 <= (repeats[-1] - repeats[0]) / 1.0 + 0.5, times
 
 
 def test_row25_repeater_restarted_after_the_lease_does_not_replay(
