@@ -122,7 +122,10 @@ def test_replay_follows_recorded_timing_scaled_by_rate(zenoh_router: str) -> Non
             assert replayer.wait_for_subscribers(timeout=10)
             stats = replayer.run()
             # while both sessions are open: the last scans may still be on their way
-            wait_until(lambda: len(arrivals) >= 457, timeout=5, message="all 457 scans")
+            try:
+                wait_until(lambda: len(arrivals) >= 457, timeout=5, message="all 457 scans")
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}: {len(arrivals)} arrived") from None
     recorded_s = 91.1  # first to last /scan message in the recording
     assert stats.published["/scan"] == 457
     assert len(arrivals) == 457
