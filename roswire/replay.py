@@ -24,7 +24,7 @@ import zenoh
 from fleetlink.roswire.errors import BagError
 from fleetlink.roswire.names import join_namespace, validate_node_name, validate_topic
 from fleetlink.roswire.node import RosNode
-from fleetlink.roswire.publisher import RosPublisher
+from fleetlink.roswire.publisher import Congestion, RosPublisher
 from fleetlink.roswire.qos import DEFAULT, Durability, History, QoS, Reliability
 from fleetlink.schemas.typestore import Distro, load_typestore
 
@@ -111,7 +111,10 @@ class BagReplayer:
         topics: Sequence[str] | None = None,
         node_name: str = "replay",
         clock: Callable[[], float] = time.monotonic,
+        congestion: Congestion | None = None,
     ) -> None:
+        """``congestion``: what a publisher does when the way is full (``None``: block at ``rate``
+        0, else as rmw_zenoh does for the topic's recorded QoS, which drops for KEEP_LAST)."""
         if rate < 0:
             raise BagError(f"replay rate must be >= 0 (0 = as fast as possible), got {rate}")
         self.bag = Path(bag)
@@ -122,6 +125,7 @@ class BagReplayer:
         self.distro: Distro = distro
         self.msg_paths = tuple(msg_paths)
         self.clock = clock
+        self.congestion = congestion
         self.stats = ReplayStats()
         self._node_args: dict[str, Any] = {
             "namespace": f"/{robot}",
@@ -164,7 +168,7 @@ class BagReplayer:
         self.node = RosNode(
             self._node_name, typestore=typestore, distro=self.distro, **self._node_args
         ).start()
-        congestion = "block" if self.rate == 0 else None
+        congestion = self.congestion or ("block" if self.rate == 0 else None)
         for conn in connections:
             if conn.topic in self.publishers:
                 continue
