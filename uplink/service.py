@@ -431,7 +431,7 @@ class Uplink:
         arrived: float,
     ) -> Gate | None:
         """Produce an admitted at-least-once batch, unless an earlier batch of its stream failed
-        (``stream_fence``: then it is answered ``error`` and comes again after that one). Returns
+        (``stream_fence``: then it is answered ``held_back`` and comes again after that one). Returns
         the ``Gate`` the stream's next batch waits for, if it must wait (``NativeJob.run``)."""
         sink, ids, registrations = self._sink, self._ids, self._registrations
         if sink is None or ids is None or registrations is None:
