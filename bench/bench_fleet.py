@@ -1,7 +1,7 @@
 """Fleet benchmark: steady fleets of robots -> site router -> edge -> WAN -> uplink -> Kafka.
 
     .venv/bin/python bench/bench_fleet.py [--shape 200x5x10 ...] [--seconds 30] [--runs 2]
-        [--sites 10] [--uplinks 2]
+        [--sites 10] [--uplinks 2] [--bare]
 
 Each robot is its own Zenoh session (as an rmw_zenoh process is), publishing real recorded
 messages on five topics (Imu, Odometry, NavSatFix from the Husky bag; LaserScan, JointState from
@@ -17,7 +17,10 @@ record read from Kafka (p50/p99/max), CPU of the edge and the uplink in µs per 
 of a core, the edge's threads and RSS over time, samples dropped at the edge's intake and
 sequence gaps (samples lost before the edge saw them). With ``--uplinks N`` the cloud router is
 a process of its own and N uplinks serve the sites (each site's stream goes to one of them):
-each uplink's share of the CPU shows how they split the load.
+each uplink's share of the CPU shows how they split the load. With ``--bare`` a bare Zenoh client
+of each site router (bench/bare_receiver.py: the data plane's runtime, the same samples, nothing
+done with them) runs beside the edge: its CPU is the floor of receiving the fleet through Zenoh
+on this machine, printed beside the edge's as a ratio, with both processes' wake-ups a second.
 """
 
 from __future__ import annotations
@@ -94,6 +97,19 @@ def threads(pid: int) -> int:
     return int(proc_status(pid)["Threads"])
 
 
+def wakeups(pid: int) -> int:
+    """Times the process's threads went to sleep and were woken (voluntary context switches of
+    the threads alive now): at steady low rates each costs more than the work it wakes for."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            status = (task / "status").read_text()
+        except OSError:  # the thread ended
+            continue
+        total += int(status.split("voluntary_ctxt_switches:", 1)[1].split()[0])
+    return total
+
+
 @dataclass
 class Sample:
     at: float
@@ -127,6 +143,8 @@ class Result:
     """CPU seconds of each uplink over the window (with several)."""
     worst_second: tuple[float, float] | None = None
     """The second of the window (from its start) whose records had the highest p99 latency."""
+    wakeups: dict[str, float] = field(default_factory=dict)
+    """Wake-ups a second over the window of the edges and (``--bare``) the bare receivers."""
 
     def line(self) -> str:
         s = self.shape
@@ -146,6 +164,15 @@ class Result:
             for proc in ("edge", "uplink", "site router"):
                 cpu = self.cpu_s.get(proc, 0.0)
                 parts.append(f"{proc} {100 * cpu / max(self.window_s, 1e-9):.1f} % of a core (idle)")
+        bare = self.cpu_s.get("bare")
+        if bare is not None and self.window_records:
+            edge = self.cpu_s.get("edge", 0.0)
+            parts.append(
+                f"bare Zenoh receive {1e6 * bare / self.window_records:.1f} µs/record "
+                f"({100 * bare / self.window_s:.0f} % of a core), edge / bare {edge / max(bare, 1e-9):.2f}"
+            )
+        if self.wakeups:
+            parts.append("wake-ups/s " + ", ".join(f"{k} {v:,.0f}" for k, v in self.wakeups.items()))
         if self.latencies_ms:
             lat = self.latencies_ms
             parts.append(
@@ -165,7 +192,7 @@ class Result:
         others = ", ".join(
             f"{k} {100 * v / max(self.window_s, 1e-9):.0f} %"
             for k, v in self.cpu_s.items()
-            if k not in ("edge", "uplink")
+            if k not in ("edge", "uplink", "bare")
         )
         parts.append(f"CPU of the others: {others}")
         parts.append(f"intake drops {self.dropped}, sequence gaps {self.gaps} ({self.missing} missing)")
@@ -311,6 +338,23 @@ def start_router(stack: ExitStack, config: Path, render: list[str], port: int) -
             time.sleep(0.1)
 
 
+def start_bare(stack: ExitStack, port: int, topics: int) -> int:
+    """A bare receiver (bench/bare_receiver.py) of the site router on ``port``; its pid once it
+    subscribed."""
+    names = [arg for name, *_ in TOPICS[:topics] for arg in ("--topic", name)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bench.bare_receiver", "--connect", f"tcp/127.0.0.1:{port}", *names],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    stack.callback(proc.kill)
+    if proc.stdout is None or proc.stdout.readline().strip() != "ready":
+        raise SystemExit("the bare receiver did not start")
+    return proc.pid
+
+
 def start_process(
     stack: ExitStack, work: Path, name: str, config: Mapping[str, object], argv: list[str], ready: object
 ) -> int:
@@ -340,6 +384,7 @@ def run_shape(
     sites: int = 1,
     uplinks: int = 1,
     coalesce: str | None = None,
+    bare: bool = False,
 ) -> Result:
     work.mkdir(parents=True)
     suffix = uuid.uuid4().hex[:6]
@@ -392,6 +437,8 @@ def run_shape(
             edges.append(edge_pid)
             procs[f"site router {site}"] = router_pid
             procs[f"edge {site}"] = edge_pid
+        bares = [start_bare(stack, port, shape.topics) for port in site_ports] if bare else []
+        procs.update({f"bare {site}": pid for site, pid in enumerate(bares)})
 
         pubs: list[subprocess.Popen[str]] = []
         robot_site: dict[bytes, str] = {}
@@ -464,9 +511,13 @@ def run_shape(
             pub.stdin.flush()
         sampler.start()
         time.sleep(warmup)
+        woken = {"edge": edges, "bare": bares}
+        wake0 = {k: sum(wakeups(pid) for pid in pids) for k, pids in woken.items() if pids}
         cpu0, t0 = cpu_now(), time.time()
         time.sleep(max(0.0, seconds - warmup))
         cpu1, t1 = cpu_now(), time.time()
+        wake1 = {k: sum(wakeups(pid) for pid in pids) for k, pids in woken.items() if pids}
+        result.wakeups = {k: (wake1[k] - wake0[k]) / (t1 - t0) for k in wake1}
         for pub in pubs:
             assert pub.stdout is not None
             done = pub.stdout.readline().split()
@@ -497,8 +548,10 @@ def run_shape(
     result.cpu_s = {
         "edge": sum(v for k, v in cpu.items() if k.startswith("edge ")),
         "site router": sum(v for k, v in cpu.items() if k.startswith("site router ")),
-        **{k: v for k, v in cpu.items() if not k.startswith(("edge ", "site router ", "uplink "))},
+        **{k: v for k, v in cpu.items() if not k.startswith(("edge ", "site router ", "uplink ", "bare "))},
     }
+    if bares:
+        result.cpu_s["bare"] = sum(v for k, v in cpu.items() if k.startswith("bare "))
     if uplinks > 1:
         result.uplink_cpu = [cpu[f"uplink {n}"] for n in range(uplinks)]
         result.cpu_s["uplink"] = sum(result.uplink_cpu)
@@ -577,6 +630,12 @@ def main() -> None:
         metavar="DURATION",
         help="the edges' intake.coalesce (default: the edge's default; 0s turns it off)",
     )
+    ap.add_argument(
+        "--bare",
+        action="store_true",
+        help="beside each edge, a bare Zenoh client receiving the same samples and doing nothing"
+        " with them (bench/bare_receiver.py): the receive path's floor, in the same run",
+    )
     args = ap.parse_args()
     shapes = [Shape.parse(s) for s in (args.shape or DEFAULT_SHAPES)]
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-fleet-") as tmp:
@@ -603,6 +662,7 @@ def main() -> None:
                     args.sites,
                     args.uplinks,
                     args.coalesce,
+                    args.bare,
                 )
                 print(f"run {run + 1}: {result.line()}", flush=True)
 
