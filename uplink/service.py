@@ -62,6 +62,7 @@ from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.stream_fence import StreamFence
 from fleetlink.uplink.topics import ensure_topics
 from fleetlink.wire import Ack, Batch, WireError, decode_batch, decode_batch_head, encode_ack
+from fleetlink.wire.batch import peek_stream
 from fleetlink.wire.keys import VIA, via_key
 
 log = logging.getLogger(__name__)
@@ -307,7 +308,8 @@ class Uplink:
             query.drop()
             return
         if not self._slots.acquire(blocking=False):
-            self.metrics.on_ingested(site_of(str(query.key_expr)), "refused", 0)
+            self.metrics.on_ingested(site_of(key), "refused", 0)
+            self._hold_back_after(key, payload.to_bytes())
             query.reply_err(b"uplink busy: retry later")
             query.drop()
             return
@@ -316,6 +318,16 @@ class Uplink:
             key.split(f"/{VIA}/", maxsplit=1)[0],
             partial(self._ingest, query, payload.to_bytes(), time.monotonic()),
         )
+
+    def _hold_back_after(self, key: str, data: bytes) -> None:
+        """A batch answered busy, unread: its at-least-once stream's later batches must not reach
+        Kafka before it comes again (``stream_fence``). Read from the start of the batch only, and
+        only for a stream of the edge whose key it came on."""
+        source, head = source_of(key), peek_stream(data)
+        if source is None or head is None or head.origin:
+            return
+        if (head.site, head.edge_id) == (source.site, source.edge_id):
+            self._fence.failed((head.site, head.edge_id, head.stream), head.first_seq)
 
     def _answered(self, batch: Batch, scanned: ScannedBatch | None, ack: Ack, arrived: float) -> None:
         """Count a batch's answer: metrics, the site's delivery figures, a warning on errors."""

@@ -210,16 +210,17 @@ def _check_acked(acked: int, first_seq: int) -> None:
         raise WireError(f"acked {acked} must be below the first seq {first_seq} (and not negative)")
 
 
-def _decompress(codec: int, data: memoryview, size: int) -> bytes:
+def _decompress(codec: int, data: memoryview, limit: int) -> bytes:
+    """The body, at most ``limit`` bytes of it."""
     if codec == 0:
-        return bytes(data)
+        return bytes(data[:limit])
     try:
         if codec == 1:
-            out = zlib.decompressobj().decompress(data, size + 1)
+            out = zlib.decompressobj().decompress(data, limit)
         elif codec == 2:
             if _zstd is None:
                 raise WireError("batch compressed with zstd, which this Python lacks")
-            out = _zstd.ZstdDecompressor().decompress(data, size + 1)
+            out = _zstd.ZstdDecompressor().decompress(data, limit)
         else:
             raise WireError(f"unknown codec {codec}", offset=4)
     except _DECOMPRESS_ERRORS as exc:
@@ -278,6 +279,40 @@ class BatchBody:
     groups_at: int
 
 
+PEEK_BYTES = 4096
+"""How much of a batch's body ``peek_stream`` decompresses at most."""
+
+
+@dataclass(frozen=True, slots=True)
+class StreamHead:
+    """Whose stream a batch belongs to and where it starts (``peek_stream``)."""
+
+    site: str
+    edge_id: str
+    stream: str
+    origin: int
+    first_seq: int
+
+
+def peek_stream(data: bytes) -> StreamHead | None:
+    """The site, edge, stream, origin and first seq of a batch, from the start of its body only
+    (at most ``PEEK_BYTES`` decompressed): what an uplink that will not read a batch needs to keep
+    its stream's order. ``None`` when the batch is not well formed that far."""
+    view = memoryview(data)
+    if len(view) < _HEAD.size:
+        return None
+    magic, version, codec, size = _HEAD.unpack_from(view, 0)
+    if magic != BATCH_MAGIC or version != BATCH_VERSION or size == 0:
+        return None
+    try:
+        r = Reader(_decompress(codec, view[_HEAD.size :], min(size, PEEK_BYTES)))
+        site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
+        origin, first_seq = r.unpack(U64, "origin")[0], r.unpack(U64, "first_seq")[0]
+    except WireError:
+        return None
+    return StreamHead(site, edge_id, stream, origin, first_seq)
+
+
 def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> BatchBody:
     """Check the framing, decompress, read site, edge, stream, first seq and schemas."""
     view = memoryview(data)
@@ -290,7 +325,7 @@ def decode_batch_head(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> Batch
         raise WireError(f"unsupported batch version {version}", offset=3)
     if size > max_bytes:
         raise WireError(f"batch body of {size} bytes exceeds the {max_bytes}-byte limit", offset=5)
-    body = _decompress(codec, view[_HEAD.size :], size)
+    body = _decompress(codec, view[_HEAD.size :], size + 1)
     if len(body) != size:
         raise WireError(f"batch body has {len(body)} bytes, header says {size}")
     r = Reader(body)

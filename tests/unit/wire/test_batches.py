@@ -43,6 +43,7 @@ from fleetlink.wire import (
     split_single_object,
     zstd_available,
 )
+from fleetlink.wire.batch import PEEK_BYTES, StreamHead, peek_stream
 
 FP = bytes.fromhex("0102030405060708")
 FP2 = bytes.fromhex("a1a2a3a4a5a6a7a8")
@@ -575,3 +576,28 @@ def test_payload_fingerprints_is_the_set_of_each_payload_fingerprint(
     payloads = [encode_payload(r) for r in records] + junk
     expected = {fp for p in payloads if (fp := payload_fingerprint(p)) is not None}
     assert payload_fingerprints(payloads) == expected
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(batches(), st.sampled_from(CODECS), st.integers(0, 2**64 - 1))
+def test_peek_reads_a_batchs_stream_from_its_start(original: Batch, codec: Codec, origin: int) -> None:
+    original = dataclasses.replace(original, origin=origin)
+    head = peek_stream(encode_batch(original, codec=codec))
+    names = sum(len(t.encode()) + 2 for t in (original.site, original.edge_id, original.stream))
+    expected = StreamHead(original.site, original.edge_id, original.stream, origin, original.first_seq)
+    assert head == (expected if names + 16 <= PEEK_BYTES else None)
+
+
+@pytest.mark.parametrize("codec", CODECS)
+def test_peek_stops_at_the_head_of_a_large_batch(codec: Codec) -> None:
+    records = tuple(rec(seq, value=single_object(FP, bytes(range(256)) * 8)) for seq in range(5, 2005))
+    data = encode_batch(batch(records), codec=codec)
+    assert peek_stream(data) == StreamHead("warehouse-a", "edge-1", "durable", 0, 5)
+    assert peek_stream(data[:40]) in (None, StreamHead("warehouse-a", "edge-1", "durable", 0, 5))
+    assert peek_stream(b"FLX" + data[3:]) is None  # not a batch
+
+
+@settings(max_examples=500)
+@given(st.binary(max_size=300))
+def test_peek_at_garbage_says_none_or_a_head(data: bytes) -> None:
+    assert peek_stream(data) is None or isinstance(peek_stream(data), StreamHead)
