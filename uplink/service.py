@@ -61,7 +61,7 @@ from fleetlink.uplink.registration_records import RegistrationWriter
 from fleetlink.uplink.schema_ids import SchemaIds
 from fleetlink.uplink.stream_fence import StreamFence
 from fleetlink.uplink.topics import ensure_topics
-from fleetlink.wire import Ack, Batch, WireError, decode_batch, decode_batch_head, encode_ack
+from fleetlink.wire import Ack, AckStatus, Batch, WireError, decode_batch, decode_batch_head, encode_ack
 from fleetlink.wire.batch import peek_stream
 from fleetlink.wire.keys import VIA, via_key
 
@@ -407,30 +407,41 @@ class Uplink:
         self, query: zenoh.Query, batch: Batch, scanned: ScannedBatch | None, missing: tuple[bytes, ...]
     ) -> None:
         """Answer ``need_schemas``: the batch left out schemas this uplink does not know."""
-        last_seq = scanned.last_seq() if scanned is not None else batch.last_seq
         if not batch.origin:  # the stream's later batches wait for this one (order)
             self._fence.failed((batch.site, batch.edge_id, batch.stream), batch.first_seq)
-        self.metrics.on_ingested(batch.site, "need_schemas", 0)
         log.info(
-            "batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
+            "batch %s/%s %d.. leaves out %d schema(s) this uplink does not know: asking for them",
+            batch.edge_id,
+            batch.stream,
+            batch.first_seq,
+            len(missing),
+        )
+        detail = "send the batch again with these schemas"
+        self._send_back(query, batch, scanned, "need_schemas", detail=detail, missing=missing)
+
+    def _send_back(
+        self,
+        query: zenoh.Query,
+        batch: Batch,
+        scanned: ScannedBatch | None,
+        status: AckStatus,
+        *,
+        detail: str,
+        missing: tuple[bytes, ...] = (),
+    ) -> None:
+        """Answer a batch of which nothing was produced: it is to come again (``status``)."""
+        self.metrics.on_ingested(batch.site, status, 0)
+        last_seq = scanned.last_seq() if scanned is not None else batch.last_seq
+        ack = Ack(
             batch.edge_id,
             batch.stream,
             batch.first_seq,
             last_seq,
-            len(missing),
+            status,
+            detail=detail,
+            missing_schemas=missing,
         )
-        self._finish(
-            query,
-            Ack(
-                edge_id=batch.edge_id,
-                stream=batch.stream,
-                first_seq=batch.first_seq,
-                last_seq=last_seq,
-                status="need_schemas",
-                missing_schemas=missing,
-                detail="send the batch again with these schemas",
-            ),
-        )
+        self._finish(query, ack)
 
     def _write_at_least_once(
         self,
@@ -452,18 +463,8 @@ class Uplink:
         stream = (batch.site, batch.edge_id, batch.stream)
         fenced = self._fence.check(stream, batch.first_seq)
         if fenced is not None:
-            self.metrics.on_ingested(batch.site, "held_back", 0)
-            self._finish(
-                query,
-                Ack(
-                    edge_id=batch.edge_id,
-                    stream=batch.stream,
-                    first_seq=batch.first_seq,
-                    last_seq=scanned.last_seq() if scanned is not None else batch.last_seq,
-                    status="held_back",
-                    detail=f"batch {fenced.failed_seq}.. of this stream was not produced: it goes first",
-                ),
-            )
+            detail = f"batch {fenced.failed_seq}.. of this stream was not produced: it goes first"
+            self._send_back(query, batch, scanned, "held_back", detail=detail)
             return None
         on_retry = partial(self._fence.failed, stream, batch.first_seq)
 
