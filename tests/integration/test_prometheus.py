@@ -18,6 +18,7 @@ import httpx
 import pytest
 import yaml
 
+from fleetlink.common.metrics.families import LATENCY_BUCKETS
 from fleetlink.common.metrics_config import MetricsSection
 from fleetlink.edge.admin import EdgeAdmin
 from fleetlink.edge.agent import EdgeAgent
@@ -207,8 +208,11 @@ def test_prometheus_scrapes_edge_uplink_and_repeater(
                     # 1 s scrape timeout may not give
                     buckets = "fleetlink_wan_ack_latency_seconds_bucket"
                     p95 = prom.value(f"histogram_quantile(0.95, sum by (le) ({buckets}))")
-                    # in seconds, not ms: no acknowledgement comes later than the ack timeout
-                    assert 0 < p95 <= edge.wan.ack_timeout / 1e9
+                    # in seconds, not ms: no acknowledgement comes later than the ack timeout, so the
+                    # quantile lies at most in the bucket that holds the timeout; the estimate is
+                    # interpolated within that bucket, and may pass the timeout up to its edge
+                    timeout_s = edge.wan.ack_timeout / 1e9
+                    assert 0 < p95 <= min(b for b in LATENCY_BUCKETS if b >= timeout_s)
                     for expr in dashboard_queries():
                         prom.query(expr)  # every panel's query is valid PromQL against real data
                     firing = prom.query('ALERTS{alertstate="firing"}')
