@@ -327,7 +327,7 @@ class Uplink:
         if source is None or head is None or head.origin:
             return
         if (head.site, head.edge_id) == (source.site, source.edge_id):
-            self._fence.failed((head.site, head.edge_id, head.stream), head.first_seq)
+            self._fence.failed((head.site, head.edge_id, head.stream), head.first_seq, evict=False)
 
     def _answered(self, batch: Batch, scanned: ScannedBatch | None, ack: Ack, arrived: float) -> None:
         """Count a batch's answer: metrics, the site's delivery figures, a warning on errors."""
@@ -410,10 +410,11 @@ class Uplink:
         if not batch.origin:  # the stream's later batches wait for this one (order)
             self._fence.failed((batch.site, batch.edge_id, batch.stream), batch.first_seq)
         log.info(
-            "batch %s/%s %d.. leaves out %d schema(s) this uplink does not know: asking for them",
+            "batch %s/%s %d..%d leaves out %d schema(s) this uplink does not know: asking for them",
             batch.edge_id,
             batch.stream,
             batch.first_seq,
+            scanned.last_seq() if scanned is not None else batch.last_seq,
             len(missing),
         )
         detail = "send the batch again with these schemas"
@@ -461,7 +462,7 @@ class Uplink:
             self._finish(query, error="uplink stopping")
             return None
         stream = (batch.site, batch.edge_id, batch.stream)
-        fenced = self._fence.check(stream, batch.first_seq)
+        fenced = self._fence.check(stream, batch.first_seq, arrived)
         if fenced is not None:
             detail = f"batch {fenced.failed_seq}.. of this stream was not produced: it goes first"
             self._send_back(query, batch, scanned, "held_back", detail=detail)

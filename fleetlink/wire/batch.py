@@ -281,6 +281,9 @@ class BatchBody:
 
 PEEK_BYTES = 4096
 """How much of a batch's body ``peek_stream`` decompresses at most."""
+PEEK_INPUT_BYTES = 65536
+"""How much of a compressed batch ``peek_stream`` hands the decompressor at most (it would copy
+the rest of a large batch as unread input)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -294,20 +297,23 @@ class StreamHead:
     first_seq: int
 
 
-def peek_stream(data: bytes) -> StreamHead | None:
-    """The site, edge, stream, origin and first seq of a batch, from the start of its body only
-    (at most ``PEEK_BYTES`` decompressed): what an uplink that will not read a batch needs to keep
-    its stream's order. ``None`` when the batch is not well formed that far."""
+def peek_stream(data: bytes, *, max_bytes: int = MAX_BATCH_BYTES) -> StreamHead | None:
+    """The site, edge, stream, origin and first seq of a batch, from its start only (at most
+    ``PEEK_INPUT_BYTES`` read, ``PEEK_BYTES`` decompressed): what an uplink that will not read a
+    batch needs to keep its stream's order. ``None`` when the batch is not well formed that far,
+    or is one that ``decode_batch_head`` refuses from what is read."""
     view = memoryview(data)
     if len(view) < _HEAD.size:
         return None
     magic, version, codec, size = _HEAD.unpack_from(view, 0)
-    if magic != BATCH_MAGIC or version != BATCH_VERSION or size == 0:
+    if magic != BATCH_MAGIC or version != BATCH_VERSION or not 0 < size <= max_bytes:
         return None
     try:
-        r = Reader(_decompress(codec, view[_HEAD.size :], min(size, PEEK_BYTES)))
+        start = _decompress(codec, view[_HEAD.size : _HEAD.size + PEEK_INPUT_BYTES], min(size, PEEK_BYTES))
+        r = Reader(start)
         site, edge_id, stream = r.text("site"), r.text("edge_id"), r.text("stream")
-        origin, first_seq = r.unpack(U64, "origin")[0], r.unpack(U64, "first_seq")[0]
+        origin, first_seq, acked = (r.unpack(U64, what)[0] for what in ("origin", "first_seq", "acked"))
+        _check_acked(acked, first_seq)
     except WireError:
         return None
     return StreamHead(site, edge_id, stream, origin, first_seq)

@@ -23,7 +23,7 @@ from fleetlink.localstack.relay import TcpRelay
 from fleetlink.schemas.single_object import fingerprint
 from fleetlink.uplink.config import UplinkConfig
 from fleetlink.uplink.service import Uplink
-from fleetlink.wire import Record, ingest_key, single_object
+from fleetlink.wire import Record, decode_ack, ingest_key, single_object
 from fleetlink.wire.batch import Batch, encode_batch
 from tests.helpers import zenoh_peer_config
 from tests.integration.test_uplink_ingest import read_topic, send
@@ -61,6 +61,12 @@ def bed(kafka_bootstrap: str, schema_registry_url: str, zenoh_router: str) -> It
 def one_slot_bed(kafka_bootstrap: str, schema_registry_url: str, zenoh_router: str) -> Iterator[Bed]:
     """An uplink that reads one batch at a time and answers the others ``busy``."""
     yield from open_bed(kafka_bootstrap, schema_registry_url, zenoh_router, max_concurrent_batches=1)
+
+
+@pytest.fixture
+def two_slot_bed(kafka_bootstrap: str, schema_registry_url: str, zenoh_router: str) -> Iterator[Bed]:
+    """An uplink that takes two batches at a time and answers the others ``busy``."""
+    yield from open_bed(kafka_bootstrap, schema_registry_url, zenoh_router, max_concurrent_batches=2)
 
 
 def open_bed(
@@ -135,6 +141,26 @@ def test_a_batch_after_one_refused_busy_waits_for_it(one_slot_bed: Bed, kafka_bo
     assert bed.order(kafka_bootstrap, 20) == list(range(1, 21))
     later = dataclasses.replace(bed.batch(5, 1, stream=f"{bed.topic}.e2"), edge_id="edge-2")
     assert send(bed.edge, later).status == "ok"
+
+
+def test_an_earlier_batch_in_hand_does_not_lift_a_busy_fence(two_slot_bed: Bed, kafka_bootstrap: str) -> None:
+    bed = two_slot_bed
+    assert send(bed.edge, bed.batch(1, 1)).status == "ok"  # routes ready, the schema known
+    bed.registry.set_mode("blackhole")  # a batch of another stream holds a slot, waiting
+    holder = ask(bed.edge, bed.batch(1, 1, stream=f"{bed.topic}.other"))
+    earlier = ask(bed.edge, bed.batch(2, 9))  # the second slot: it waits behind the holder
+    first, second = bed.batch(11, 10), bed.batch(21, 10)
+    with pytest.raises(AssertionError, match="uplink busy"):
+        send(bed.edge, first)  # answered busy, unread: the fence is up
+    bed.registry.set_mode("refuse")  # the holder fails; the earlier batch goes after it
+    assert [reply.ok is not None for reply in holder] == [True]
+    assert [decode_ack(reply.ok.payload.to_bytes()).status for reply in earlier if reply.ok] == ["ok"]
+    bed.registry.set_mode("pass")
+    held = send(bed.edge, second)  # the earlier batch did not lift the fence
+    assert (held.status, held.first_seq) == ("held_back", 21), held
+    assert send(bed.edge, first).status == "ok"
+    assert send(bed.edge, second).status == "ok"
+    assert bed.order(kafka_bootstrap, 30) == list(range(1, 31))
 
 
 def ask(session: zenoh.Session, batch: Batch, key: str = "") -> Any:

@@ -61,3 +61,27 @@ def test_fences_are_bounded() -> None:
     assert len(fence) == 3
     assert fence.check(("site-a", "edge-0", "durable"), 20) is None  # the oldest went first
     assert fence.check(("site-a", "edge-4", "durable"), 20) is not None
+
+
+def test_an_earlier_batch_in_hand_before_the_fence_goes_and_leaves_it_up() -> None:
+    clock = Clock()
+    fence = StreamFence(clock=clock)
+    queued_at = clock.now  # batch 1.. arrived and waits its turn
+    clock.now += 1
+    fence.failed(STREAM, 11)  # then batch 11.. was answered busy, unread
+    assert fence.check(STREAM, 1, arrived=queued_at) is None  # the earlier batch goes
+    assert fence.check(STREAM, 21, arrived=clock.now) == Fenced(11, 0.0)  # the fence is still up
+    assert fence.check(STREAM, 11, arrived=clock.now) is None  # batch 11.. again lifts it
+    assert len(fence) == 0
+
+
+def test_a_fence_that_may_not_evict_is_not_set_when_full() -> None:
+    fence = StreamFence(max_streams=2, clock=Clock())
+    fence.failed(("s", "e", "a"), 1)
+    fence.failed(("s", "e", "b"), 1)
+    fence.failed(("s", "e", "c"), 1, evict=False)  # a flood of new streams pushes nobody out
+    assert fence.check(("s", "e", "a"), 5) == Fenced(1, 0.0)
+    assert fence.check(("s", "e", "b"), 5) == Fenced(1, 0.0)
+    assert fence.check(("s", "e", "c"), 5) is None
+    fence.failed(("s", "e", "a"), 0, evict=False)  # a stream already fenced moves to the earlier seq
+    assert fence.check(("s", "e", "a"), 1) == Fenced(0, 0.0)

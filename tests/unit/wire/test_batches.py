@@ -585,7 +585,7 @@ def test_peek_reads_a_batchs_stream_from_its_start(original: Batch, codec: Codec
     head = peek_stream(encode_batch(original, codec=codec))
     names = sum(len(t.encode()) + 2 for t in (original.site, original.edge_id, original.stream))
     expected = StreamHead(original.site, original.edge_id, original.stream, origin, original.first_seq)
-    assert head == (expected if names + 16 <= PEEK_BYTES else None)
+    assert head == (expected if names + 24 <= PEEK_BYTES else None)
 
 
 @pytest.mark.parametrize("codec", CODECS)
@@ -601,3 +601,14 @@ def test_peek_stops_at_the_head_of_a_large_batch(codec: Codec) -> None:
 @given(st.binary(max_size=300))
 def test_peek_at_garbage_says_none_or_a_head(data: bytes) -> None:
     assert peek_stream(data) is None or isinstance(peek_stream(data), StreamHead)
+
+
+def test_peek_says_none_for_what_the_head_decoder_refuses() -> None:
+    data = encode_batch(batch((rec(5),)), codec="none")
+    assert peek_stream(data) == StreamHead("warehouse-a", "edge-1", "durable", 0, 5)
+    assert peek_stream(data, max_bytes=10) is None  # a body above the limit
+    acked_at = 9 + sum(2 + len(t) for t in (b"warehouse-a", b"edge-1", b"durable")) + 16
+    bad = data[:acked_at] + struct.pack("<Q", 5) + data[acked_at + 8 :]  # acked not below first seq
+    with pytest.raises(WireError, match="acked 5 must be below"):
+        decode_batch(bad)
+    assert peek_stream(bad) is None
