@@ -265,7 +265,7 @@ def start_site(
     sites: int,
     cloud_port: int,
     mappings: list[dict[str, str]],
-    coalesce: str | None = None,
+    intake: dict[str, str] | None = None,
 ) -> tuple[int, int, int, Path]:
     """One site: its router and its edge (a client of it). Returns (router port, router pid, edge
     pid, the edge's stats file)."""
@@ -284,8 +284,8 @@ def start_site(
         "robot_types": {"bench": {"match": "/r*", "mappings": mappings}},
         "spool": {"dir": str(work / f"spool-{site}"), "max_bytes": "1GiB"},
     }
-    if coalesce is not None:
-        edge["intake"] = {"coalesce": coalesce}
+    if intake:
+        edge["intake"] = intake
     stats_path = work / f"edge-{site}.stats"
     pid = start_process(
         stack,
@@ -383,7 +383,7 @@ def run_shape(
     warmup: float,
     sites: int = 1,
     uplinks: int = 1,
-    coalesce: str | None = None,
+    intake: dict[str, str] | None = None,
     bare: bool = False,
 ) -> Result:
     work.mkdir(parents=True)
@@ -430,7 +430,7 @@ def run_shape(
         edges: list[int] = []
         for site in range(sites):
             port, router_pid, edge_pid, stats_path = start_site(
-                stack, work, site, sites, cloud_port, mappings, coalesce
+                stack, work, site, sites, cloud_port, mappings, intake
             )
             site_ports.append(port)
             stats_paths.append(stats_path)
@@ -631,6 +631,11 @@ def main() -> None:
         help="the edges' intake.coalesce (default: the edge's default; 0s turns it off)",
     )
     ap.add_argument(
+        "--busy-coalesce",
+        metavar="DURATION",
+        help="the edges' intake.busy_coalesce (default: the edge's default; 0s turns it off)",
+    )
+    ap.add_argument(
         "--bare",
         action="store_true",
         help="beside each edge, a bare Zenoh client receiving the same samples and doing nothing"
@@ -638,6 +643,11 @@ def main() -> None:
     )
     args = ap.parse_args()
     shapes = [Shape.parse(s) for s in (args.shape or DEFAULT_SHAPES)]
+    intake = {
+        key: value
+        for key, value in (("coalesce", args.coalesce), ("busy_coalesce", args.busy_coalesce))
+        if value is not None
+    }
     with ExitStack() as stack, tempfile.TemporaryDirectory(prefix="fleetlink-fleet-") as tmp:
         work = Path(tmp)
         bootstrap, registry = os.environ.get("KAFKA_BOOTSTRAP"), os.environ.get("SCHEMA_REGISTRY_URL")
@@ -661,7 +671,7 @@ def main() -> None:
                     args.warmup,
                     args.sites,
                     args.uplinks,
-                    args.coalesce,
+                    intake,
                     args.bare,
                 )
                 print(f"run {run + 1}: {result.line()}", flush=True)

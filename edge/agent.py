@@ -227,6 +227,7 @@ class EdgeAgent:
             group_records=group_records,
             group_bytes=group_bytes,
             coalesce_s=config.intake.coalesce / 1e9,
+            busy_coalesce_s=config.intake.busy_coalesce / 1e9,
         )
         limit.on_change(self._apply_record_limit)
         # what each publisher had in the spool when the last run stopped: its first sample now

@@ -261,11 +261,13 @@ class IntakeSection(Section):
     lag_alarm: DurationNs = 2 * _NS
     """Health turns ``degraded`` while samples wait longer than this between receipt and spool."""
     coalesce: DurationNs = Field(default=1_000_000, ge=0, le=100_000_000)
-    """A sample that finds the receive thread idle makes it wait this long before reading on, so
-    the samples arriving meanwhile are read from the socket together: at steady fleet rates one
-    wake-up for many samples instead of one each. While samples arrive at 1,500 a second or more
-    the wait is twice this. Adds at most that much latency; ``0s`` turns it off. A burst never
-    waits (docs/edge.md, "Receiving")."""
+    """A sample that wakes the receive thread makes it wait this long before reading on, so the
+    samples arriving meanwhile are read from the socket together: one wake-up for many samples
+    instead of one each. Adds at most that much latency; ``0s`` turns it off. Samples read from a
+    backlog (a burst) never wait (docs/edge.md, "Receiving")."""
+    busy_coalesce: DurationNs = Field(default=10_000_000, ge=0, le=100_000_000)
+    """The same wait while samples arrive at 1,500 a second or more (a fleet's steady flow), where
+    wake-ups cost the most and a few ms of latency the least."""
 
 
 class WanSection(Section):

@@ -49,14 +49,15 @@ COLLECT_S = 0.002
 """After a first sample, how long ``take`` waits for more (a sample waits at most this long), so
 that a steady flow is taken a few ms' worth at a time and the per-take work is shared."""
 BUSY_RATE = 1500.0
-BUSY_COLLECT_S = 0.008
+BUSY_COLLECT_S = 0.025
 """While samples arrive at ``BUSY_RATE`` a second or more (over the last 100 ms), ``take`` waits
 until this long after the first: a take costs some 250 µs of the edge's CPU whatever it
 holds (the spool write, waking the WAN sender, the threads taking turns on the GIL), a third of
 the edge at 10,000 samples/s when it is taken every 3 ms (bench/bench_fleet.py). At 2,000
 samples/s (200 robots, 5 topics each at 2 Hz) it took 330 times a second, 6 samples each: from 1,500/s
-on, 100 takes a second. Below that rate the latency is worth more (p99 ≤ 20 ms at 1,000
-samples/s)."""
+on, 40 takes a second, each a WAN batch of some 50 records (with ``intake.busy_coalesce``: 51
+instead of 75 µs of edge CPU a record, p99 57 ms, docs/benchmarks.md). Below that rate the
+latency is worth more (p99 ≤ 20 ms at 1,000 samples/s)."""
 DATAPLANE_RUNTIME = (
     "(rx: (handover: app), tx: (handover: app), net: (handover: app), acc: (handover: app),"
     " app: (worker_threads: 1))"
@@ -160,6 +161,7 @@ class NativeSource:
         group_records: int = 2000,
         group_bytes: int = 1 << 20,
         coalesce_s: float = 0.0,
+        busy_coalesce_s: float = 0.0,
     ) -> None:
         config = dataplane_config(python_config)
         try:
@@ -172,6 +174,7 @@ class NativeSource:
                     max_items,
                     max_bytes,
                     coalesce_s=coalesce_s,
+                    busy_coalesce_s=busy_coalesce_s,
                 )
         except (ValueError, RuntimeError) as exc:
             raise RuntimeSetupError(f"zenoh: the edge's receive path cannot start: {exc}") from None

@@ -27,6 +27,7 @@ use crate::attachment;
 use crate::cdr_avro::Program;
 use crate::drops::Drops;
 use crate::seq::{SeqTracker, Seen};
+use crate::wakeups;
 
 const FLAG_SOURCE_SEQ: u8 = 0x04;
 /// A lane that only counts: a mapping that declares another ROS type than the key carries.
@@ -98,39 +99,57 @@ struct Shared {
     dropped: AtomicU64,
     dropped_bytes: AtomicU64,
     taken: AtomicU64,
-    /// How long the receive thread waits after a sample that ended an idle spell (zero: never).
+    /// How long the receive thread waits after a sample that woke it (zero: never)...
     coalesce: Duration,
-    /// When the last sample arrived (or the last wait ended), in ns from `started`.
+    /// ... and while `busy`.
+    busy_coalesce: Duration,
+    /// Where blocks are not counted: when the last sample arrived (or the last wait ended), in ns
+    /// from `started`.
     last_ns: AtomicU64,
     started: Instant,
     /// Waits made: each one a wake-up of the receive thread shared by the samples that followed.
     coalesced: AtomicU64,
-    /// Samples arrive at the busy rate (`wait_and_drain`): each wait is twice `coalesce`.
+    /// Samples arrive at the busy rate (`wait_and_drain`): each wait is `busy_coalesce`.
     busy: AtomicBool,
 }
 
-/// A sample this long after the one before found the receive thread idle: it woke for it.
+/// Where a thread's blocks are not counted: a sample this long after the one before found the
+/// receive thread idle.
 const IDLE_GAP_NS: u64 = 50_000;
 
 impl Shared {
-    /// Called for each sample on the session's receive thread. When the sample ends an idle
-    /// spell (at steady rates each sample comes on its own: a wake-up, a socket read and a
-    /// thread switch a sample), wait `coalesce` (twice that while `busy`) before reading on, so
-    /// that the samples arriving meanwhile are read together from the socket. Back to back (a
-    /// burst, or the samples that arrived during a wait) never waits. Adds at most the wait to a
-    /// sample's latency.
-    fn coalesce(&self) {
-        if self.coalesce.is_zero() {
-            return;
+    /// Called for each sample on the session's receive thread, before it is offered: whether the
+    /// sample woke the thread (it had blocked since the last sample: at steady rates each sample
+    /// comes on its own, a wake-up, a socket read and a thread switch a sample) rather than being
+    /// read on from the socket's backlog.
+    fn woke(&self) -> bool {
+        if self.coalesce.is_zero() && self.busy_coalesce.is_zero() {
+            return false;
+        }
+        if let Some(blocked) = wakeups::blocked_since_settled() {
+            return blocked;
         }
         let now = self.started.elapsed().as_nanos() as u64;
         let last = self.last_ns.swap(now, Ordering::Relaxed);
-        if now.saturating_sub(last) > IDLE_GAP_NS {
-            let busy = self.busy.load(Ordering::Relaxed);
-            std::thread::sleep(if busy { self.coalesce * 2 } else { self.coalesce });
+        now.saturating_sub(last) > IDLE_GAP_NS
+    }
+
+    /// After a sample that `woke` the receive thread, wait `coalesce` (`busy_coalesce` while
+    /// `busy`) before reading on, so that the samples arriving meanwhile are read together from the
+    /// socket: one wake-up for many. Samples read from a backlog (a burst, those that came
+    /// during a wait, a thread preempted while reading) never wait. Adds at most the wait to a
+    /// sample's latency.
+    fn coalesce(&self, woke: bool) {
+        let wait = if self.busy.load(Ordering::Relaxed) { self.busy_coalesce } else { self.coalesce };
+        if wait.is_zero() {
+            return;
+        }
+        if woke {
+            std::thread::sleep(wait);
             self.coalesced.fetch_add(1, Ordering::Relaxed);
             self.last_ns.store(self.started.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
+        wakeups::settle(); // the wait, or the intake's lock, is not the next sample's wake-up
     }
 
     fn offer(&self, raw: Raw, sub: &SubAtomics) {
@@ -302,13 +321,15 @@ pub struct DataPlane {
 
 #[pymethods]
 impl DataPlane {
-    /// `DataPlane(config_file, overrides, max_items, max_bytes, max_sources, coalesce_s)`: open a
+    /// `DataPlane(config_file, overrides, max_items, max_bytes, max_sources, coalesce_s,
+    /// busy_coalesce_s)`: open a
     /// Zenoh session from a JSON5 config file (or the defaults) with `overrides` (key, JSON5
     /// value) inserted, and an intake bounded by `max_items` samples and `max_bytes` bytes. A
     /// sample that finds the receive thread idle makes it wait `coalesce_s` before reading on
-    /// (0: never), so that the samples that follow are read together.
+    /// (`busy_coalesce_s` while samples arrive at the busy rate of `take`; 0: never), so that the
+    /// samples that follow are read together.
     #[new]
-    #[pyo3(signature = (config_file, overrides, max_items, max_bytes, max_sources=65536, coalesce_s=0.0))]
+    #[pyo3(signature = (config_file, overrides, max_items, max_bytes, max_sources=65536, coalesce_s=0.0, busy_coalesce_s=0.0))]
     fn new(
         py: Python<'_>,
         config_file: Option<String>,
@@ -317,9 +338,10 @@ impl DataPlane {
         max_bytes: usize,
         max_sources: usize,
         coalesce_s: f64,
+        busy_coalesce_s: f64,
     ) -> PyResult<Self> {
-        if !(0.0..=0.1).contains(&coalesce_s) {
-            return Err(PyValueError::new_err("coalesce_s must be between 0 and 0.1"));
+        if !(0.0..=0.1).contains(&coalesce_s) || !(0.0..=0.1).contains(&busy_coalesce_s) {
+            return Err(PyValueError::new_err("coalesce_s and busy_coalesce_s must be between 0 and 0.1"));
         }
         if max_items == 0 || max_bytes == 0 {
             return Err(PyValueError::new_err("intake bounds must be positive"));
@@ -351,6 +373,7 @@ impl DataPlane {
                 dropped_bytes: AtomicU64::new(0),
                 taken: AtomicU64::new(0),
                 coalesce: Duration::from_secs_f64(coalesce_s),
+                busy_coalesce: Duration::from_secs_f64(busy_coalesce_s),
                 last_ns: AtomicU64::new(0),
                 started: Instant::now(),
                 coalesced: AtomicU64::new(0),
@@ -401,8 +424,9 @@ impl DataPlane {
                             attachment: sample.attachment().map(|a| a.to_bytes().into_owned()),
                             received_ns: now_ns(),
                         };
+                        let woke = shared.woke();
                         shared.offer(raw, &atomics);
-                        shared.coalesce();
+                        shared.coalesce(woke);
                     })
                     .wait()
             })

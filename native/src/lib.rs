@@ -7,6 +7,7 @@ pub mod drops;
 pub mod producer;
 pub mod rdkafka;
 pub mod seq;
+pub mod wakeups;
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
