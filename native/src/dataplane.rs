@@ -140,11 +140,11 @@ impl Shared {
     /// during a wait, a thread preempted while reading) never wait. Adds at most the wait to a
     /// sample's latency.
     fn coalesce(&self, woke: bool) {
-        let wait = if self.busy.load(Ordering::Relaxed) { self.busy_coalesce } else { self.coalesce };
-        if wait.is_zero() {
+        if self.coalesce.is_zero() && self.busy_coalesce.is_zero() {
             return;
         }
-        if woke {
+        let wait = if self.busy.load(Ordering::Relaxed) { self.busy_coalesce } else { self.coalesce };
+        if woke && !wait.is_zero() {
             std::thread::sleep(wait);
             self.coalesced.fetch_add(1, Ordering::Relaxed);
             self.last_ns.store(self.started.elapsed().as_nanos() as u64, Ordering::Relaxed);
