@@ -24,38 +24,46 @@ from fleetlink.localstack.zenoh_router import ZenohRouter
 from fleetlink.roswire import cdr
 from fleetlink.roswire.node import RosNode
 from fleetlink.schemas.typestore import load_typestore
-from tests.fault.soak import run_fleet
+from tests.fault.soak import Soak, run_fleet
 from tests.helpers import wait_until, zenoh_peer_config
 
 STRING = "std_msgs/msg/String"
 
 
-def test_ten_thousand_messages_a_second_all_reach_the_spool(tmp_path: Path) -> None:
-    spool = {"segment_bytes": "16MiB", "max_bytes": "512MiB"}
-    run = run_fleet(
-        tmp_path, "load", robots=20, topics=5, hz=100.0, seconds=15.0, warmup_s=3.0, spool=spool, block=True
-    )
+SPOOL = {"segment_bytes": "16MiB", "max_bytes": "512MiB"}
+
+
+def assert_all_spooled(run: Soak, rate: float, seconds: float, samples_a_wait: float) -> None:
+    """The robots kept ``rate`` messages/s for ``seconds`` (reliable, blocking publishers fall
+    behind an edge that reads slower), every message reached the spool (lost 0), and the
+    receive thread waited, but less than once every ``samples_a_wait`` samples."""
     print("\n" + run.summary())
     accounted = run.accounted()
-    assert run.published >= 0.95 * 20 * 5 * 100 * 15, "the robots did not publish at 10,000 messages/s"
+    assert run.published >= 0.95 * rate * seconds, f"the robots fell behind {rate:,.0f} messages/s"
     assert accounted["lost in transit (sequence gaps)"] == 0, accounted
     assert accounted["dropped at the intake"] == 0, accounted
     assert accounted["held in the spool"] == run.published + run.registrations, accounted
+    coalesced = run.count("intake", "coalesced")
+    assert 0 < coalesced < run.published / samples_a_wait, f"{coalesced} waits for {run.published} samples"
+
+
+def test_ten_thousand_messages_a_second_all_reach_the_spool(tmp_path: Path) -> None:
+    run = run_fleet(
+        tmp_path, "load", robots=20, topics=5, hz=100.0, seconds=15.0, warmup_s=3.0, spool=SPOOL, block=True
+    )
+    assert_all_spooled(run, rate=20 * 5 * 100, seconds=15.0, samples_a_wait=3)
     edge_log = (tmp_path / "edge.log").read_text()
     assert edge_log.count("receiving ") == 5, "one key expression per mapping, declared once"
     assert "stopped receiving" not in edge_log
-    coalesced = run.count("intake", "coalesced")
-    assert 0 < coalesced < run.published / 3, f"{coalesced} waits for {run.published} samples"
 
 
 def test_a_long_receive_wait_still_reads_a_steady_fleet_whole(tmp_path: Path) -> None:
     """A 20 ms receive wait at 2,000 messages/s: the receive thread waits only after a sample
     that woke it, and reads on without waiting through the samples that came meanwhile, even
-    when it is preempted between two of them on a loaded machine. So the robots publish at their
-    rate (reliable, blocking publishers would fall behind an edge that reads slower), every
-    message reaches the spool, and there are tens of samples a wait (a thread that waited after
-    any gap between two samples read a few samples a wait: 24 % of the rate came through)."""
-    spool = {"segment_bytes": "16MiB", "max_bytes": "512MiB"}
+    when it is preempted between two of them on a loaded machine. So the robots keep their rate,
+    every message reaches the spool, and there are tens of samples a wait (a thread that waited
+    after any gap between two samples read a few samples a wait: 24 % of the rate came through)."""
+    intake = {"coalesce": "20ms", "busy_coalesce": "20ms"}
     run = run_fleet(
         tmp_path,
         "long wait",
@@ -64,22 +72,14 @@ def test_a_long_receive_wait_still_reads_a_steady_fleet_whole(tmp_path: Path) ->
         hz=20.0,
         seconds=10.0,
         warmup_s=2.0,
-        spool=spool,
+        spool=SPOOL,
         block=True,
-        intake={"coalesce": "20ms", "busy_coalesce": "20ms"},
+        intake=intake,
     )
-    print("\n" + run.summary())
-    accounted = run.accounted()
-    assert run.published >= 0.95 * 20 * 5 * 20 * 10, "the robots fell behind 2,000 messages/s"
-    assert accounted["lost in transit (sequence gaps)"] == 0, accounted
-    assert accounted["dropped at the intake"] == 0, accounted
-    assert accounted["held in the spool"] == run.published + run.registrations, accounted
-    coalesced = run.count("intake", "coalesced")
-    assert 0 < coalesced < run.published / 10, f"{coalesced} waits for {run.published} samples"
+    assert_all_spooled(run, rate=20 * 5 * 20, seconds=10.0, samples_a_wait=10)
 
 
 def test_samples_dropped_at_the_intake_are_counted_once(tmp_path: Path) -> None:
-    spool = {"segment_bytes": "16MiB", "max_bytes": "512MiB"}
     run = run_fleet(
         tmp_path,
         "small intake",
@@ -88,7 +88,7 @@ def test_samples_dropped_at_the_intake_are_counted_once(tmp_path: Path) -> None:
         hz=1000.0,
         seconds=8.0,
         warmup_s=2.0,
-        spool=spool,
+        spool=SPOOL,
         block=True,  # nothing lost on the way: every gap the edge sees is its own intake's doing
         intake={"max_samples": 8},
     )
