@@ -4,11 +4,13 @@ publishing real recorded messages on five topics at a steady rate.
 Run by bench/bench_fleet.py: ``fleet_publisher.py --connect EP --first N --robots K --hz F``.
 Declares the robots (node, publishers), prints ``ready``, waits for a line on stdin, publishes
 every topic of every robot at ``--hz`` for ``--seconds`` (the publications evenly spread over
-each period), the first and the last sample of each topic waiting for room instead of being
-dropped (a sample lost on the way between them is a gap in the sequence numbers at the edge;
-one lost before a publisher's first sample the edge receives would be counted nowhere), prints
-``done <published> <seconds> <behind>`` (``behind``: publications that left more than one
-period late), then waits for a line before closing the sessions.
+each period, robot after robot; with ``--tick`` those due within a tick leave together, a
+wake-up a tick instead of one a publication), the first and the last sample of each topic
+waiting for room instead of being dropped (a sample lost on the way between them is a gap in
+the sequence numbers at the edge; one lost before a publisher's first sample the edge receives
+would be counted nowhere), prints ``done <published> <seconds> <behind>`` (``behind``:
+publications that left more than one period late), then waits for a line before closing the
+sessions.
 """
 
 from __future__ import annotations
@@ -77,6 +79,13 @@ def main() -> int:
         "--block", action="store_true", help="reliable and blocking publishers: nothing dropped on the way"
     )
     parser.add_argument(
+        "--tick",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="wake at most once per tick and publish what is due then (0: a wake-up per publication)",
+    )
+    parser.add_argument(
         "--wait-subscribed",
         type=float,
         default=0.0,
@@ -99,6 +108,9 @@ def main() -> int:
             pubs.append(
                 (node.create_publisher(f"/r{i:04d}/{name}", typename, congestion=congestion), payloads[name])
             )
+    # robot by robot within a topic: publications that leave in one tick come from different
+    # robots (different sessions), as independent robots' would, not one robot's topics together
+    pubs = [pubs[r * len(topics) + t] for t in range(len(topics)) for r in range(args.robots)]
     gc.freeze()
     print("ready", flush=True)
     sys.stdin.readline()
@@ -116,7 +128,7 @@ def main() -> int:
             due = began + n * interval
             delay = due - time.perf_counter()
             if delay > 0:
-                time.sleep(delay)
+                time.sleep(max(delay, args.tick))
             elif -delay > period:
                 behind += 1
             pub, msgs = pubs[n % len(pubs)]
