@@ -654,9 +654,9 @@ def main() -> None:
         type=float,
         default=2.0,
         metavar="MS",
-        help="each robot process wakes at most once per this many ms and publishes what is due then,"
-        " robot after robot (0: a wake-up per publication; 1,000 robots then cost the machine twice"
-        " the CPU pacing themselves)",
+        help="each robot process wakes at most once per this many ms (at most half a topic's period)"
+        " and publishes what is due then, robot after robot (0: a wake-up per publication; 1,000"
+        " robots then cost the machine twice the CPU pacing themselves)",
     )
     ap.add_argument(
         "--bare",

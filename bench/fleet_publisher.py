@@ -83,7 +83,8 @@ def main() -> int:
         type=float,
         default=0.0,
         metavar="SECONDS",
-        help="wake at most once per tick and publish what is due then (0: a wake-up per publication)",
+        help="wake at most once per tick (at most half the period) and publish what is due then"
+        " (0: a wake-up per publication)",
     )
     parser.add_argument(
         "--wait-subscribed",
@@ -122,13 +123,14 @@ def main() -> int:
     if args.hz > 0:
         interval = 1.0 / (args.hz * len(pubs))  # every publisher once per period, evenly spread
         period = 1.0 / args.hz
+        tick = min(args.tick, period / 2)  # a publisher never leaves twice in one tick
         total = int(args.seconds * args.hz) * len(pubs)
         began = time.perf_counter()
         for n in range(total):
             due = began + n * interval
             delay = due - time.perf_counter()
             if delay > 0:
-                time.sleep(max(delay, args.tick))
+                time.sleep(max(delay, tick))
             elif -delay > period:
                 behind += 1
             pub, msgs = pubs[n % len(pubs)]
