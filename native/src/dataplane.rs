@@ -87,6 +87,9 @@ struct Queue {
     bytes: usize,
     high_water: usize,
     woken: bool,
+    /// While a take collects for company: how many samples it takes at most (0: none collects).
+    /// The sample that makes that many wakes it, so that a backlog does not wait out the window.
+    want: usize,
     /// Per publisher GID, the samples dropped here since the last take (`Drops`).
     dropped_by: Drops,
 }
@@ -169,13 +172,14 @@ impl Shared {
             return;
         }
         let was_empty = q.items.is_empty();
+        let wanted = q.want != 0 && q.items.len() + 1 == q.want;
         q.items.push_back(raw);
         q.bytes += size;
         if q.items.len() > q.high_water {
             q.high_water = q.items.len();
         }
         drop(q);
-        if was_empty {
+        if was_empty || wanted {
             self.ready.notify_one();
         }
     }
@@ -364,6 +368,7 @@ impl DataPlane {
                     bytes: 0,
                     high_water: 0,
                     woken: false,
+                    want: 0,
                     dropped_by: Drops::new(MAX_DROP_SOURCES),
                 }),
                 ready: Condvar::new(),
@@ -641,7 +646,8 @@ impl DataPlane {
     /// at most `max`. While samples arrive at `busy_rate` a second or more (measured over the
     /// takes of the last 100 ms or so, so a burst at a low rate does not count), a take's fixed
     /// cost (waking the threads that handle what it spools) outweighs a few ms of latency:
-    /// collect until `busy_collect_s` after the first sample.
+    /// collect until `busy_collect_s` after the first sample. The sample that makes `max` ends
+    /// the wait (a burst is taken `max` at a time, not a window's worth at a time).
     fn wait_and_drain(
         &self,
         max: usize,
@@ -664,6 +670,7 @@ impl DataPlane {
         if !q.items.is_empty() && !q.woken && collect_s > 0.0 {
             let window = if busy { collect_s.max(busy_collect_s) } else { collect_s };
             let until = Instant::now() + Duration::from_secs_f64(window);
+            q.want = max;
             while q.items.len() < max && !q.woken {
                 let now = Instant::now();
                 if now >= until {
@@ -671,6 +678,7 @@ impl DataPlane {
                 }
                 q = self.shared.ready.wait_timeout(q, until - now).unwrap().0;
             }
+            q.want = 0;
         }
         q.woken = false;
         let n = q.items.len().min(max);
