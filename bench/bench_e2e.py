@@ -22,7 +22,7 @@ of a warm one); then parts 1 and 3 alternate ``--repeat`` times and their median
 read back one ``poll`` at a time for latency (receive times to the millisecond), in 5 ms batches
 for throughput. Part 2 runs last. Environment: ``BENCH_LINGER`` (the edge's ``wan.linger``, default 10ms),
 ``BENCH_KAFKA_LINGER`` / ``BENCH_KAFKA_COMPRESSION`` (the uplink's ``kafka.linger`` and
-``kafka.compression``, default 5ms and lz4),
+``kafka.compression``, default: the uplink's, and lz4),
 ``BENCH_METRICS=1`` (the uplink's Prometheus metrics on: every delivery report counted).
 """
 
@@ -148,12 +148,13 @@ class Pipeline:
         uplink: dict[str, Any] = {
             "kafka": {
                 "bootstrap_servers": bootstrap,
-                "linger": os.environ.get("BENCH_KAFKA_LINGER", "5ms"),
                 "compression": os.environ.get("BENCH_KAFKA_COMPRESSION", "lz4"),
             },
             "registry": {"url": registry},
             "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.cloud_port}"]},
         }
+        if os.environ.get("BENCH_KAFKA_LINGER"):
+            uplink["kafka"]["linger"] = os.environ["BENCH_KAFKA_LINGER"]
         if os.environ.get("BENCH_METRICS"):  # Prometheus metrics on: every delivery report counted
             uplink["metrics"] = {"listen": "127.0.0.1:0"}
         edge = {

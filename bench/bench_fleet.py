@@ -21,6 +21,7 @@ each uplink's share of the CPU shows how they split the load. With ``--bare`` a 
 of each site router (bench/bare_receiver.py: the data plane's runtime, the same samples, nothing
 done with them) runs beside the edge: its CPU is the floor of receiving the fleet through Zenoh
 on this machine, printed beside the edge's as a ratio, with both processes' wake-ups a second.
+``BENCH_KAFKA_LINGER`` sets the uplinks' ``kafka.linger`` (default: the uplink's).
 
 Before the counted runs, ``--warmup-runs`` runs of the first shape are printed but not counted: a
 Kafka broker just started compiles its hot paths under the first minutes of load (200 x 5 x 10 Hz
@@ -409,11 +410,14 @@ def run_shape(
                 stack, work / "cloud-router.json5", ["cloud-router-dev.json5"], cloud_port
             )
             zenoh = {"mode": "client", "connect": [cloud]}
+        kafka = {"bootstrap_servers": bootstrap}
+        if os.environ.get("BENCH_KAFKA_LINGER"):
+            kafka["linger"] = os.environ["BENCH_KAFKA_LINGER"]
         for n in range(uplinks):
             name = "uplink" if uplinks == 1 else f"uplink {n}"
             uplink = {
                 "id": f"bench-uplink-{n}",
-                "kafka": {"bootstrap_servers": bootstrap, "linger": "5ms"},
+                "kafka": kafka,
                 "registry": {"url": registry},
                 "zenoh": zenoh,
             }

@@ -22,7 +22,7 @@ def test_producer_always_runs_acks_all_and_idempotent() -> None:
 
 def test_durations_are_text_and_reach_librdkafka_in_milliseconds() -> None:
     defaults = KafkaSection(bootstrap_servers="b").producer_config()
-    assert (defaults["linger.ms"], defaults["delivery.timeout.ms"]) == (5, 120_000)
+    assert (defaults["linger.ms"], defaults["delivery.timeout.ms"]) == (1, 120_000)
     settings = KafkaSection.model_validate(
         {"bootstrap_servers": "b", "linger": "20ms", "delivery_timeout": "3m"}
     )
