@@ -22,7 +22,7 @@ of a warm one); then parts 1 and 3 alternate ``--repeat`` times and their median
 read back one ``poll`` at a time for latency (receive times to the millisecond), in 5 ms batches
 for throughput. Part 2 runs last. Environment: ``BENCH_LINGER`` (the edge's ``wan.linger``, default 10ms),
 ``BENCH_KAFKA_LINGER`` / ``BENCH_KAFKA_COMPRESSION`` (the uplink's ``kafka.linger`` and
-``kafka.compression``, default: the uplink's, and lz4),
+``kafka.compression``; default: the uplink's, lz4 and 1 ms),
 ``BENCH_METRICS=1`` (the uplink's Prometheus metrics on: every delivery report counted).
 """
 
@@ -72,6 +72,17 @@ def tree_cpu(pid: int) -> float:
     also those that ended (summing /proc/<pid>/task/* would miss them, and race their exit)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / CLK  # utime + stime
+
+
+def uplink_kafka(bootstrap: str) -> dict[str, Any]:
+    """The uplinks' ``kafka`` section: ``BENCH_KAFKA_LINGER`` and ``BENCH_KAFKA_COMPRESSION`` where
+    set, else the uplink's defaults."""
+    kafka: dict[str, Any] = {"bootstrap_servers": bootstrap}
+    for key in ("linger", "compression"):
+        value = os.environ.get(f"BENCH_KAFKA_{key.upper()}")
+        if value:
+            kafka[key] = value
+    return kafka
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -146,15 +157,10 @@ class Pipeline:
     ) -> None:
         self.cloud_port, self.site_port = free_port(), free_port()
         uplink: dict[str, Any] = {
-            "kafka": {
-                "bootstrap_servers": bootstrap,
-                "compression": os.environ.get("BENCH_KAFKA_COMPRESSION", "lz4"),
-            },
+            "kafka": uplink_kafka(bootstrap),
             "registry": {"url": registry},
             "zenoh": {"mode": "router", "listen": [f"tcp/127.0.0.1:{self.cloud_port}"]},
         }
-        if os.environ.get("BENCH_KAFKA_LINGER"):
-            uplink["kafka"]["linger"] = os.environ["BENCH_KAFKA_LINGER"]
         if os.environ.get("BENCH_METRICS"):  # Prometheus metrics on: every delivery report counted
             uplink["metrics"] = {"listen": "127.0.0.1:0"}
         edge = {

@@ -15,13 +15,16 @@ Per shape (``ROBOTSxTOPICSxHZ``; ``HZ`` 0 = subscribed and idle), over the stead
 ``--warmup`` seconds): messages offered and delivered to Kafka (%), records/s, latency publish ->
 record read from Kafka (p50/p99/max), CPU of the edge and the uplink in µs per record and in %
 of a core, the edge's threads and RSS over time, samples dropped at the edge's intake and
-sequence gaps (samples lost before the edge saw them). With ``--uplinks N`` the cloud router is
+sequence gaps (samples lost before the edge saw them), and the CPU time the hypervisor took
+from the machine (``/proc/stat``'s steal: in all, and its worst second, to set beside the worst
+second of latency: a stall every process shares). With ``--uplinks N`` the cloud router is
 a process of its own and N uplinks serve the sites (each site's stream goes to one of them):
 each uplink's share of the CPU shows how they split the load. With ``--bare`` a bare Zenoh client
 of each site router (bench/bare_receiver.py: the data plane's runtime, the same samples, nothing
 done with them) runs beside the edge: its CPU is the floor of receiving the fleet through Zenoh
 on this machine, printed beside the edge's as a ratio, with both processes' wake-ups a second.
-``BENCH_KAFKA_LINGER`` sets the uplinks' ``kafka.linger`` (default: the uplink's).
+``BENCH_KAFKA_LINGER`` / ``BENCH_KAFKA_COMPRESSION`` set the uplinks' ``kafka.linger`` and
+``kafka.compression`` (default: the uplink's).
 
 Before the counted runs, ``--warmup-runs`` runs of the first shape are printed but not counted: a
 Kafka broker just started compiles its hot paths under the first minutes of load (200 x 5 x 10 Hz
@@ -32,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import itertools
 import json
 import os
 import socket
@@ -55,7 +59,7 @@ from confluent_kafka.admin import AdminClient, NewTopic
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.bench_e2e import percentile, tree_cpu  # noqa: E402
+from bench.bench_e2e import CLK, percentile, tree_cpu, uplink_kafka  # noqa: E402
 from bench.fleet_publisher import TOPICS  # noqa: E402
 from fleetlink.localstack.process import ServerProcess, exit_on_sigterm, free_port  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
@@ -102,6 +106,13 @@ def threads(pid: int) -> int:
     return int(proc_status(pid)["Threads"])
 
 
+def steal_s() -> float:
+    """CPU seconds the hypervisor took from this VM's processors since boot (``/proc/stat``'s
+    ``steal``, all processors): time the machine's work was ready and did not run."""
+    fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+    return int(fields[8]) / CLK if len(fields) > 8 else 0.0
+
+
 def wakeups(pid: int) -> int:
     """Times the process's threads went to sleep and were woken (voluntary context switches of
     the threads alive now): at steady low rates each costs more than the work it wakes for."""
@@ -121,6 +132,7 @@ class Sample:
     cpu: dict[str, float]
     edge_rss_mb: float
     edge_threads: int
+    steal_s: float
 
 
 @dataclass
@@ -150,6 +162,10 @@ class Result:
     """The second of the window (from its start) whose records had the highest p99 latency."""
     wakeups: dict[str, float] = field(default_factory=dict)
     """Wake-ups a second over the window of the edges and (``--bare``) the bare receivers."""
+    steal_s: float = 0.0
+    """CPU seconds the hypervisor took from the machine over the window (``steal_s``)."""
+    steal_peak: tuple[float, float] | None = None
+    """The second of the window with the most steal: ``(seconds from its start, steal s)``."""
 
     def line(self) -> str:
         s = self.shape
@@ -187,6 +203,12 @@ class Result:
             if self.worst_second:
                 at, p99 = self.worst_second
                 parts.append(f"worst second +{at:.0f} s (p99 {p99:.0f} ms)")
+        if self.window_s:
+            steal = f"VM steal {100 * self.steal_s / self.window_s:.1f} % of a core"
+            if self.steal_peak:
+                at, most = self.steal_peak
+                steal += f", most {1000 * most:.0f} ms in the second at +{at:.0f} s"
+            parts.append(steal)
         rss = [x.edge_rss_mb for x in self.samples]
         if rss:
             third = max(1, len(rss) // 3)
@@ -410,9 +432,7 @@ def run_shape(
                 stack, work / "cloud-router.json5", ["cloud-router-dev.json5"], cloud_port
             )
             zenoh = {"mode": "client", "connect": [cloud]}
-        kafka = {"bootstrap_servers": bootstrap}
-        if os.environ.get("BENCH_KAFKA_LINGER"):
-            kafka["linger"] = os.environ["BENCH_KAFKA_LINGER"]
+        kafka = uplink_kafka(bootstrap)
         for n in range(uplinks):
             name = "uplink" if uplinks == 1 else f"uplink {n}"
             uplink = {
@@ -513,7 +533,9 @@ def run_shape(
         def sample() -> None:
             while not stop_sampling.wait(1.0):
                 rss = sum(rss_mb(pid) for pid in edges)
-                samples.append(Sample(time.time(), cpu_now(), rss, max(threads(pid) for pid in edges)))
+                samples.append(
+                    Sample(time.time(), cpu_now(), rss, max(threads(pid) for pid in edges), steal_s())
+                )
 
         sampler = threading.Thread(target=sample, daemon=True)
         for pub in pubs:
@@ -524,9 +546,10 @@ def run_shape(
         time.sleep(warmup)
         woken = {"edge": edges, "bare": bares}
         wake0 = {k: sum(wakeups(pid) for pid in pids) for k, pids in woken.items() if pids}
-        cpu0, t0 = cpu_now(), time.time()
+        cpu0, t0, steal0 = cpu_now(), time.time(), steal_s()
         time.sleep(max(0.0, seconds - warmup))
-        cpu1, t1 = cpu_now(), time.time()
+        cpu1, t1, steal1 = cpu_now(), time.time(), steal_s()
+        result.steal_s = steal1 - steal0
         wake1 = {k: sum(wakeups(pid) for pid in pids) for k, pids in woken.items() if pids}
         result.wakeups = {k: (wake1[k] - wake0[k]) / (t1 - t0) for k in wake1}
         for pub in pubs:
@@ -567,6 +590,7 @@ def run_shape(
         result.uplink_cpu = [cpu[f"uplink {n}"] for n in range(uplinks)]
         result.cpu_s["uplink"] = sum(result.uplink_cpu)
     result.samples = samples
+    result.steal_peak = steal_peak(samples, t0, t1)
     result.misrouted = sum(
         1 for robot, seen in reader.sites.items() if seen != {robot_site.get(robot, "?").encode()}
     ) + sum(1 for robot in robot_site if robot not in reader.sites)
@@ -588,6 +612,16 @@ def run_shape(
         result.missing += sum(int(s.get("missing", 0)) for s in subs.values())
         result.registered.append(len(stats.get("robots", {})))
     return result
+
+
+def steal_peak(samples: list[Sample], start: float, end: float) -> tuple[float, float] | None:
+    """The sampling interval within ``[start, end]`` with the most VM steal: ``(its start from
+    ``start`` in s, steal s)``. A stall every process of a run shares shows there, not in one of them."""
+    pairs = [(a, b) for a, b in itertools.pairwise(samples) if start <= a.at and b.at <= end]
+    if not pairs:
+        return None
+    a, b = max(pairs, key=lambda p: p[1].steal_s - p[0].steal_s)
+    return a.at - start, b.steal_s - a.steal_s
 
 
 def timeline(window: list[tuple[float, int]], start_ms: float, step_s: int = 5) -> str:
