@@ -105,12 +105,21 @@ class SegmentWriter:
         self.unsynced = 0
         return os.dup(self._fd)
 
-    def seal(self) -> None:
-        """fsync and close the active segment; the next write needs ``create``."""
+    def seal(self, *, sync: bool = True) -> int | None:
+        """Close the active segment; the next write needs ``create``. ``sync``: fdatasync it
+        first. Else its descriptor comes back while records in it are not on disk yet (the
+        caller fdatasyncs and closes it), ``None`` when every one is."""
         if self.segment is None:
-            return
-        self.sync()
-        os.close(self._fd)
+            return None
+        kept = None
+        if sync:
+            self.sync()
+        elif self.unsynced:
+            kept = self._fd
+        if kept is None:
+            os.close(self._fd)
+        self.unsynced = 0
         self._fd = -1
         self.segment.sealed = True
         self.segment = None
+        return kept
