@@ -74,6 +74,13 @@ def tree_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK  # utime + stime
 
 
+def steal_s() -> float:
+    """CPU seconds the hypervisor took from this VM's processors since boot (``/proc/stat``'s
+    ``steal``, all processors): time the machine's work was ready and did not run."""
+    fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+    return int(fields[8]) / CLK if len(fields) > 8 else 0.0
+
+
 def uplink_kafka(bootstrap: str) -> dict[str, Any]:
     """The uplinks' ``kafka`` section: ``BENCH_KAFKA_LINGER`` and ``BENCH_KAFKA_COMPRESSION`` where
     set, else the uplink's defaults."""
@@ -318,8 +325,10 @@ def run_throughput(
         pipe = Pipeline(work, bootstrap, registry, topic, stack, delivery)
         cpu0 = pipe.cpu()
         broker0 = tree_cpu(broker_pid) if broker_pid else 0.0
+        steal0 = steal_s()
         pub, began = run_robots(pipe.site_port, robots, per_robot, 0)
         got = read_topic(bootstrap, topic, per_robot * robots, timeout=300, per_record=False)
+        steal = steal_s() - steal0
         if pub.stdout is None or pub.stdin is None:
             raise SystemExit("publisher has no pipes")
         published = pub.stdout.readline().split()
@@ -331,6 +340,7 @@ def run_throughput(
         cpu.update({k: cpu1[k] - cpu0[k] for k in cpu1})
         if broker_pid:
             cpu["Kafka broker"] = tree_cpu(broker_pid) - broker0
+        cpu["VM steal"] = steal  # taken from every process alike: a stall of the whole machine
     elapsed = got[-1][0] - began if got else float("nan")
     return Throughput(len(got), elapsed, int(published[1]), float(published[2]), cpu)
 

@@ -59,7 +59,7 @@ from confluent_kafka.admin import AdminClient, NewTopic
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.bench_e2e import CLK, percentile, tree_cpu, uplink_kafka  # noqa: E402
+from bench.bench_e2e import percentile, steal_s, tree_cpu, uplink_kafka  # noqa: E402
 from bench.fleet_publisher import TOPICS  # noqa: E402
 from fleetlink.localstack.process import ServerProcess, exit_on_sigterm, free_port  # noqa: E402
 from fleetlink.localstack.stack import LocalStack  # noqa: E402
@@ -104,13 +104,6 @@ def rss_mb(pid: int) -> float:
 
 def threads(pid: int) -> int:
     return int(proc_status(pid)["Threads"])
-
-
-def steal_s() -> float:
-    """CPU seconds the hypervisor took from this VM's processors since boot (``/proc/stat``'s
-    ``steal``, all processors): time the machine's work was ready and did not run."""
-    fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
-    return int(fields[8]) / CLK if len(fields) > 8 else 0.0
 
 
 def wakeups(pid: int) -> int:
