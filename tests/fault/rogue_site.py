@@ -66,7 +66,7 @@ class Rogue:
             while not bool(getattr(querier.matching_status, "matching", False)):
                 if time.monotonic() > deadline:
                     raise SystemExit(f"nothing answers on {key} after {timeout:.0f} s")
-                time.sleep(0.05)
+                time.sleep(0.05)  # ok-sleep: the poll interval of a wait with a deadline
         finally:
             querier.undeclare()
 

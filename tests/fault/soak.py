@@ -195,11 +195,11 @@ def run_fleet(
         began = time.monotonic()
         pub.stdin.write("go\n")
         pub.stdin.flush()
-        time.sleep(warmup_s)
+        time.sleep(warmup_s)  # ok-sleep: the warm-up the soak leaves uncounted
         assert edge.proc is not None
         while time.monotonic() - began < seconds:
             result.rss_mb.append(_rss_mb(edge.proc.pid))
-            time.sleep(0.5)
+            time.sleep(0.5)  # ok-sleep: the RSS sampling interval over the soak
         done = pub.stdout.readline().split()
         assert done[:1] == ["done"], f"the robots did not publish: {' '.join(done)}"
         result.published = int(done[1])

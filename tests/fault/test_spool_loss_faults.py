@@ -119,7 +119,7 @@ class Robot:
             self.sent += 1
             ahead = self.sent / self.rate - (time.monotonic() - began)
             if ahead > 0.001:
-                time.sleep(ahead)
+                time.sleep(ahead)  # ok-sleep: the robot's publishing pace
 
     def close(self) -> None:
         self.stop.set()

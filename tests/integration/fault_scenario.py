@@ -173,7 +173,7 @@ def produce_scenario(
     started, first_ts = time.monotonic(), timeline[0][0].ts if timeline else 0
     for event, robot in timeline:
         if live and (ahead := started + (event.ts - first_ts) / 1000 - time.monotonic()) > 0:
-            time.sleep(ahead)  # the robot's pace
+            time.sleep(ahead)  # ok-sleep: the robot's pace
         typename = PKG + SENSOR_TYPES[event.sensor]
         cdr = bytes(ts.serialize_cdr(ros_message(ts, event), typename))
         producer.produce(

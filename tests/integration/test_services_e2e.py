@@ -359,7 +359,7 @@ def test_a_robot_killed_during_a_goal_is_reported_not_retried(
                 assert final["status"] == "error"
                 assert "went away" in final["detail"]
                 assert final["result"] is None
-                time.sleep(1.0)
+                time.sleep(1.0)  # ok-sleep: a window in which no second outcome may come
                 # outcomes are at least once (a batch whose answer came late is sent again, the
                 # same outcome with the same time): a retried goal would make a new one
                 outcomes = dict.fromkeys(

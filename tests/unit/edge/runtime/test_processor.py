@@ -217,7 +217,7 @@ class OneTake:
     def take(self, max_samples: int, timeout_s: float) -> Taken:
         if self.pending:
             return self.pending.pop()
-        time.sleep(min(timeout_s, 0.01))
+        time.sleep(min(timeout_s, 0.01))  # ok-sleep: a take that waits and finds nothing
         return Taken()
 
     def wake(self) -> None:
